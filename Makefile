@@ -1,0 +1,44 @@
+# Two commands: `make run` (the viewer on the default sample scene) and `make test`.
+# Both set up what is missing: Debian packages (when root), a .venv, the package in editable mode.
+PY      ?= python3
+VENV    := .venv
+BIN     := $(VENV)/bin
+SCENE   ?= sample_models/cornell_box.glb
+XVFB    := xvfb-run -a -s "-screen 0 1280x800x24"
+
+.PHONY: run test lint setup clean bench
+
+setup: .stamp-venv
+
+.stamp-apt:
+	@if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && ! command -v xvfb-run >/dev/null; then \
+	  echo "installing Debian packages (xvfb, Mesa EGL/GL)"; \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq xvfb xauth libegl1 libgl1 libegl-mesa0 >/dev/null; \
+	fi
+	@touch $@
+
+.stamp-venv: .stamp-apt pyproject.toml
+	@test -x $(BIN)/python || $(PY) -m venv $(VENV)
+	@$(BIN)/pip install -q --upgrade pip
+	@$(BIN)/pip install -q -e ".[test]"
+	@touch $@
+
+run: setup
+	@if [ -n "$$DISPLAY$$WAYLAND_DISPLAY" ]; then \
+	  $(BIN)/iat view $(SCENE); \
+	else \
+	  echo "no display: rendering $(SCENE) headless instead (for the window: 'xvfb-run make run' or a desktop)"; \
+	  $(BIN)/iat render $(SCENE) --mode iat -o out/default.png && echo "wrote out/default.png"; \
+	fi
+
+test: setup
+	$(XVFB) $(BIN)/python -m pytest -q tests
+
+lint: setup
+	$(BIN)/ruff check iat viewer tests sample_models
+
+bench: setup
+	$(BIN)/iat bench
+
+clean:
+	rm -rf $(VENV) .stamp-* out

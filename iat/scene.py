@@ -1,0 +1,173 @@
+"""Scenes: world-space arrays of root patches, materials, lights and cameras.
+
+A *patch* is a root polygon of the report: a planar convex quad (coplanar
+triangle pairs merged back) or a triangle. Quads keep their corners in order
+around the polygon; triangles store ``-1`` as their fourth corner.
+
+Lattice parametrisation (shared by the solver, the baker and the renderer):
+for a quad with corners c0..c3 the point at ``(u, v)`` in ``[0, 1]^2`` is
+``(1-u)(1-v) c0 + u(1-v) c1 + u v c2 + (1-u) v c3``; for a triangle
+``c0 + u (c1 - c0) + v (c2 - c0)`` with ``u + v <= 1``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .camera import Camera
+
+
+@dataclass
+class Material:
+    """A diffuse material.
+
+    albedo : (3,) float64 linear RGB in [0, 1] (baseColorFactor x mean of its texture)
+    emission : (3,) float64 emitted radiance, linear RGB (emissiveFactor x strength)
+    detail : (h, w, 3) float32 linear RGB albedo texture repeated on the surface, or None
+    """
+
+    name: str = ""
+    albedo: np.ndarray = field(default_factory=lambda: np.full(3, 0.5))
+    emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    detail: np.ndarray | None = None
+
+    def __post_init__(self):
+        self.albedo = np.asarray(self.albedo, dtype=np.float64).reshape(3)
+        self.emission = np.asarray(self.emission, dtype=np.float64).reshape(3)
+
+
+@dataclass
+class Light:
+    """A KHR_lights_punctual point or spot light.
+
+    kind : "point" or "spot" (directional lights are not supported by the solver)
+    position : (3,) float64 world
+    direction : (3,) float64 unit vector the spot points along (world)
+    color : (3,) float64 linear RGB
+    intensity : float, W/sr per unit colour (glTF candela read as radiometric)
+    inner_cone, outer_cone : spot cone half-angles in radians
+    """
+
+    kind: str = "point"
+    position: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    direction: np.ndarray = field(default_factory=lambda: np.array([0.0, -1.0, 0.0]))
+    color: np.ndarray = field(default_factory=lambda: np.ones(3))
+    intensity: float = 1.0
+    inner_cone: float = 0.0
+    outer_cone: float = np.pi / 4
+    name: str = ""
+
+    def __post_init__(self):
+        self.position = np.asarray(self.position, dtype=np.float64).reshape(3)
+        self.direction = np.asarray(self.direction, dtype=np.float64).reshape(3)
+        self.color = np.asarray(self.color, dtype=np.float64).reshape(3)
+
+    @property
+    def radiant_intensity(self) -> np.ndarray:
+        """(3,) float64 intensity x colour."""
+        return self.color * float(self.intensity)
+
+
+@dataclass
+class Scene:
+    """World-space arrays of a model.
+
+    vertices : (n, 3) float64 world positions
+    patch_corners : (p, 4) int64 indices into ``vertices``; -1 in column 3 for triangles
+    patch_material : (p,) int64 index into ``materials``
+    patch_uv : (p, 4, 2) float64 detail-texture UVs at the corners (0 where none)
+    materials, lights, cameras : lists
+    camera_paths : named lists of Camera poses (walkthrough paths), may be empty
+    path : the file it came from ("" when built in memory)
+    """
+
+    vertices: np.ndarray
+    patch_corners: np.ndarray
+    patch_material: np.ndarray
+    materials: list[Material]
+    patch_uv: np.ndarray | None = None
+    lights: list[Light] = field(default_factory=list)
+    cameras: list[Camera] = field(default_factory=list)
+    camera_paths: dict[str, list[Camera]] = field(default_factory=dict)
+    path: str = ""
+
+    def __post_init__(self):
+        self.vertices = np.asarray(self.vertices, dtype=np.float64).reshape(-1, 3)
+        self.patch_corners = np.asarray(self.patch_corners, dtype=np.int64).reshape(-1, 4)
+        self.patch_material = np.asarray(self.patch_material, dtype=np.int64).reshape(-1)
+        if self.patch_uv is None:
+            self.patch_uv = np.zeros((len(self.patch_corners), 4, 2))
+        self.patch_uv = np.asarray(self.patch_uv, dtype=np.float64).reshape(-1, 4, 2)
+
+    # -- derived per-patch data -------------------------------------------------
+    @property
+    def n_patches(self) -> int:
+        return len(self.patch_corners)
+
+    @property
+    def patch_is_quad(self) -> np.ndarray:
+        """(p,) bool: True for quads, False for triangles."""
+        return self.patch_corners[:, 3] >= 0
+
+    @property
+    def corner_positions(self) -> np.ndarray:
+        """(p, 4, 3) float64 corner positions; a triangle's 4th corner repeats its 3rd."""
+        c = self.patch_corners.copy()
+        tri = c[:, 3] < 0
+        c[tri, 3] = c[tri, 2]
+        return self.vertices[c]
+
+    @property
+    def patch_normal(self) -> np.ndarray:
+        """(p, 3) float64 unit normals (right-handed winding of the corners)."""
+        c = self.corner_positions
+        n = np.cross(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1])
+        tri = ~self.patch_is_quad
+        n[tri] = np.cross(c[tri, 1] - c[tri, 0], c[tri, 2] - c[tri, 0])
+        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+    @property
+    def patch_area(self) -> np.ndarray:
+        """(p,) float64 areas in square scene units."""
+        c = self.corner_positions
+        a = 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
+        q = self.patch_is_quad
+        a[q] += 0.5 * np.linalg.norm(np.cross(c[q, 2] - c[q, 0], c[q, 3] - c[q, 0]), axis=1)
+        return a
+
+    @property
+    def patch_albedo(self) -> np.ndarray:
+        """(p, 3) float64 albedo per patch."""
+        return np.array([m.albedo for m in self.materials])[self.patch_material]
+
+    @property
+    def patch_emission(self) -> np.ndarray:
+        """(p, 3) float64 emitted radiance per patch."""
+        return np.array([m.emission for m in self.materials])[self.patch_material]
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) float64 min and max corner of the used vertices."""
+        v = self.vertices[np.unique(self.patch_corners[self.patch_corners >= 0])]
+        return np.array([v.min(axis=0), v.max(axis=0)])
+
+    def default_camera(self) -> Camera:
+        """The file's first camera, or one that frames the bounds from +Z."""
+        if self.cameras:
+            return self.cameras[0]
+        lo, hi = self.bounds
+        c = (lo + hi) / 2
+        r = max(np.linalg.norm(hi - lo) / 2, 1e-6)
+        return Camera(eye=c + np.array([0.0, 0.0, 2.2 * r]), target=c, yfov=50.0, znear=r * 0.01, zfar=r * 10)
+
+
+def load_scene(path: str | Path, max_edge: float | None = None) -> Scene:
+    """Load a model file (glTF/GLB, OBJ+MTL, PLY, STL, OFF) into a :class:`Scene`.
+
+    max_edge : pre-split patches longer than this (scene units) into a regular grid.
+    Raises :class:`iat.errors.LoadError` naming the file and the cause.
+    """
+    raise NotImplementedError  # written by the scene-loading work
