@@ -1,0 +1,199 @@
+"""The radiosity solution: per-patch quad-trees and radiance at every mesh vertex.
+
+Saved as a versioned ``.npz`` without pickles (``format = "iat-solution"``,
+``version = SOLUTION_VERSION``). See ``docs/architecture.md`` for the fields.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import quadtree as qt
+from ..errors import SolutionFileError
+
+SOLUTION_FORMAT = "iat-solution"
+SOLUTION_VERSION = 1
+
+_ARRAYS = {
+    "patch_corners": np.float64,
+    "patch_is_quad": np.bool_,
+    "patch_material": np.int64,
+    "patch_albedo": np.float64,
+    "leaf_patch": np.int32,
+    "leaf_level": np.int8,
+    "leaf_i": np.int32,
+    "leaf_j": np.int32,
+    "leaf_flip": np.bool_,
+    "vert_key": np.int64,
+    "vert_radiance": np.float32,
+    "tri_vertices": np.int32,
+}
+
+
+@dataclass
+class Solution:
+    """A radiosity solution.
+
+    max_depth : lattice depth D (``2**D + 1`` lattice points per patch side)
+    patch_corners : (P, 4, 3) float64 world corners (triangles repeat corner 2 in slot 3)
+    patch_is_quad : (P,) bool
+    patch_material : (P,) int64 material index in the scene
+    patch_albedo : (P, 3) float64 albedo used by the solve
+    leaf_patch, leaf_level, leaf_i, leaf_j, leaf_flip : (L,) leaves (see ``iat.quadtree``)
+    vert_key : (V,) int64 sorted vertex keys
+    vert_radiance : (V, 3) float32 outgoing radiance, linear RGB
+    tri_vertices : (T, 3) int32 anchored mesh triangles (indices into the vertex table)
+    stats, options : JSON-able dicts
+    model_path : the model file it was solved from ("" if built in memory)
+    """
+
+    max_depth: int
+    patch_corners: np.ndarray
+    patch_is_quad: np.ndarray
+    patch_material: np.ndarray
+    patch_albedo: np.ndarray
+    leaf_patch: np.ndarray
+    leaf_level: np.ndarray
+    leaf_i: np.ndarray
+    leaf_j: np.ndarray
+    leaf_flip: np.ndarray
+    vert_key: np.ndarray
+    vert_radiance: np.ndarray
+    tri_vertices: np.ndarray
+    stats: dict = field(default_factory=dict)
+    options: dict = field(default_factory=dict)
+    model_path: str = ""
+
+    # -- views ---------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        return 1 << self.max_depth
+
+    @property
+    def forest(self) -> qt.Forest:
+        """The leaves as a :class:`iat.quadtree.Forest` (arrays shared, not copied)."""
+        return qt.Forest(
+            self.max_depth,
+            self.patch_is_quad,
+            self.leaf_patch,
+            self.leaf_level,
+            self.leaf_i,
+            self.leaf_j,
+            self.leaf_flip,
+        )
+
+    @property
+    def vert_position(self) -> np.ndarray:
+        """(V, 3) float64 world positions of the vertices."""
+        return qt.keys_to_world(self.patch_corners, self.patch_is_quad, self.vert_key, self.n)
+
+    def patch_depth(self) -> np.ndarray:
+        """(P,) int8 deepest leaf level per patch."""
+        return self.forest.patch_depth()
+
+    @classmethod
+    def from_forest(
+        cls,
+        forest: qt.Forest,
+        patch_corners: np.ndarray,
+        patch_material: np.ndarray,
+        patch_albedo: np.ndarray,
+        vert_key: np.ndarray,
+        vert_radiance: np.ndarray,
+        **kw,
+    ) -> "Solution":
+        """Assemble a solution; computes the anchored triangulation."""
+        return cls(
+            max_depth=forest.max_depth,
+            patch_corners=np.asarray(patch_corners, dtype=np.float64),
+            patch_is_quad=forest.patch_is_quad,
+            patch_material=np.asarray(patch_material, dtype=np.int64),
+            patch_albedo=np.asarray(patch_albedo, dtype=np.float64),
+            leaf_patch=forest.leaf_patch,
+            leaf_level=forest.leaf_level,
+            leaf_i=forest.leaf_i,
+            leaf_j=forest.leaf_j,
+            leaf_flip=forest.leaf_flip,
+            vert_key=vert_key,
+            vert_radiance=np.asarray(vert_radiance, dtype=np.float32),
+            tri_vertices=qt.triangulate(forest, vert_key),
+            **kw,
+        )
+
+    # -- files ---------------------------------------------------------------
+    def save(self, path: str | Path) -> None:
+        """Write atomically as ``.npz`` (no pickles); the previous file survives a failure."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        arrays = {k: np.asarray(getattr(self, k), dtype=t) for k, t in _ARRAYS.items()}
+        meta = {
+            "format": np.array(SOLUTION_FORMAT),
+            "version": np.array(SOLUTION_VERSION),
+            "max_depth": np.array(self.max_depth),
+            "stats": np.array(json.dumps(self.stats)),
+            "options": np.array(json.dumps(self.options)),
+            "model_path": np.array(self.model_path),
+        }
+        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.savez_compressed(fh, **arrays, **meta)
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Solution":
+        """Read a solution; a damaged file or one of another version raises SolutionFileError."""
+        path = Path(path)
+        if not path.exists():
+            raise SolutionFileError("no such file", path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                names = set(z.files)
+                if "format" not in names or str(z["format"]) != SOLUTION_FORMAT:
+                    raise SolutionFileError("not an IAT solution file", path)
+                version = int(z["version"])
+                if version != SOLUTION_VERSION:
+                    raise SolutionFileError(
+                        f"solution file version {version}, this IAT reads version {SOLUTION_VERSION};"
+                        " solve the model again",
+                        path,
+                    )
+                missing = sorted(set(_ARRAYS) - names)
+                if missing:
+                    raise SolutionFileError(f"damaged solution file: missing {', '.join(missing)}", path)
+                data = {k: np.asarray(z[k], dtype=t) for k, t in _ARRAYS.items()}
+                sol = cls(
+                    max_depth=int(z["max_depth"]),
+                    stats=json.loads(str(z["stats"])),
+                    options=json.loads(str(z["options"])),
+                    model_path=str(z["model_path"]),
+                    **data,
+                )
+        except SolutionFileError:
+            raise
+        except (OSError, ValueError, KeyError, zipfile.BadZipFile, EOFError, json.JSONDecodeError) as e:
+            raise SolutionFileError(f"damaged solution file ({type(e).__name__}: {e})", path) from e
+        sol._validate(path)
+        return sol
+
+    def _validate(self, path) -> None:
+        v, p = len(self.vert_key), len(self.patch_is_quad)
+        ok = (
+            self.vert_radiance.shape == (v, 3)
+            and self.patch_corners.shape == (p, 4, 3)
+            and (self.tri_vertices.size == 0 or (0 <= self.tri_vertices.min() and self.tri_vertices.max() < v))
+            and (len(self.leaf_patch) == 0 or self.leaf_patch.max() < p)
+            and np.isfinite(self.vert_radiance).all()
+        )
+        if not ok:
+            raise SolutionFileError("damaged solution file: inconsistent arrays", path)
