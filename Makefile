@@ -17,7 +17,11 @@ setup: .stamp-venv
 	fi
 	@touch $@
 
-.stamp-venv: .stamp-apt pyproject.toml
+.stamp-node:
+	@if command -v npm >/dev/null; then npm install --prefix .node --no-save --no-audit --no-fund --loglevel=error gltf-validator >/dev/null && echo "installed gltf-validator (npm)"; fi
+	@touch $@
+
+.stamp-venv: .stamp-apt .stamp-node pyproject.toml
 	@test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	@$(BIN)/pip install -q --upgrade pip
 	@$(BIN)/pip install -q -e ".[test]"

@@ -1,0 +1,342 @@
+"""The ``iat`` command line (names and flags are a contract: see docs/architecture.md).
+
+Every IATError is printed on one line and exits 2 (``--debug`` shows the traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .errors import IATError, OptionError
+
+EXIT_USER_ERROR = 2
+
+
+# -- progress --------------------------------------------------------------------
+class ProgressBar:
+    """A ``progress(fraction, message) -> bool`` callback drawn as a tqdm bar with ETA on stderr."""
+
+    def __init__(self, desc: str, enabled: bool = True):
+        self.enabled = bool(enabled) and sys.stderr.isatty()
+        self.desc = desc
+        self._bar = None
+
+    def __call__(self, fraction: float, message: str = "") -> bool:
+        if not self.enabled:
+            return True
+        if self._bar is None:
+            from tqdm import tqdm
+
+            self._bar = tqdm(total=1000, desc=self.desc, unit="‰", leave=False, file=sys.stderr)
+        self._bar.n = int(1000 * min(max(fraction, 0.0), 1.0))
+        self._bar.set_postfix_str(message[:40], refresh=False)
+        self._bar.refresh()
+        return True
+
+    def close(self):
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
+
+
+def _parse_vec(text: str, name: str) -> np.ndarray:
+    try:
+        v = np.array([float(x) for x in text.split(",")])
+    except ValueError:
+        raise OptionError(f"{name} must be three numbers X,Y,Z, got {text!r}") from None
+    if v.shape != (3,) or not np.isfinite(v).all():
+        raise OptionError(f"{name} must be three finite numbers X,Y,Z, got {text!r}")
+    return v
+
+
+def _parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise OptionError(f"--size must be WxH, got {text!r}") from None
+    if not (1 <= w <= 16384 and 1 <= h <= 16384):
+        raise OptionError(f"--size out of range: {text}")
+    return w, h
+
+
+def _solve_options(args):
+    from .radiosity import SolveOptions
+
+    kw = {}
+    for name in ("max_depth", "tolerance", "max_edge", "samples", "convergence"):
+        v = getattr(args, name, None)
+        if v is not None:
+            kw[name] = v
+    return SolveOptions(**kw)
+
+
+def _bake_policy(args):
+    from .bake import BakePolicy
+
+    kw = {}
+    for name in ("threshold", "scale", "method", "budget_mb"):
+        v = getattr(args, name, None)
+        if v is not None:
+            kw[name] = v
+    return BakePolicy(**kw)
+
+
+def _open(args, what: str):
+    from .inputs import open_solution
+
+    bar = ProgressBar(f"solve {Path(args.input).name}", enabled=not getattr(args, "json", False))
+    try:
+        return open_solution(args.input, _solve_options(args), progress=bar)
+    finally:
+        bar.close()
+
+
+# -- commands --------------------------------------------------------------------
+def cmd_info(args) -> int:
+    from .scene import load_scene
+
+    scene = load_scene(args.input)
+    q = scene.patch_is_quad
+    info = {
+        "file": str(args.input),
+        "triangles": int(q.sum() * 2 + (~q).sum()),
+        "patches": scene.n_patches,
+        "quads": int(q.sum()),
+        "triangle_patches": int((~q).sum()),
+        "materials": len(scene.materials),
+        "emissive_materials": int(sum(m.emission.max() > 0 for m in scene.materials)),
+        "lights": len(scene.lights),
+        "cameras": len(scene.cameras),
+        "camera_paths": {k: len(v) for k, v in scene.camera_paths.items()},
+        "bounds": scene.bounds.tolist(),
+        "area": float(scene.patch_area.sum()),
+    }
+    _emit(args, info)
+    return 0
+
+
+def cmd_solve(args) -> int:
+    from .radiosity import solve
+    from .scene import load_scene
+
+    opts = _solve_options(args)
+    scene = load_scene(args.input, max_edge=opts.max_edge)
+    bar = ProgressBar(f"solve {Path(args.input).name}", enabled=not args.json)
+    try:
+        sol = solve(scene, opts, progress=bar)
+    finally:
+        bar.close()
+    sol.model_path = str(Path(args.input).resolve())
+    sol.save(args.output)
+    stats = dict(sol.stats)
+    stats["output"] = str(args.output)
+    _emit(args, stats)
+    return 0
+
+
+def cmd_bake(args) -> int:
+    from .bake import Baker, choose_policy
+    from .export import export_glb
+
+    scene, sol = _open(args, "bake")
+    policy = _bake_policy(args)
+    if policy.budget_mb is not None:
+        policy = choose_policy(sol, policy.budget_mb, policy)
+    baked = Baker(sol, scene).bake(policy)
+    export_glb(baked, args.output, scene=scene, layered=args.layered)
+    report = {"output": str(args.output), "policy": _policy_dict(baked.policy), **baked.memory.to_dict()}
+    report["timings"] = getattr(baked, "timings", {})
+    _emit(args, report)
+    return 0
+
+
+def _policy_dict(p) -> dict:
+    from dataclasses import asdict
+
+    return asdict(p)
+
+
+def cmd_render(args) -> int:
+    from .camera import Camera
+    from .imageio import save_npy, save_png
+    from .render import Renderer
+
+    size = _parse_size(args.size)
+    out = Path(args.output)
+    if out.suffix.lower() not in (".png", ".npy"):
+        raise OptionError(f"output must end in .png or .npy, got {out.name}")
+    src = Path(args.input)
+    mode = args.mode
+    if src.suffix.lower() in (".glb", ".gltf") and mode == "preview":
+        from .scene import load_scene
+
+        scene, sol = load_scene(src), None
+    else:
+        scene, sol = _open(args, "render")
+    if args.eye or args.target:
+        if not (args.eye and args.target):
+            raise OptionError("--eye and --target go together")
+        cam = Camera(eye=_parse_vec(args.eye, "--eye"), target=_parse_vec(args.target, "--target"), yfov=args.fov)
+        lo, hi = scene.bounds
+        r = float(np.linalg.norm(hi - lo))
+        cam.znear, cam.zfar = r * 1e-3, r * 10
+    elif args.camera is not None:
+        if not (0 <= args.camera < len(scene.cameras)):
+            raise OptionError(f"--camera {args.camera}: the file has {len(scene.cameras)} camera(s)")
+        cam = scene.cameras[args.camera]
+    else:
+        cam = scene.default_camera()
+    r = Renderer()
+    try:
+        r.set_scene(scene)
+        if sol is not None:
+            r.set_solution(sol)
+            if mode in ("iat", "split", "diff"):
+                from .bake import Baker
+
+                r.set_baked(Baker(sol, scene).bake(_bake_policy(args)))
+        img = r.render(cam, size=size, mode=mode)
+    finally:
+        r.release()
+    if out.suffix.lower() == ".npy":
+        save_npy(out, img)
+    else:
+        from .imageio import auto_exposure
+
+        save_png(out, img, exposure=args.exposure if args.exposure else auto_exposure(img))
+    _emit(args, {"output": str(out), "mode": mode, "size": list(size)})
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from .bench import main as bench_main
+
+    return bench_main(args)
+
+
+def cmd_chart(args) -> int:
+    from .chart import main as chart_main
+
+    return chart_main(args)
+
+
+def cmd_view(args) -> int:
+    from viewer.app import main as view_main
+
+    return view_main(args.input)
+
+
+def _emit(args, data: dict) -> None:
+    if getattr(args, "json", False):
+        print(json.dumps(data, indent=2, default=_json_default))
+    else:
+        for k, v in data.items():
+            print(f"{k:>24}: {v}")
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(type(o).__name__)
+
+
+# -- parser ----------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="iat", description="Illumination as texture: solve, bake, render, view.")
+    p.add_argument("--debug", action="store_true", help="show tracebacks")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    def solve_flags(sp):
+        sp.add_argument("--max-depth", type=int, dest="max_depth", help="deepest quad-tree level (default 6)")
+        sp.add_argument("--tolerance", type=float, help="relative radiance change that splits an element")
+        sp.add_argument("--max-edge", type=float, dest="max_edge", help="pre-split patches longer than this")
+        sp.add_argument("--samples", type=int, help="shooter samples for visibility")
+
+    def bake_flags(sp):
+        sp.add_argument("--threshold", type=int, help="tree depth from which a patch becomes a texture")
+        sp.add_argument("--scale", type=float, help="texture scale factor (1 = a texel per mesh vertex)")
+        sp.add_argument("--method", choices=["bilinear", "scan", "bicubic"])
+        sp.add_argument("--budget-mb", type=float, dest="budget_mb", help="texture budget; chooses threshold/scale")
+
+    s = sub.add_parser("info", help="counts: triangles, patches, materials, lights, cameras")
+    s.add_argument("input", metavar="MODEL")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_info)
+
+    s = sub.add_parser("solve", help="radiosity solution with adaptive quad-tree meshing")
+    s.add_argument("input", metavar="MODEL")
+    s.add_argument("-o", "--output", required=True, metavar="SOL.npz")
+    solve_flags(s)
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_solve)
+
+    s = sub.add_parser("bake", help="illumination as texture, exported as GLB")
+    s.add_argument("input", metavar="SOL|MODEL")
+    s.add_argument("-o", "--output", required=True, metavar="OUT.glb")
+    bake_flags(s)
+    solve_flags(s)
+    s.add_argument("--layered", action="store_true", help="albedo on TEXCOORD_0, illumination on TEXCOORD_1")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_bake)
+
+    s = sub.add_parser("render", help="render a solution (mesh or IAT mode) or a model (preview)")
+    s.add_argument("input", metavar="SOL|MODEL|GLB")
+    s.add_argument("-o", "--output", required=True, metavar="OUT.png|OUT.npy")
+    s.add_argument("--mode", choices=["mesh", "iat", "preview", "split", "diff"], default="iat")
+    s.add_argument("--camera", type=int, help="use the file's K-th camera")
+    s.add_argument("--eye")
+    s.add_argument("--target")
+    s.add_argument("--fov", type=float, default=50.0)
+    s.add_argument("--size", default="640x480")
+    s.add_argument("--exposure", type=float, help="PNG exposure (default: automatic)")
+    bake_flags(s)
+    solve_flags(s)
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_render)
+
+    s = sub.add_parser("bench", help="the report's Figure 3 table, and more")
+    s.add_argument("models", nargs="*", metavar="MODEL")
+    s.add_argument("--json", action="store_true")
+    s.add_argument("--frames", type=int, default=60)
+    s.add_argument("--size", default="640x480")
+    s.set_defaults(func=cmd_bench)
+
+    s = sub.add_parser("chart", help="speed against accuracy")
+    s.add_argument("models", nargs="*", metavar="MODEL")
+    s.add_argument("-o", "--output", required=True, metavar="CHART.png")
+    s.add_argument("--size", default="320x240")
+    s.add_argument("--frames", type=int, default=10)
+    s.set_defaults(func=cmd_chart)
+
+    s = sub.add_parser("view", help="the walkthrough viewer")
+    s.add_argument("input", nargs="?", metavar="SOL|MODEL")
+    s.set_defaults(func=cmd_view)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except IATError as e:
+        if args.debug:
+            raise
+        print(f"iat {args.command}: error: {e}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        print(f"iat {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

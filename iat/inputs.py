@@ -1,0 +1,65 @@
+"""Open what a user names on the command line or in the viewer: a model or a solution.
+
+``MODEL`` given where a solution is expected is solved with default options
+first (the design's command-line contract).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .errors import LoadError, SolutionFileError
+from .scene import Scene, load_scene
+
+SOLUTION_SUFFIXES = (".npz",)
+
+
+def is_solution_path(path: str | Path) -> bool:
+    return Path(path).suffix.lower() in SOLUTION_SUFFIXES
+
+
+def open_solution(path: str | Path, options=None, progress=None):
+    """(scene, solution) from a solution file or a model file.
+
+    A solution's model is reloaded from ``solution.model_path`` (for materials
+    and detail textures); when that file is gone the scene is rebuilt from the
+    solution's own patches, without detail textures.
+    """
+    from .radiosity import SolveOptions, Solution, solve
+
+    path = Path(path)
+    if is_solution_path(path):
+        sol = Solution.load(path)
+        model = Path(sol.model_path) if sol.model_path else None
+        if model is not None and not model.is_absolute():
+            model = (path.parent / model).resolve() if not model.exists() else model
+        if model is not None and model.exists():
+            scene = load_scene(model, max_edge=sol.options.get("max_edge"))
+            if scene.n_patches != len(sol.patch_is_quad):
+                raise SolutionFileError(
+                    f"solution has {len(sol.patch_is_quad)} patches but {model} has {scene.n_patches};"
+                    " the model changed since it was solved",
+                    path,
+                )
+        else:
+            scene = scene_from_solution(sol)
+        return scene, sol
+    if not path.exists():
+        raise LoadError("no such file", path)
+    options = options or SolveOptions()
+    scene = load_scene(path, max_edge=getattr(options, "max_edge", None))
+    return scene, solve(scene, options, progress=progress)
+
+
+def scene_from_solution(sol) -> Scene:
+    """A Scene rebuilt from a solution's patches (albedo only, no lights, no detail)."""
+    import numpy as np
+
+    from .scene import Material
+
+    p = len(sol.patch_is_quad)
+    verts = sol.patch_corners.reshape(-1, 3)
+    corners = np.arange(4 * p).reshape(p, 4)
+    corners[~sol.patch_is_quad, 3] = -1
+    mats = [Material(name=f"patch{k}", albedo=a) for k, a in enumerate(sol.patch_albedo)]
+    return Scene(verts, corners, np.arange(p), mats, path=sol.model_path)

@@ -1,0 +1,107 @@
+"""Ray-traced visibility between points, with embreex (Embree 4).
+
+Every patch of the scene becomes one (triangle) or two (quad) float32 triangles
+in one Embree scene. :meth:`Visibility.occluded` answers shadow-ray queries in
+chunks, spread over a few threads (embreex releases the GIL during a query).
+Callers offset their ray origins off the surfaces (see the solver).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from embreex import rtcore_scene as rtcs
+from embreex.mesh_construction import TriangleMesh
+
+#: rays per embreex call
+CHUNK = 1 << 16
+
+
+def patch_triangles(patch_corners: np.ndarray, patch_is_quad: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) float64 triangles of the patches: (c0, c1, c2) for all, (c0, c2, c3) for quads too."""
+    c = np.asarray(patch_corners, dtype=np.float64)
+    q = np.asarray(patch_is_quad, dtype=bool)
+    first = c[:, [0, 1, 2]]
+    second = c[q][:, [0, 2, 3]]
+    return np.concatenate([first, second])
+
+
+class Visibility:
+    """Occlusion queries against all patches.
+
+    patch_corners : (P, 4, 3) float64 (triangles repeat corner 2 in slot 3)
+    patch_is_quad : (P,) bool
+    threads : worker threads for large queries (default: min(2, CPU count))
+
+    ``rays`` counts the rays traced so far and ``seconds`` the time spent tracing them.
+    """
+
+    def __init__(self, patch_corners: np.ndarray, patch_is_quad: np.ndarray, threads: int | None = None):
+        tris = patch_triangles(patch_corners, patch_is_quad).astype(np.float32)
+        self._scene = rtcs.EmbreeScene()
+        self._n_tris = len(tris)
+        if self._n_tris:
+            verts = np.ascontiguousarray(tris.reshape(-1, 3))
+            faces = np.arange(len(verts), dtype=np.int32).reshape(-1, 3)
+            self._mesh = TriangleMesh(self._scene, verts, faces)
+        self.threads = max(1, int(threads if threads is not None else min(2, os.cpu_count() or 1)))
+        self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+        self._lock = threading.Lock()
+        self.rays = 0
+        self.seconds = 0.0
+
+    def close(self) -> None:
+        """Stop the worker threads (also done when the object is collected)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def _run(self, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return self._scene.run(o, d, dists=t, query="OCCLUDED")
+
+    def occluded(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray) -> np.ndarray:
+        """(n,) bool: True where something lies on the ray before ``tfar``.
+
+        origins : (n, 3) ray origins (already offset off the surface)
+        dirs : (n, 3) unit directions
+        tfar : (n,) distances along the ray beyond which hits are ignored
+        """
+        n = len(origins)
+        out = np.zeros(n, dtype=bool)
+        if n == 0 or self._n_tris == 0:
+            with self._lock:
+                self.rays += n
+            return out
+        o = np.ascontiguousarray(origins, dtype=np.float32).reshape(-1, 3)
+        d = np.ascontiguousarray(dirs, dtype=np.float32).reshape(-1, 3)
+        t = np.ascontiguousarray(tfar, dtype=np.float32).reshape(-1)
+        t0 = time.perf_counter()
+        c = max(4096, min(CHUNK, -(-n // self.threads)))
+        bounds = list(range(0, n, c))
+        if self._pool is None or len(bounds) == 1:
+            for a in bounds:
+                out[a : a + c] = self._run(o[a : a + c], d[a : a + c], t[a : a + c]) == 0
+        else:
+            futs = [(a, self._pool.submit(self._run, o[a : a + c], d[a : a + c], t[a : a + c])) for a in bounds]
+            for a, f in futs:
+                out[a : a + c] = f.result() == 0
+        with self._lock:
+            self.rays += n
+            self.seconds += time.perf_counter() - t0
+        return out

@@ -1,0 +1,383 @@
+"""Mitsuba 3 path-traced references of a :class:`~iat.scene.Scene`.
+
+The reference is what the radiosity solution should converge to: the same
+patches, the same diffuse albedos, the same emitters, rendered by an unbiased
+path tracer. It is compared with the renderer's float output (``mesh`` / ``iat``
+modes) through :mod:`iat.metrics`.
+
+Conventions (checked by ``tests/test_reference.py``)
+----------------------------------------------------
+- Image: ``(h, w, 3) float32`` linear RGB radiance, row 0 is the **top** of the
+  picture and column 0 its **left**, not mirrored: for a camera looking down -Z
+  with +Y up, world +X is on the right (column ``w - 1``) and world +Y at the top
+  (row 0) -- the same layout as the renderer's read-back after its vertical flip
+  and as a PNG.
+- Pixels are plain averages over their footprint (box reconstruction filter of
+  radius half a pixel), like a rasteriser's supersampled pixel.
+- Units: patch emission is radiance (W m^-2 sr^-1 per unit colour); a point or
+  spot light's ``color * intensity`` is radiant intensity in W/sr (glTF candela
+  read as radiometric), given to Mitsuba's ``intensity`` as is, so a white
+  Lambertian floor of albedo rho at distance h straight below a point light of
+  intensity I has radiance ``rho / pi * I / h**2``.
+- Surfaces are single-sided, like the solver's patches: the front is the side
+  of :attr:`Scene.patch_normal` (``cross(c1 - c0, c2 - c0)``); area emitters
+  emit only on the front and the diffuse BSDF is black from behind (pass
+  ``two_sided=True`` for a BSDF that reflects on both sides).
+- ``max_depth`` follows Mitsuba: ``-1`` unlimited, ``1`` emitters seen directly
+  only, ``2`` adds direct lighting, ``3`` one indirect bounce, ... Russian
+  roulette starts at ``rr_depth`` bounces (unbiased, adds variance only).
+- Spot lights: Mitsuba's ``spot`` has its full intensity inside ``beam_width``
+  (the glTF inner cone) and falls off *linearly in angle* to zero at
+  ``cutoff_angle`` (the outer cone); glTF's falloff is smooth in cos(angle), so
+  spot references match the solver inside the inner cone and only roughly in the
+  transition ring.
+
+Variant: ``scalar_rgb`` (works everywhere). ``llvm_ad_rgb`` is used when the
+environment variable ``IAT_MITSUBA_VARIANT`` names it, or when
+``DRJIT_LIBLLVM_PATH`` is set and a small probe render in a subprocess succeeds
+(with the system's LLVM 15 the LLVM backend aborts the process, so it is never
+tried in-process without that check).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .camera import Camera
+from .scene import Scene
+
+__all__ = [
+    "mitsuba_variant",
+    "build_mitsuba_scene",
+    "render_reference",
+    "render_reference_cached",
+    "reference_key",
+    "REFERENCE_VERSION",
+]
+
+#: bump when the way references are built changes, so cached ``.npy`` files are redone
+REFERENCE_VERSION = 1
+
+_VARIANT: str | None = None
+
+_LLVM_PROBE = """
+import mitsuba as mi
+mi.set_variant('llvm_ad_rgb')
+s = mi.load_dict(mi.cornell_box())
+import numpy as np
+img = np.array(mi.render(s, spp=2))
+assert img.shape[-1] == 3 and np.isfinite(img).all()
+"""
+
+
+def _import_mitsuba():
+    try:
+        import mitsuba as mi  # noqa: F401
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            "iat.reference needs the 'mitsuba' package (Mitsuba 3) for path-traced references: "
+            f"pip install mitsuba ({e})"
+        ) from e
+    return mi
+
+
+def mitsuba_variant() -> str:
+    """Pick (once per process) and set the Mitsuba variant; returns its name.
+
+    ``IAT_MITSUBA_VARIANT`` forces one; otherwise ``llvm_ad_rgb`` when
+    ``DRJIT_LIBLLVM_PATH`` is set and a probe render in a subprocess works, else
+    ``scalar_rgb``. Raises ImportError when mitsuba is missing.
+    """
+    global _VARIANT
+    mi = _import_mitsuba()
+    if _VARIANT is None:
+        forced = os.environ.get("IAT_MITSUBA_VARIANT", "").strip()
+        if forced:
+            if forced not in ("scalar_rgb", "llvm_ad_rgb", "cuda_ad_rgb"):
+                raise ValueError(
+                    f"IAT_MITSUBA_VARIANT={forced!r}: use scalar_rgb, llvm_ad_rgb or cuda_ad_rgb"
+                )
+            _VARIANT = forced
+        else:
+            _VARIANT = "scalar_rgb"
+            if os.environ.get("DRJIT_LIBLLVM_PATH") and "llvm_ad_rgb" in mi.variants():
+                try:
+                    r = subprocess.run(
+                        [sys.executable, "-c", _LLVM_PROBE], capture_output=True, timeout=120, check=False
+                    )
+                    if r.returncode == 0:
+                        _VARIANT = "llvm_ad_rgb"
+                except (OSError, subprocess.TimeoutExpired):
+                    pass
+    if mi.variant() != _VARIANT:
+        mi.set_variant(_VARIANT)
+    return _VARIANT
+
+
+def _rgb(value) -> dict:
+    return {"type": "rgb", "value": [float(x) for x in np.asarray(value, dtype=np.float64).reshape(3)]}
+
+
+def _camera_frame(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Eye, target and an orthonormal up taken from the camera's own view matrix
+    (so degenerate up vectors are resolved exactly as the renderer does)."""
+    v = camera.view_from_world()
+    up = v[1, :3]
+    return camera.eye, camera.eye + camera.forward, up
+
+
+def _group_triangles(scene: Scene) -> dict[int, np.ndarray]:
+    """Triangles per material, ``{material: (t, 3) int64 vertex indices}``.
+
+    A quad (c0, c1, c2, c3) becomes (c0, c1, c2) and (c0, c2, c3): both keep the
+    winding of the patch, so their face normal ``cross(v1 - v0, v2 - v0)`` is
+    :attr:`Scene.patch_normal`.
+    """
+    pc = scene.patch_corners
+    quad = scene.patch_is_quad
+    out: dict[int, np.ndarray] = {}
+    for m in np.unique(scene.patch_material):
+        sel = scene.patch_material == m
+        q = pc[sel & quad]
+        t = pc[sel & ~quad, :3]
+        tris = np.concatenate([t, q[:, [0, 1, 2]], q[:, [0, 2, 3]]], axis=0)
+        if len(tris):
+            out[int(m)] = tris
+    return out
+
+
+def _make_mesh(mi, name: str, positions: np.ndarray, faces: np.ndarray, props):
+    """An in-memory ``mi.Mesh`` (no vertex normals: flat face normals)."""
+    mesh = mi.Mesh(name, len(positions), len(faces), props, has_vertex_normals=False)
+    params = mi.traverse(mesh)
+    vp, fa = params["vertex_positions"], params["faces"]
+    params["vertex_positions"] = type(vp)(np.ascontiguousarray(positions, dtype=np.float32).ravel())
+    params["faces"] = type(fa)(np.ascontiguousarray(faces, dtype=np.uint32).ravel())
+    params.update()
+    return mesh
+
+
+def build_mitsuba_scene(
+    scene: Scene,
+    camera: Camera,
+    size: tuple[int, int] = (256, 256),
+    seed: int = 0,
+    max_depth: int = -1,
+    rr_depth: int = 16,
+    two_sided: bool = False,
+):
+    """Build the ``mi.Scene`` for a :class:`Scene` seen from ``camera``.
+
+    size : (w, h) pixels. One ``mi.Mesh`` per material (diffuse BSDF of its
+    albedo; an ``area`` emitter of its emission when that is non-zero), point
+    and spot emitters for the lights, a ``path`` integrator and a perspective
+    sensor (vertical ``yfov``, box filter, independent sampler seeded by ``seed``).
+    """
+    mi = _import_mitsuba()
+    mitsuba_variant()
+    w, h = (int(size[0]), int(size[1]))
+    if w <= 0 or h <= 0:
+        raise ValueError(f"image size must be positive, got {size}")
+
+    eye, target, up = _camera_frame(camera)
+    d: dict = {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": int(max_depth), "rr_depth": int(rr_depth)},
+        "sensor": {
+            "type": "perspective",
+            "fov": float(camera.yfov),
+            "fov_axis": "y",
+            "near_clip": float(camera.znear),
+            "far_clip": float(camera.zfar),
+            "to_world": mi.ScalarTransform4f().look_at(
+                origin=eye.tolist(), target=target.tolist(), up=up.tolist()
+            ),
+            "film": {
+                "type": "hdrfilm",
+                "width": w,
+                "height": h,
+                "pixel_format": "rgb",
+                "component_format": "float32",
+                "rfilter": {"type": "box"},
+            },
+            "sampler": {"type": "independent", "seed": int(seed)},
+        },
+    }
+
+    for m, tris in _group_triangles(scene).items():
+        mat = scene.materials[m]
+        used, inv = np.unique(tris.ravel(), return_inverse=True)
+        positions = scene.vertices[used]
+        faces = inv.reshape(-1, 3)
+        bsdf = {"type": "diffuse", "reflectance": _rgb(np.clip(mat.albedo, 0.0, 1.0))}
+        if two_sided:
+            bsdf = {"type": "twosided", "material": bsdf}
+        props = mi.Properties()
+        props["bsdf"] = mi.load_dict(bsdf)
+        if np.any(mat.emission > 0):
+            props["emitter"] = mi.load_dict({"type": "area", "radiance": _rgb(np.maximum(mat.emission, 0.0))})
+        d[f"material_{m}"] = _make_mesh(mi, f"material_{m}", positions, faces, props)
+
+    for k, light in enumerate(scene.lights):
+        inten = _rgb(light.radiant_intensity)
+        if light.kind == "point":
+            d[f"light_{k}"] = {"type": "point", "position": light.position.tolist(), "intensity": inten}
+        elif light.kind == "spot":
+            dirn = light.direction / max(np.linalg.norm(light.direction), 1e-300)
+            lup = np.array([0.0, 1.0, 0.0]) if abs(dirn[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+            outer = float(np.degrees(light.outer_cone))
+            inner = float(np.degrees(min(light.inner_cone, light.outer_cone)))
+            d[f"light_{k}"] = {
+                "type": "spot",
+                "to_world": mi.ScalarTransform4f().look_at(
+                    origin=light.position.tolist(), target=(light.position + dirn).tolist(), up=lup.tolist()
+                ),
+                "intensity": inten,
+                "cutoff_angle": outer,
+                "beam_width": min(inner, outer * 0.9999),
+            }
+        else:
+            raise ValueError(f"light {k} ({light.name!r}): unsupported kind {light.kind!r}")
+    return mi.load_dict(d)
+
+
+def render_reference(
+    scene: Scene,
+    camera: Camera,
+    size: tuple[int, int] = (256, 256),
+    spp: int = 64,
+    seed: int = 0,
+    max_depth: int = -1,
+    *,
+    rr_depth: int = 16,
+    two_sided: bool = False,
+) -> np.ndarray:
+    """Path-trace ``scene`` from ``camera`` with Mitsuba 3.
+
+    size : (w, h) pixels; spp : samples per pixel; seed : sampler seed;
+    max_depth : Mitsuba path depth (-1 unlimited, 2 = direct light only).
+    Returns ``(h, w, 3) float32`` linear RGB radiance, row 0 at the top, column 0
+    at the left (not mirrored; see the module docstring).
+    Raises ImportError when mitsuba is not installed.
+    """
+    mi = _import_mitsuba()
+    msc = build_mitsuba_scene(scene, camera, size, seed, max_depth, rr_depth, two_sided)
+    img = mi.render(msc, spp=int(spp), seed=int(seed))
+    out = np.array(img, dtype=np.float32)
+    w, h = int(size[0]), int(size[1])
+    return np.ascontiguousarray(out.reshape(h, w, -1)[..., :3])
+
+
+def reference_key(
+    scene: Scene,
+    camera: Camera,
+    size: tuple[int, int],
+    spp: int,
+    seed: int = 0,
+    max_depth: int = -1,
+    rr_depth: int = 16,
+    two_sided: bool = False,
+) -> str:
+    """Hex SHA-256 (first 24 digits) of everything a reference depends on."""
+    hsh = hashlib.sha256()
+
+    def arr(a, dtype):
+        a = np.ascontiguousarray(np.asarray(a, dtype=dtype))
+        hsh.update(str(a.shape).encode())
+        hsh.update(a.tobytes())
+
+    arr(scene.vertices, np.float64)
+    arr(scene.patch_corners, np.int64)
+    arr(scene.patch_material, np.int64)
+    arr([m.albedo for m in scene.materials] or np.zeros((0, 3)), np.float64)
+    arr([m.emission for m in scene.materials] or np.zeros((0, 3)), np.float64)
+    meta = {
+        "version": REFERENCE_VERSION,
+        "lights": [
+            [
+                l.kind,
+                l.position.tolist(),
+                l.direction.tolist(),
+                l.color.tolist(),
+                float(l.intensity),
+                float(l.inner_cone),
+                float(l.outer_cone),
+            ]
+            for l in scene.lights
+        ],
+        "camera": [
+            camera.eye.tolist(),
+            camera.target.tolist(),
+            camera.up.tolist(),
+            float(camera.yfov),
+            float(camera.znear),
+            float(camera.zfar),
+        ],
+        "size": [int(size[0]), int(size[1])],
+        "spp": int(spp),
+        "seed": int(seed),
+        "max_depth": int(max_depth),
+        "rr_depth": int(rr_depth),
+        "two_sided": bool(two_sided),
+    }
+    hsh.update(json.dumps(meta, sort_keys=True).encode())
+    return hsh.hexdigest()[:24]
+
+
+def render_reference_cached(
+    scene: Scene,
+    camera: Camera,
+    size: tuple[int, int],
+    spp: int,
+    cache_dir: str | Path,
+    *,
+    seed: int = 0,
+    max_depth: int = -1,
+    rr_depth: int = 16,
+    two_sided: bool = False,
+    regen: bool | None = None,
+) -> np.ndarray:
+    """:func:`render_reference`, stored in ``cache_dir/ref-<key>.npy``.
+
+    The key (:func:`reference_key`) hashes the scene arrays, materials, lights,
+    camera, size, spp, seed and depth settings, so any change renders anew.
+    regen : True re-renders and overwrites; None reads the environment variable
+    ``IAT_REGEN_REFS`` ("1"/"true"/"yes" mean regenerate; a pytest
+    ``--regen-refs`` option can set it). The file is written atomically
+    (temporary file + ``os.replace``). Returns ``(h, w, 3) float32``.
+    """
+    if regen is None:
+        regen = os.environ.get("IAT_REGEN_REFS", "").strip().lower() in ("1", "true", "yes")
+    cache_dir = Path(cache_dir)
+    key = reference_key(scene, camera, size, spp, seed, max_depth, rr_depth, two_sided)
+    path = cache_dir / f"ref-{key}.npy"
+    w, h = int(size[0]), int(size[1])
+    if not regen and path.is_file():
+        try:
+            img = np.load(path, allow_pickle=False)
+            if img.shape == (h, w, 3) and img.dtype == np.float32:
+                return img
+        except (OSError, ValueError):
+            pass  # damaged cache file: render again
+    img = render_reference(scene, camera, size, spp, seed, max_depth, rr_depth=rr_depth, two_sided=two_sided)
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".ref-{key}-", suffix=".npy", dir=cache_dir)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.save(f, img, allow_pickle=False)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    return img

@@ -1,0 +1,732 @@
+"""The renderer: draws a Scene (preview), a Solution (mesh) or a Baked (IAT) with moderngl.
+
+Shared by the viewer (a window context is passed in), the CLI, the tests and the
+benchmark (headless: an EGL standalone context, Mesa llvmpipe here).
+
+Modes
+-----
+``preview``  every patch of a :class:`~iat.scene.Scene` unlit: ``emission + 0.5 x albedo``
+``mesh``     the solution's leaf triangles, one radiance per vertex, Gouraud-interpolated
+``iat``      a Baked: its vertex-coloured mesh part plus one textured polygon per
+             textured patch, the atlas pages in one texture array
+``split``    mesh left of ``split x width``, IAT right of it (scissor)
+``diff``     ``|mesh - iat| x diff_gain`` (both drawn to float targets, combined in a fullscreen pass)
+
+:meth:`Renderer.render` returns linear radiance as ``(h, w, 3) float32`` read
+back from an RGBA32F framebuffer (exact, no tone map); :meth:`Renderer.draw`
+draws into the bound framebuffer with exposure and sRGB encoding in the shader.
+
+Atlas convention: ``pages[layer, y, x]`` is the texel whose centre is at
+``uv = ((x + 0.5) / W, (y + 0.5) / H)`` of that page (row ``y = 0`` at ``v = 0``).
+
+GL memory: every GL object the renderer creates is kept in one registry and
+released by :meth:`Renderer.release`. Re-setting data writes buffers and
+textures in place when the size allows (a buffer is orphaned with a new size
+when the data grows, or shrinks below a quarter, keeping its name and its
+vertex arrays), so re-baking every frame does not grow GL memory.
+"""
+
+from __future__ import annotations
+
+import importlib.resources
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import RenderError
+
+log = logging.getLogger(__name__)
+
+try:  # the lattice -> world map lives in quadtree.py once it exists
+    from .quadtree import lattice_to_world
+except ImportError:  # pragma: no cover - depends on the order modules land in
+
+    def lattice_to_world(
+        patch_corners: np.ndarray,
+        patch_is_quad: np.ndarray,
+        patch: np.ndarray,
+        i: np.ndarray,
+        j: np.ndarray,
+        n: int,
+    ) -> np.ndarray:
+        """World positions of lattice points.
+
+        patch_corners : (P, 4, 3) float64 world corners (triangles repeat corner 2 in slot 3)
+        patch_is_quad : (P,) bool
+        patch, i, j : (k,) int lattice point (i, j) of patch ``patch``; ``(u, v) = (i / n, j / n)``
+        n : lattice intervals per side (``2 ** max_depth``)
+        Returns (k, 3) float64: bilinear in the 4 corners for quads,
+        ``c0 + u (c1 - c0) + v (c2 - c0)`` for triangles.
+        """
+        corners = np.asarray(patch_corners, dtype=np.float64)
+        patch = np.asarray(patch, dtype=np.int64)
+        u = (np.asarray(i, dtype=np.float64) / n)[:, None]
+        v = (np.asarray(j, dtype=np.float64) / n)[:, None]
+        c = corners[patch]
+        quad = (1 - u) * (1 - v) * c[:, 0] + u * (1 - v) * c[:, 1] + u * v * c[:, 2] + (1 - u) * v * c[:, 3]
+        tri = c[:, 0] + u * (c[:, 1] - c[:, 0]) + v * (c[:, 2] - c[:, 0])
+        is_quad = np.asarray(patch_is_quad, dtype=bool)[patch]
+        return np.where(is_quad[:, None], quad, tri)
+
+
+MODES = ("preview", "mesh", "iat", "split", "diff")
+#: constant standing in for lighting in preview mode: colour = emission + PREVIEW_AMBIENT x albedo
+PREVIEW_AMBIENT = 0.5
+PIXEL_FORMATS = {"rgba16f": "f2", "rgba32f": "f4", "rgba8": "f1"}
+_MIN_BUFFER = 64  # bytes; GL buffers are never created empty
+
+
+# -- shader lookup ----------------------------------------------------------------------------
+def shader_dir() -> Path | Any:
+    """Where the ``.glsl`` files are: ``iat/shaders`` in a wheel, else ``shaders/`` of the repo.
+
+    Returns a :class:`pathlib.Path` or an ``importlib.resources`` Traversable.
+    """
+    try:
+        packaged = importlib.resources.files("iat") / "shaders"
+        if packaged.is_dir() and (packaged / "mesh.glsl").is_file():
+            return packaged
+    except (ModuleNotFoundError, FileNotFoundError, NotADirectoryError):  # pragma: no cover
+        pass
+    repo = Path(__file__).resolve().parent.parent / "shaders"
+    if (repo / "mesh.glsl").is_file():
+        return repo
+    raise RenderError(f"shader directory not found (looked in the iat package and {repo})")
+
+
+def shader_source(name: str, stage: str) -> str:
+    """Source of program ``name`` (``shaders/<name>.glsl``) for ``stage`` "VERTEX_SHADER" / "FRAGMENT_SHADER".
+
+    The file holds both stages in ``#if defined VERTEX_SHADER`` / ``#elif defined
+    FRAGMENT_SHADER`` sections; this prepends ``#version 330 core`` and the define.
+    """
+    path = shader_dir() / f"{name}.glsl"
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as e:
+        raise RenderError(f"cannot read shader: {e}", path) from e
+    return f"#version 330 core\n#define {stage}\n#line 1\n{text}"
+
+
+# -- GL object bookkeeping --------------------------------------------------------------------
+class _Registry:
+    """Every GL object the renderer owns, so that ``release()`` frees them all and tests can count them."""
+
+    def __init__(self):
+        self._objects: dict[int, Any] = {}
+
+    def add(self, obj):
+        self._objects[id(obj)] = obj
+        return obj
+
+    def release(self, obj) -> None:
+        if obj is not None and self._objects.pop(id(obj), None) is not None:
+            obj.release()
+
+    def release_all(self) -> None:
+        # vertex arrays first, then programs, framebuffers, attachments, buffers
+        objs = list(self._objects.values())
+        order = {"VertexArray": 0, "Framebuffer": 1, "Program": 2}
+        objs.sort(key=lambda o: order.get(type(o).__name__, 3))
+        for o in objs:
+            o.release()
+        self._objects.clear()
+
+    def __len__(self) -> int:
+        return len(self._objects)
+
+    def counts(self) -> dict[str, int]:
+        out: dict[str, int] = {}
+        for o in self._objects.values():
+            out[type(o).__name__] = out.get(type(o).__name__, 0) + 1
+        return out
+
+
+def _upload(ctx, reg: _Registry, buf, data: np.ndarray):
+    """Write ``data`` into ``buf`` in place; orphan it with a new size when the data grows
+    (or shrinks below a quarter). Creates the buffer when ``buf`` is None. Returns the buffer."""
+    raw = np.ascontiguousarray(data)
+    nbytes = raw.nbytes
+    if buf is None:
+        buf = reg.add(ctx.buffer(reserve=max(nbytes, _MIN_BUFFER), dynamic=True))
+    elif nbytes > buf.size or (buf.size > _MIN_BUFFER and nbytes < buf.size // 4):
+        buf.orphan(max(nbytes, _MIN_BUFFER))
+    if nbytes:
+        buf.write(raw.tobytes())
+    return buf
+
+
+@dataclass
+class _Geometry:
+    """Indexed triangles with per-vertex attributes, drawn by ranges (one range per draw call).
+
+    attrs : (name, components) of the float attributes, in the program's ``in_<name>``
+    ranges : [(key, first_index, index_count)]: key -1 = plain, else a material with a detail texture
+    """
+
+    program: Any
+    attrs: list[tuple[str, int]]
+    buffers: dict[str, Any] = field(default_factory=dict)
+    index_buffer: Any = None
+    vao: Any = None
+    n_triangles: int = 0
+    ranges: list[tuple[int, int, int]] = field(default_factory=list)
+
+    def upload(
+        self,
+        ctx,
+        reg: _Registry,
+        arrays: dict[str, np.ndarray],
+        indices: np.ndarray,
+        tri_key: np.ndarray | None = None,
+    ) -> None:
+        """arrays : name -> (n, components) float32; indices : (t, 3) uint32;
+        tri_key : (t,) int, -1 for plain triangles, else the detail material (one draw call per key)."""
+        indices = np.asarray(indices, dtype=np.uint32).reshape(-1, 3)
+        ranges = [(-1, 0, 3 * len(indices))]
+        if tri_key is not None and len(indices):
+            tri_key = np.asarray(tri_key, dtype=np.int64).reshape(-1)
+            order = np.argsort(tri_key, kind="stable")
+            indices = indices[order]
+            keys, starts, counts = np.unique(tri_key[order], return_index=True, return_counts=True)
+            ranges = [(int(k), 3 * int(s), 3 * int(c)) for k, s, c in zip(keys, starts, counts, strict=True)]
+        for name, comps in self.attrs:
+            a = np.asarray(arrays[name], dtype=np.float32).reshape(-1, comps)
+            self.buffers[name] = _upload(ctx, reg, self.buffers.get(name), a)
+        self.index_buffer = _upload(ctx, reg, self.index_buffer, indices)
+        if self.vao is None:
+            content = [(self.buffers[name], f"{comps}f", f"in_{name}") for name, comps in self.attrs]
+            self.vao = reg.add(
+                ctx.vertex_array(self.program, content, index_buffer=self.index_buffer, index_element_size=4)
+            )
+        self.n_triangles = len(indices)
+        self.ranges = [r for r in ranges if r[2] > 0]
+
+    def calls(self):
+        """(key, first_index, index_count) of each draw call."""
+        return list(self.ranges)
+
+    def render_range(self, first: int, count: int) -> None:
+        import moderngl
+
+        self.vao.render(moderngl.TRIANGLES, vertices=count, first=first)
+
+    def release(self, reg: _Registry) -> None:
+        reg.release(self.vao)
+        for b in self.buffers.values():
+            reg.release(b)
+        reg.release(self.index_buffer)
+        self.buffers.clear()
+        self.vao = self.index_buffer = None
+        self.n_triangles = 0
+        self.ranges = []
+
+
+@dataclass
+class _Target:
+    """An offscreen framebuffer: RGBA32F colour (renderbuffer, or texture when sampled later) + depth."""
+
+    size: tuple[int, int]
+    color: Any
+    depth: Any
+    fbo: Any
+
+
+def _vec(a, n: int, name: str, dtype=np.float32) -> np.ndarray:
+    a = np.asarray(a, dtype=dtype)
+    if a.size % n:
+        raise RenderError(f"{name} has {a.size} values, not a multiple of {n}")
+    return a.reshape(-1, n)
+
+
+def _check_indices(indices: np.ndarray, n_vertices: int, name: str) -> None:
+    if indices.size and (indices.min() < 0 or indices.max() >= n_vertices):
+        raise RenderError(f"{name} refer to vertex {int(indices.max())} but there are {n_vertices} vertices")
+
+
+class Renderer:
+    """Draws preview / mesh / IAT images with moderngl.
+
+    ctx : a moderngl context (the viewer's window context), or None to create an
+          EGL standalone context (headless), which the renderer then owns and releases.
+    """
+
+    def __init__(self, ctx=None):
+        import moderngl
+
+        self._moderngl = moderngl
+        self._owns_ctx = ctx is None
+        if ctx is None:
+            try:
+                ctx = moderngl.create_standalone_context(backend="egl")
+            except Exception as e:  # moderngl raises plain Exception subclasses here
+                raise RenderError(f"cannot create an EGL OpenGL context: {e}") from e
+        self.ctx = ctx
+        # where to return after offscreen work: moderngl rebinds "the bound framebuffer" whenever it
+        # creates one, so our framebuffers must never stay bound once released
+        self._home = ctx.fbo if ctx.fbo is not None else ctx.detect_framebuffer()
+        self._reg = _Registry()
+        self._programs: dict[str, Any] = {}
+        for name in ("mesh", "iat", "preview", "composite"):
+            self._programs[name] = self._program(name)
+        self._fullscreen = self._reg.add(ctx.vertex_array(self._programs["composite"], []))
+        # bound to the detail unit when a draw has no detail texture, so that unit never holds a
+        # texture that is also the render target (a feedback loop in diff mode)
+        self._white = self._reg.add(ctx.texture((1, 1), 4, np.ones(4, np.float32).tobytes(), dtype="f4"))
+        mesh, iat, preview = self._programs["mesh"], self._programs["iat"], self._programs["preview"]
+        self._solution = _Geometry(mesh, [("position", 3), ("color", 3)])
+        self._baked_mesh = _Geometry(mesh, [("position", 3), ("color", 3)])
+        self._baked_tex = _Geometry(
+            iat, [("position", 3), ("uv", 2), ("layer", 1), ("detail_uv", 2), ("detail", 1)]
+        )
+        self._preview = _Geometry(preview, [("position", 3), ("emission", 3), ("albedo", 3), ("uv", 2)])
+        self._has = {"preview": False, "mesh": False, "iat": False}
+        self._pages = None  # texture array
+        self._pages_key: tuple | None = None
+        self._page_scale = 1.0
+        self._detail: dict[str, dict[int, Any]] = {"iat": {}, "preview": {}}
+        self._targets: dict[str, _Target] = {}
+        self._last: dict[str, Any] = {"mode": None, "triangles": 0, "draw_calls": 0, "modes": {}}
+        self._released = False
+
+    # -- lifetime ---------------------------------------------------------------------------
+    def release(self) -> None:
+        """Release every GL object created by this renderer (and the context if it created it)."""
+        if self._released:
+            return
+        if any(self.ctx.fbo is t.fbo for t in self._targets.values()):
+            self._home.use()
+        self._reg.release_all()
+        self._detail = {"iat": {}, "preview": {}}
+        self._targets.clear()
+        self._pages = None
+        if self._owns_ctx:
+            self.ctx.release()
+        self._released = True
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.release()
+
+    def gl_object_count(self) -> int:
+        """How many GL objects this renderer holds now (constant across re-sets of same-shaped data)."""
+        return len(self._reg)
+
+    def _alive(self):
+        if self._released:
+            raise RenderError("renderer already released")
+
+    def _program(self, name: str):
+        try:
+            return self._reg.add(
+                self.ctx.program(
+                    vertex_shader=shader_source(name, "VERTEX_SHADER"),
+                    fragment_shader=shader_source(name, "FRAGMENT_SHADER"),
+                )
+            )
+        except RenderError:
+            raise
+        except Exception as e:
+            raise RenderError(f"shader {name}.glsl does not compile: {e}") from e
+
+    # -- textures ---------------------------------------------------------------------------
+    def _texture2d(self, old, data: np.ndarray):
+        """(h, w, 3) float -> RGBA32F repeating, mipmapped texture; written in place when the size matches."""
+        h, w = data.shape[:2]
+        rgba = np.ones((h, w, 4), dtype=np.float32)
+        rgba[..., :3] = data[..., :3]
+        if old is not None and old.size == (w, h):
+            old.write(rgba.tobytes())
+            tex = old
+        else:
+            self._reg.release(old)
+            tex = self._reg.add(self.ctx.texture((w, h), 4, rgba.tobytes(), dtype="f4"))
+            tex.repeat_x = tex.repeat_y = True
+            tex.filter = (self._moderngl.LINEAR_MIPMAP_LINEAR, self._moderngl.LINEAR)
+        tex.build_mipmaps()
+        return tex
+
+    def _set_details(self, which: str, textures: dict[int, np.ndarray]) -> None:
+        cur = self._detail[which]
+        for m in list(cur):
+            if m not in textures:
+                self._reg.release(cur.pop(m))
+        for m, img in textures.items():
+            img = np.asarray(img, dtype=np.float32)
+            if img.ndim != 3 or img.shape[2] < 3 or img.shape[0] == 0 or img.shape[1] == 0:
+                raise RenderError(f"detail texture of material {m} has shape {img.shape}, expected (h, w, 3)")
+            cur[int(m)] = self._texture2d(cur.get(int(m)), img)
+
+    def _set_pages(
+        self, pages: np.ndarray, pixel_format: str, mipmaps: bool, page_scale: float | None
+    ) -> None:
+        mgl = self._moderngl
+        pages = np.asarray(pages, dtype=np.float32)
+        if pages.ndim != 4 or pages.shape[3] < 3:
+            raise RenderError(f"baked pages have shape {pages.shape}, expected (n_pages, H, W, 3)")
+        if pixel_format not in PIXEL_FORMATS:
+            raise RenderError(f"unknown pixel format {pixel_format!r} (known: {', '.join(PIXEL_FORMATS)})")
+        n, h, w = pages.shape[:3]
+        dtype = PIXEL_FORMATS[pixel_format]
+        if pixel_format == "rgba8":
+            scale = float(page_scale) if page_scale else float(max(pages[..., :3].max(initial=0.0), 1e-30))
+            data = np.full((n, h, w, 4), 255, dtype=np.uint8)
+            data[..., :3] = np.rint(np.clip(pages[..., :3] / scale, 0.0, 1.0) * 255.0)
+            self._page_scale = scale
+        else:
+            data = np.ones((n, h, w, 4), dtype=np.float16 if dtype == "f2" else np.float32)
+            data[..., :3] = pages[..., :3]
+            self._page_scale = 1.0
+        key = (w, h, n, dtype)
+        if self._pages is not None and self._pages_key == key:
+            self._pages.write(data.tobytes())
+        else:
+            self._reg.release(self._pages)
+            self._pages = self._reg.add(self.ctx.texture_array((w, h, n), 4, data.tobytes(), dtype=dtype))
+            self._pages.repeat_x = self._pages.repeat_y = False
+            self._pages_key = key
+        if mipmaps:
+            self._pages.build_mipmaps()
+            self._pages.filter = (mgl.LINEAR_MIPMAP_LINEAR, mgl.LINEAR)
+        else:
+            self._pages.filter = (mgl.LINEAR, mgl.LINEAR)
+
+    # -- data -------------------------------------------------------------------------------
+    def set_scene(self, scene) -> None:
+        """Preview geometry of a :class:`~iat.scene.Scene`: every patch, unlit albedo + emission.
+
+        Quads become two triangles (0, 1, 2), (0, 2, 3); triangles one. Materials with a
+        ``detail`` texture are drawn with it (one draw call per such material).
+        """
+        self._alive()
+        corners = np.asarray(scene.corner_positions, dtype=np.float64).reshape(-1, 4, 3)
+        p = len(corners)
+        is_quad = np.asarray(scene.patch_corners)[:, 3] >= 0
+        mat = np.asarray(scene.patch_material, dtype=np.int64).reshape(-1)
+        materials = scene.materials
+        albedo = np.array([m.albedo for m in materials], dtype=np.float64).reshape(-1, 3)
+        emission = np.array([m.emission for m in materials], dtype=np.float64).reshape(-1, 3)
+        if p and (mat.min() < 0 or mat.max() >= len(materials)):
+            raise RenderError(f"scene patch_material refers to material {int(mat.max())} of {len(materials)}")
+        uv = scene.patch_uv if scene.patch_uv is not None else np.zeros((p, 4, 2))
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 4, 2)
+        base = 4 * np.arange(p, dtype=np.uint32)
+        t1 = np.stack([base, base + 1, base + 2], axis=1)
+        t2 = np.stack([base, base + 2, base + 3], axis=1)[is_quad]
+        indices = np.concatenate([t1, t2])
+        tri_patch = np.concatenate([np.arange(p), np.nonzero(is_quad)[0]])
+        details = {i: m.detail for i, m in enumerate(materials) if getattr(m, "detail", None) is not None}
+        detail_mat = np.array(sorted(details), dtype=np.int64)
+        tri_mat = mat[tri_patch]
+        tri_key = np.where(np.isin(tri_mat, detail_mat), tri_mat, -1)
+        self._set_details("preview", details)
+        self._preview.upload(
+            self.ctx,
+            self._reg,
+            {
+                "position": corners.reshape(-1, 3),
+                "emission": np.repeat(emission[mat], 4, axis=0),
+                "albedo": np.repeat(albedo[mat], 4, axis=0),
+                "uv": uv.reshape(-1, 2),
+            },
+            indices,
+            tri_key,
+        )
+        self._has["preview"] = True
+
+    def set_solution(self, solution) -> None:
+        """Mesh-mode geometry of a Solution: vertex-coloured leaf triangles (Gouraud).
+
+        Uses ``max_depth, patch_corners (P,4,3), patch_is_quad (P,), vert_key (V,) int64,
+        vert_radiance (V,3), tri_vertices (T,3)``; vertex positions come from the lattice keys.
+        """
+        self._alive()
+        n = 2 ** int(solution.max_depth)
+        key = np.asarray(solution.vert_key, dtype=np.int64).reshape(-1)
+        m = n + 1
+        j, i, patch = key % m, (key // m) % m, key // (m * m)
+        corners = np.asarray(solution.patch_corners, dtype=np.float64).reshape(-1, 4, 3)
+        if key.size and (key.min() < 0 or patch.max() >= len(corners)):
+            raise RenderError(f"solution vertex keys refer to patch {int(patch.max())} of {len(corners)}")
+        pos = lattice_to_world(corners, np.asarray(solution.patch_is_quad, dtype=bool), patch, i, j, n)
+        rad = _vec(solution.vert_radiance, 3, "vert_radiance")
+        if len(rad) != len(key):
+            raise RenderError(f"solution has {len(key)} vertex keys but {len(rad)} radiance values")
+        tris = np.asarray(solution.tri_vertices, dtype=np.int64).reshape(-1, 3)
+        _check_indices(tris, len(key), "solution tri_vertices")
+        self._solution.upload(self.ctx, self._reg, {"position": pos, "color": rad}, tris)
+        self._has["mesh"] = True
+
+    def set_baked(self, baked) -> None:
+        """IAT-mode data of a Baked: its vertex-coloured mesh part and its textured part.
+
+        The textured part is drawn in one call for the patches without detail texture and
+        one call per detail material (``baked.detail_textures: {material: (h,w,3)}``,
+        applied where ``tex_detail`` is 1, or on every vertex of that material when the
+        field is absent). Pages go into one texture array, rewritten in place when the
+        shape and ``policy.pixel_format`` are unchanged, mipmapped when ``policy.mipmaps``.
+        """
+        self._alive()
+        policy = getattr(baked, "policy", None)
+        pixel_format = str(getattr(policy, "pixel_format", "rgba16f") or "rgba16f")
+        mipmaps = bool(getattr(policy, "mipmaps", False))
+
+        mpos = _vec(baked.mesh_positions, 3, "mesh_positions")
+        mrad = _vec(baked.mesh_radiance, 3, "mesh_radiance")
+        midx = np.asarray(baked.mesh_indices, dtype=np.int64).reshape(-1, 3)
+        if len(mpos) != len(mrad):
+            raise RenderError(f"baked mesh part has {len(mpos)} positions but {len(mrad)} radiance values")
+        _check_indices(midx, len(mpos), "baked mesh_indices")
+
+        tpos = _vec(baked.tex_positions, 3, "tex_positions")
+        k = len(tpos)
+        tuv = _vec(baked.tex_uv, 2, "tex_uv")
+        tlayer = _vec(baked.tex_layer, 1, "tex_layer")
+        tduv = getattr(baked, "tex_detail_uv", None)
+        tduv = np.zeros((k, 2), np.float32) if tduv is None else _vec(tduv, 2, "tex_detail_uv")
+        tmat = getattr(baked, "tex_material", None)
+        tmat = np.full(k, -1, np.int64) if tmat is None else np.asarray(tmat, dtype=np.int64).reshape(-1)
+        tidx = np.asarray(baked.tex_indices, dtype=np.int64).reshape(-1, 3)
+        rows = {"tex_uv": tuv, "tex_layer": tlayer, "tex_detail_uv": tduv, "tex_material": tmat}
+        for name, a in rows.items():
+            if len(a) != k:
+                raise RenderError(f"baked {name} has {len(a)} rows but tex_positions has {k}")
+        _check_indices(tidx, k, "baked tex_indices")
+
+        details = dict(getattr(baked, "detail_textures", None) or {})
+        tdetail = getattr(baked, "tex_detail", None)
+        if tdetail is None:
+            tdetail = np.isin(tmat, list(details)).astype(np.float32)
+        else:
+            tdetail = np.asarray(tdetail, dtype=np.float32).reshape(-1)
+            if len(tdetail) != k:
+                raise RenderError(f"baked tex_detail has {len(tdetail)} rows but tex_positions has {k}")
+        # a triangle goes to its material's detail draw call when its first vertex asks for detail
+        tri_key = np.full(len(tidx), -1, np.int64)
+        if len(tidx) and details:
+            v0 = tidx[:, 0]
+            use = (tdetail[v0] > 0.5) & np.isin(tmat[v0], list(details))
+            tri_key[use] = tmat[v0][use]
+
+        if len(tidx):
+            pages = np.asarray(baked.pages)
+            if pages.ndim != 4 or pages.shape[0] == 0:
+                raise RenderError(f"baked has textured triangles but its pages have shape {pages.shape}")
+            if tlayer.size and (tlayer.min() < 0 or tlayer.max() > pages.shape[0] - 1):
+                raise RenderError(f"baked tex_layer refers to page {int(tlayer.max())} of {pages.shape[0]}")
+            self._set_pages(pages, pixel_format, mipmaps, getattr(baked, "page_scale", None))
+        self._set_details("iat", {int(m): v for m, v in details.items()})
+        self._baked_mesh.upload(self.ctx, self._reg, {"position": mpos, "color": mrad}, midx)
+        self._baked_tex.upload(
+            self.ctx,
+            self._reg,
+            {"position": tpos, "uv": tuv, "layer": tlayer, "detail_uv": tduv, "detail": tdetail},
+            tidx,
+            tri_key,
+        )
+        self._has["iat"] = True
+
+    # -- drawing ----------------------------------------------------------------------------
+    def _target(self, name: str, size: tuple[int, int], sampled: bool) -> _Target:
+        t = self._targets.get(name)
+        if t is not None and t.size == size:
+            return t
+        if t is not None:
+            if self.ctx.fbo is t.fbo:
+                self._home.use()
+            for o in (t.fbo, t.color, t.depth):
+                self._reg.release(o)
+        ctx = self.ctx
+        if sampled:
+            color = self._reg.add(ctx.texture(size, 4, dtype="f4"))
+            color.filter = (self._moderngl.NEAREST, self._moderngl.NEAREST)
+        else:
+            color = self._reg.add(ctx.renderbuffer(size, 4, dtype="f4"))
+        depth = self._reg.add(ctx.depth_renderbuffer(size))
+        fbo = self._reg.add(ctx.framebuffer(color_attachments=[color], depth_attachment=depth))
+        t = self._targets[name] = _Target(size, color, depth, fbo)
+        return t
+
+    def _need(self, mode: str) -> None:
+        what = {"preview": "set_scene", "mesh": "set_solution", "iat": "set_baked"}
+        for m in {"split": ("mesh", "iat"), "diff": ("mesh", "iat")}.get(mode, (mode,)):
+            if not self._has[m]:
+                raise RenderError(f"mode {mode!r} needs {what[m]}() first")
+
+    @staticmethod
+    def _uniforms(prog, values: dict) -> None:
+        for name, v in values.items():
+            if prog.get(name, None) is not None:
+                if name == "clip_from_world":
+                    prog[name].write(v)
+                else:
+                    prog[name].value = v
+
+    def _draw_mode(self, mode: str, clip: bytes, exposure: float, tonemap: bool, stats: dict) -> None:
+        """Draw one of preview / mesh / iat into the bound framebuffer, counting triangles and calls."""
+        common = {"clip_from_world": clip, "exposure": float(exposure), "tonemap": bool(tonemap)}
+        tris = calls = 0
+        if mode == "mesh" or mode == "iat":
+            geos = [self._solution] if mode == "mesh" else [self._baked_mesh]
+            for g in geos:
+                if g.n_triangles:
+                    self._uniforms(g.program, common)
+                    for _, first, count in g.calls():
+                        g.render_range(first, count)
+                        tris, calls = tris + count // 3, calls + 1
+        if mode == "iat" and self._baked_tex.n_triangles:
+            g = self._baked_tex
+            self._pages.use(0)
+            self._uniforms(g.program, {**common, "pages": 0, "detail": 1, "page_scale": self._page_scale})
+            for key, first, count in g.calls():
+                tex = self._detail["iat"].get(key)
+                (tex if tex is not None else self._white).use(1)
+                self._uniforms(g.program, {"use_detail": tex is not None})
+                g.render_range(first, count)
+                tris, calls = tris + count // 3, calls + 1
+        if mode == "preview" and self._preview.n_triangles:
+            g = self._preview
+            self._uniforms(g.program, {**common, "detail": 1, "ambient": PREVIEW_AMBIENT})
+            for key, first, count in g.calls():
+                tex = self._detail["preview"].get(key)
+                (tex if tex is not None else self._white).use(1)
+                self._uniforms(g.program, {"use_detail": tex is not None})
+                g.render_range(first, count)
+                tris, calls = tris + count // 3, calls + 1
+        s = stats.setdefault(mode, {"triangles": 0, "draw_calls": 0})
+        s["triangles"] += tris
+        s["draw_calls"] += calls
+
+    def _frame(self, target, viewport, camera, mode, exposure, tonemap, split, diff_gain, clear) -> None:
+        if mode not in MODES:
+            raise RenderError(f"unknown render mode {mode!r} (known: {', '.join(MODES)})")
+        self._alive()
+        self._need(mode)
+        ctx, mgl = self.ctx, self._moderngl
+        x, y, w, h = (int(v) for v in viewport)
+        if w <= 0 or h <= 0:
+            raise RenderError(f"empty viewport {tuple(viewport)}")
+        clip = np.asarray(camera.clip_from_world(w / h), dtype=np.float64).T.astype("f4").tobytes()
+        stats: dict[str, dict] = {}
+        ctx.enable(mgl.DEPTH_TEST)
+        ctx.disable(mgl.CULL_FACE | mgl.BLEND)
+        try:
+            if mode == "diff":
+                for name, sub in (("diff_a", "mesh"), ("diff_b", "iat")):
+                    t = self._target(name, (w, h), sampled=True)
+                    t.fbo.use()
+                    t.fbo.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
+                    self._draw_mode(sub, clip, 1.0, False, stats)
+                target.use()
+                ctx.viewport = (x, y, w, h)
+                ctx.disable(mgl.DEPTH_TEST)
+                self._targets["diff_a"].color.use(0)
+                self._targets["diff_b"].color.use(1)
+                prog = self._programs["composite"]
+                self._uniforms(
+                    prog,
+                    {
+                        "image_a": 0,
+                        "image_b": 1,
+                        "offset": (x, y),
+                        "gain": float(diff_gain),
+                        "exposure": float(exposure),
+                        "tonemap": bool(tonemap),
+                    },
+                )
+                self._fullscreen.render(mgl.TRIANGLES, vertices=3)
+            else:
+                target.use()
+                ctx.viewport = (x, y, w, h)
+                if clear:
+                    target.clear(0.0, 0.0, 0.0, 1.0, depth=1.0, viewport=(x, y, w, h))
+                if mode == "split":
+                    sw = int(round(min(max(float(split), 0.0), 1.0) * w))
+                    ctx.scissor = (x, y, sw, h)
+                    self._draw_mode("mesh", clip, exposure, tonemap, stats)
+                    ctx.scissor = (x + sw, y, w - sw, h)
+                    self._draw_mode("iat", clip, exposure, tonemap, stats)
+                    ctx.scissor = None
+                else:
+                    self._draw_mode(mode, clip, exposure, tonemap, stats)
+        finally:
+            ctx.disable(mgl.DEPTH_TEST)
+        self._last = {
+            "mode": mode,
+            "triangles": sum(s["triangles"] for s in stats.values()),
+            "draw_calls": sum(s["draw_calls"] for s in stats.values()) + (mode == "diff"),
+            "modes": stats,
+        }
+
+    def render(
+        self,
+        camera,
+        size: tuple[int, int] = (640, 480),
+        mode: str = "mesh",
+        exposure: float | None = None,
+        split: float = 0.5,
+        diff_gain: float = 1.0,
+    ) -> np.ndarray:
+        """Draw offscreen and return ``(h, w, 3) float32`` linear radiance, row 0 at the top.
+
+        camera : anything with ``clip_from_world(aspect) -> (4, 4)`` (a :class:`~iat.camera.Camera`)
+        size : (w, h) pixels; the aspect ratio is w / h
+        mode : "mesh" | "iat" | "preview" | "split" | "diff"
+        exposure : None (radiance as is) or a multiplier applied in the shader; never a tone map
+        split : fraction of the width drawn in mesh mode (split mode)
+        diff_gain : multiplier on |mesh - iat| (diff mode)
+        """
+        self._alive()
+        w, h = (int(v) for v in size)
+        if w <= 0 or h <= 0:
+            raise RenderError(f"bad image size {size}")
+        prev = self.ctx.fbo
+        if prev is None or isinstance(prev.mglo, self._moderngl.InvalidObject):  # none, or released
+            prev = self._home
+        t = self._target("out", (w, h), sampled=False)
+        e = 1.0 if exposure is None else float(exposure)
+        try:
+            self._frame(t.fbo, (0, 0, w, h), camera, mode, e, False, split, diff_gain, True)
+            self.ctx.finish()
+            raw = t.fbo.read(viewport=(0, 0, w, h), components=3, dtype="f4", alignment=1)
+        finally:
+            prev.use()  # leave the caller's framebuffer (and its viewport) bound
+        return np.frombuffer(raw, dtype=np.float32).reshape(h, w, 3)[::-1].copy()
+
+    def draw(
+        self,
+        camera,
+        mode: str,
+        viewport: tuple[int, int, int, int],
+        exposure: float = 1.0,
+        tonemap: bool = True,
+        split: float = 0.5,
+        diff_gain: float = 1.0,
+        clear: bool = True,
+        target=None,
+    ) -> None:
+        """Draw into ``target`` (default: the bound framebuffer, ``ctx.fbo``) inside ``viewport``.
+
+        viewport : (x, y, w, h) in the target's pixels (GL convention, y up)
+        tonemap : True for a display framebuffer (exposure, clamp, sRGB encode in the shader);
+                  False writes exposure x linear radiance (float targets)
+        clear : clear colour (black) and depth inside the viewport first
+        """
+        self._alive()
+        target = target if target is not None else self.ctx.fbo
+        if target is None:
+            raise RenderError("draw() needs a bound framebuffer (or target=); use render() headless")
+        self._frame(target, viewport, camera, mode, exposure, tonemap, split, diff_gain, clear)
+
+    def stats(self) -> dict:
+        """Counts of the last frame: ``{"mode", "triangles", "draw_calls", "modes": {mode: {"triangles",
+        "draw_calls"}}, "gl_objects"}`` (split and diff list both mesh and iat under "modes")."""
+        out = dict(self._last)
+        out["modes"] = {k: dict(v) for k, v in self._last["modes"].items()}
+        out["gl_objects"] = len(self._reg)
+        return out

@@ -1,0 +1,37 @@
+// Mesh mode: vertex-coloured triangles (Gouraud shading). Each vertex carries its
+// outgoing radiance (linear RGB); the rasteriser interpolates it, no lighting here.
+// Used for the solution's leaf mesh and for the mesh part of a Baked.
+
+#if defined VERTEX_SHADER
+
+uniform mat4 clip_from_world;
+
+in vec3 in_position;  // world
+in vec3 in_color;     // linear radiance
+
+out vec3 v_color;
+
+void main() {
+    v_color = in_color;
+    gl_Position = clip_from_world * vec4(in_position, 1.0);
+}
+
+#elif defined FRAGMENT_SHADER
+
+uniform float exposure;  // multiplier on radiance
+uniform bool tonemap;    // true: clamp + sRGB encode (window); false: linear radiance (float FBO)
+
+in vec3 v_color;
+out vec4 frag_color;
+
+vec3 srgb_encode(vec3 c) {
+    c = clamp(c, 0.0, 1.0);
+    return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(vec3(0.0031308), c));
+}
+
+void main() {
+    vec3 c = v_color * exposure;
+    frag_color = vec4(tonemap ? srgb_encode(c) : c, 1.0);
+}
+
+#endif

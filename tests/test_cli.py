@@ -1,0 +1,118 @@
+"""The command line end to end, on real files: exit codes, one-line errors, JSON outputs."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+CORNELL = ROOT / "sample_models" / "cornell_box.glb"
+
+
+def iat(*args, cwd=None):
+    """Run ``python -m iat.cli ARGS`` in a subprocess; returns CompletedProcess."""
+    return subprocess.run(
+        [sys.executable, "-m", "iat.cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=cwd or ROOT,
+        timeout=600,
+    )
+
+
+@pytest.fixture(scope="module")
+def cornell_solution(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "cornell.npz"
+    r = iat("solve", CORNELL, "-o", out, "--max-depth", "4", "--json")
+    assert r.returncode == 0, r.stderr
+    stats = json.loads(r.stdout)
+    assert stats["vertices"] > 0 and stats["elements"] > 0
+    return out
+
+
+def test_info_counts_the_cornell_box():
+    r = iat("info", CORNELL, "--json")
+    assert r.returncode == 0, r.stderr
+    info = json.loads(r.stdout)
+    assert info["patches"] > 10
+    assert info["quads"] == info["patches"]  # every Cornell surface is a planar quad
+    assert info["cameras"] >= 1
+    assert info["emissive_materials"] >= 1
+
+
+BAD_FILES = {
+    "empty.obj": b"",
+    "garbage.glb": b"this is not a glb file at all" * 10,
+    "nan.obj": b"v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    "degenerate.obj": b"v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n",
+    "model.xyz123": b"v 0 0 0\n",
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAD_FILES))
+@pytest.mark.parametrize("command", ["info", "solve", "bake", "render"])
+def test_bad_input_gives_one_line_error_and_exit_2(tmp_path, name, command):
+    bad = tmp_path / name
+    bad.write_bytes(BAD_FILES[name])
+    extra = {"info": [], "solve": ["-o", tmp_path / "s.npz"], "bake": ["-o", tmp_path / "o.glb"],
+             "render": ["-o", tmp_path / "o.png"]}[command]
+    r = iat(command, bad, *extra)
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, r.stderr
+    assert name in lines[0] and "Traceback" not in r.stderr
+    assert not (tmp_path / "s.npz").exists() and not (tmp_path / "o.glb").exists()
+
+
+def test_missing_file_and_debug_traceback(tmp_path):
+    r = iat("info", tmp_path / "nope.glb")
+    assert r.returncode == 2 and "nope.glb" in r.stderr and "Traceback" not in r.stderr
+    r = iat("--debug", "info", tmp_path / "nope.glb")
+    assert r.returncode != 0 and "Traceback" in r.stderr
+
+
+def test_solution_of_another_version_is_refused(tmp_path, cornell_solution):
+    with np.load(cornell_solution, allow_pickle=False) as z:
+        data = {k: z[k] for k in z.files}
+    data["version"] = np.array(99)
+    other = tmp_path / "v99.npz"
+    np.savez(other, **data)
+    r = iat("bake", other, "-o", tmp_path / "o.glb")
+    assert r.returncode == 2 and "version 99" in r.stderr
+
+
+def test_bake_json_and_render_modes(tmp_path, cornell_solution):
+    glb = tmp_path / "c.glb"
+    r = iat("bake", cornell_solution, "-o", glb, "--threshold", "1", "--json")
+    assert r.returncode == 0, r.stderr
+    rep = json.loads(r.stdout)
+    assert glb.exists() and rep["texture_bytes"] > 0 and rep["patches_textured"] > 0
+    images = {}
+    for mode in ("mesh", "iat"):
+        out = tmp_path / f"{mode}.npy"
+        r = iat("render", cornell_solution, "-o", out, "--mode", mode, "--size", "96x72", "--camera", "0",
+                "--threshold", "0")
+        assert r.returncode == 0, r.stderr
+        images[mode] = np.load(out)
+        assert images[mode].shape == (72, 96, 3) and images[mode].dtype == np.float32
+    # IAT against mesh of the same solution: the same picture (report §4.1)
+    from iat.metrics import psnr
+
+    assert psnr(images["iat"], images["mesh"]) > 30
+    png = tmp_path / "c.png"
+    r = iat("render", cornell_solution, "-o", png, "--mode", "iat", "--size", "64x48")
+    assert r.returncode == 0 and png.stat().st_size > 100
+
+
+def test_render_rejects_bad_options(tmp_path, cornell_solution):
+    r = iat("render", cornell_solution, "-o", tmp_path / "x.png", "--camera", "7")
+    assert r.returncode == 2 and "camera" in r.stderr
+    r = iat("render", cornell_solution, "-o", tmp_path / "x.jpg")
+    assert r.returncode == 2 and ".png or .npy" in r.stderr
+    r = iat("render", cornell_solution, "-o", tmp_path / "x.png", "--eye", "1,2")
+    assert r.returncode == 2 and "--eye" in r.stderr
