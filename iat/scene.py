@@ -8,6 +8,25 @@ Lattice parametrisation (shared by the solver, the baker and the renderer):
 for a quad with corners c0..c3 the point at ``(u, v)`` in ``[0, 1]^2`` is
 ``(1-u)(1-v) c0 + u(1-v) c1 + u v c2 + (1-u) v c3``; for a triangle
 ``c0 + u (c1 - c0) + v (c2 - c0)`` with ``u + v <= 1``.
+
+Loading (:func:`load_scene`)
+----------------------------
+- Geometry comes from trimesh (``process=False``); node transforms are applied
+  here (glTF: from pygltflib's node tree, since trimesh's graph loses a camera
+  node's mesh and children), with the winding flipped under mirroring.
+- Vertices are welded (:data:`WELD_REL_TOL`), zero-area triangles dropped, and
+  coplanar same-material triangle pairs merged into convex quads
+  (:func:`merge_quads`); ``max_edge`` pre-splits big patches (:func:`split_patches`).
+- Materials: ``albedo = baseColorFactor x mean(baseColorTexture)`` (texture
+  decoded sRGB -> linear), ``emission = emissiveFactor x emissiveStrength``;
+  OBJ: ``Kd`` (x mean of ``map_Kd``) and ``Ke``. ``Material.detail`` is the
+  base colour texture times its factor, so its mean is the albedo; row 0 is the
+  image's top. Geometry without a material gets one default material (albedo 0.5).
+- ``Scene.patch_uv`` is TEXCOORD_0 in the glTF convention (``(0, 0)`` is the
+  top-left of the image, ``v`` grows downwards): texel ``detail[int(v h), int(u w)]``.
+  OBJ ``vt`` is converted (``v -> 1 - v``).
+- Lights (KHR_lights_punctual point and spot), perspective cameras and the
+  ``iat_camera_paths`` root extras are read with pygltflib.
 """
 
 from __future__ import annotations
@@ -16,6 +35,7 @@ import base64
 import hashlib
 import io
 import logging
+import re
 import urllib.parse
 import warnings
 from dataclasses import dataclass, field
@@ -158,7 +178,9 @@ class Scene:
     @property
     def bounds(self) -> np.ndarray:
         """(2, 3) float64 min and max corner of the used vertices."""
-        v = self.vertices[np.unique(self.patch_corners[self.patch_corners >= 0])]
+        used = np.zeros(len(self.vertices), dtype=bool)
+        used[self.patch_corners[self.patch_corners >= 0]] = True
+        v = self.vertices[used]
         return np.array([v.min(axis=0), v.max(axis=0)])
 
     def default_camera(self) -> Camera:
@@ -411,15 +433,43 @@ class _Gltf:
                     out[name] = (mi, pi)
         return out
 
-    def primitive_material(self, mi: int, pi: int) -> int | None:
-        return self.doc.meshes[mi].primitives[pi].material
+    def mesh_instances(self, world: dict[int, np.ndarray], geometry: dict):
+        """[(world_from_mesh, trimesh geometry name, material index or None)], or None when
+        a primitive cannot be matched to trimesh's geometry (name missing or vertex count differs)."""
+        import trimesh
 
-    def primitive_vertex_count(self, mi: int, pi: int) -> int | None:
-        try:
-            a = self.doc.meshes[mi].primitives[pi].attributes.POSITION
-            return self.doc.accessors[a].count
-        except (IndexError, AttributeError, TypeError):
-            return None
+        name_of = {v: k for k, v in self.geometry_primitives().items()}
+        out = []
+        for i in sorted(world):
+            mi = self.doc.nodes[i].mesh
+            if mi is None:
+                continue
+            if not 0 <= mi < len(self.doc.meshes):
+                log.warning("%s: node %s refers to mesh %s that does not exist", self.path, i, mi)
+                continue
+            for pi, prim in enumerate(self.doc.meshes[mi].primitives):
+                name = name_of.get((mi, pi))
+                if name is None:
+                    log.warning(
+                        "%s: mesh %s primitive %s of mode %s skipped (not supported)",
+                        self.path,
+                        mi,
+                        pi,
+                        prim.mode,
+                    )
+                    continue
+                geom = geometry.get(name)
+                if geom is None:
+                    return None
+                if isinstance(geom, trimesh.Trimesh | trimesh.PointCloud):
+                    try:
+                        count = self.doc.accessors[prim.attributes.POSITION].count
+                    except (IndexError, TypeError, AttributeError):
+                        return None
+                    if count != len(geom.vertices):
+                        return None
+                out.append((world[i], name, prim.material))
+        return out
 
     # -- nodes, lights, cameras -----------------------------------------------
     def node_world(self) -> dict[int, np.ndarray]:
@@ -483,7 +533,7 @@ class _Gltf:
             )
         return out
 
-    def cameras(self, world: dict[int, np.ndarray], bounds: np.ndarray) -> list[Camera]:
+    def cameras(self, world: dict[int, np.ndarray], scene: Scene) -> list[Camera]:
         out = []
         for i in sorted(world):
             node = self.doc.nodes[i]
@@ -508,6 +558,7 @@ class _Gltf:
             if p.zfar:
                 zfar = float(p.zfar)
             else:  # infinite projection in the file: reach beyond the far side of the model
+                bounds = scene.bounds
                 centre = bounds.mean(axis=0)
                 reach = np.linalg.norm(eye - centre) + np.linalg.norm(bounds[1] - bounds[0])
                 zfar = max(1000.0 * znear, 2.0 * reach)
@@ -586,63 +637,119 @@ def _trimesh_material(mat, path: Path) -> Material:
 def _check_obj_textures(path: Path):
     """Raise LoadError when an OBJ's material library names a texture file that is missing."""
     try:
-        text = path.read_text(errors="replace")
+        data = path.read_bytes()
     except OSError as e:
         raise LoadError(f"cannot read file: {_one_line(e)}", path) from e
-    libs = []
-    for line in text.splitlines():
-        s = line.strip()
-        if s.startswith("mtllib"):
-            rest = s[6:].strip()
-            if rest:
-                libs.append(rest)
+    libs = [
+        m.decode("utf-8", "replace").strip()
+        for m in re.findall(rb"^[ \t]*mtllib[ \t]+([^\r\n]+)", data, re.M)
+    ]
     for lib in libs:
         mtl = path.parent / lib
-        if not mtl.is_file():
-            cands = [path.parent / t for t in lib.split()]
-            found = [c for c in cands if c.is_file()]
-            if not found:
+        if mtl.is_file():
+            mtls = [mtl]
+        else:
+            mtls = [path.parent / t for t in lib.split() if (path.parent / t).is_file()]
+            if not mtls:
                 log.warning("%s: material library %s not found; default materials used", path, lib)
                 continue
-            mtls = found
-        else:
-            mtls = [mtl]
         for m in mtls:
             for line in m.read_text(errors="replace").splitlines():
                 toks = line.strip().split()
-                if not toks:
+                if len(toks) < 2:
                     continue
                 key = toks[0].lower()
                 if not (key.startswith("map_") or key in ("bump", "disp", "decal", "norm", "refl")):
                     continue
-                if len(toks) < 2:
-                    continue
                 rest = line.strip()[len(toks[0]) :].strip()
-                if (m.parent / rest).is_file() or (m.parent / toks[-1]).is_file():
+                last = toks[-1].replace("\\", "/")
+                cands = {rest, toks[-1], last, last.rsplit("/", 1)[-1]}
+                if any((m.parent / c).is_file() for c in cands):
                     continue
                 raise LoadError(f"missing texture file {toks[-1]}", path)
+
+
+def _obj_index_out_of_range(path: Path) -> bool:
+    """True when an OBJ face refers to a vertex that does not exist (only run after a failed load)."""
+    try:
+        lines = path.read_bytes().decode("latin-1").splitlines()
+    except OSError:
+        return False
+    nv = sum(1 for ln in lines if ln.startswith("v ") or ln.startswith("v\t"))
+    for ln in lines:
+        if not (ln.startswith("f ") or ln.startswith("f\t")):
+            continue
+        for tok in ln.split()[1:]:
+            try:
+                i = int(tok.split("/")[0])
+            except ValueError:
+                continue
+            if i == 0 or i > nv or -i > nv:
+                return True
+    return False
 
 
 def _load_trimesh(path: Path, ext: str):
     import trimesh
 
+    kind = ext[1:].upper()
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return trimesh.load_scene(str(path), process=False)
+            try:
+                return trimesh.load_scene(str(path), process=False)
+            except ImportError as e:
+                # trimesh guesses the encoding of non-UTF-8 text with charset_normalizer, which is absent:
+                # text formats in Latin-1 are read here, anything else is not a text file
+                data = path.read_bytes()
+                if ext not in (".obj", ".off") or b"\0" in data:
+                    raise LoadError(
+                        f"cannot read {kind} file (truncated or corrupt file): not valid data", path
+                    ) from e
+                text = io.BytesIO(data.decode("latin-1").encode("utf-8"))
+                resolver = trimesh.resolvers.FilePathResolver(str(path))
+                return trimesh.load_scene(text, file_type=ext[1:], resolver=resolver, process=False)
+    except LoadError:
+        raise
     except Exception as e:  # noqa: BLE001 - trimesh raises a zoo of types on bad input
-        raise LoadError(
-            f"cannot read {ext[1:].upper()} file (truncated or corrupt file): {_one_line(e)}", path
-        ) from e
+        if ext == ".obj" and isinstance(e, IndexError) and _obj_index_out_of_range(path):
+            raise LoadError("face index out of range", path) from e
+        raise LoadError(f"cannot read {kind} file (truncated or corrupt file): {_one_line(e)}", path) from e
 
 
-def _collect(tscene, path: Path, gl: _Gltf | None):
+def _instances(tscene, path: Path, gl: _Gltf | None, world: dict | None):
+    """[(world_from_geometry (4, 4), geometry name, material spec)] for every placed geometry.
+
+    glTF: walked from pygltflib's nodes (trimesh's graph drops the first camera
+    node's mesh and cuts off that node's children), the spec being the glTF
+    material index (None: the default material). Other formats, or a glTF
+    whose primitives cannot be matched to trimesh's geometries: trimesh's
+    graph, the spec being ``"trimesh"`` (use the geometry's own material).
+    """
+    if gl is not None:
+        out = gl.mesh_instances(world, tscene.geometry)
+        if out is not None:
+            return out
+        log.warning("%s: glTF primitives not matched to trimesh's geometries; trimesh's graph used", path)
+    out = []
+    for node in tscene.graph.nodes_geometry:
+        try:
+            T, gname = tscene.graph[node]
+        except ValueError as e:  # a node cut off from the root
+            log.warning("%s: node %s skipped (%s)", path, node, _one_line(e))
+            continue
+        out.append((T, gname, "trimesh"))
+    return out
+
+
+def _collect(tscene, path: Path, gl: _Gltf | None, world: dict | None = None):
     """Flatten a trimesh Scene to world arrays.
 
     Returns vertices (n, 3) float64, faces (f, 3) int64, face_material (f,) int64,
     face_uv (f, 3, 2) float64 (glTF convention: v down from the image top), materials.
     """
     import trimesh
+    from trimesh.visual.texture import TextureVisuals
 
     materials: list[Material] = []
     keys: dict = {}
@@ -653,18 +760,15 @@ def _collect(tscene, path: Path, gl: _Gltf | None):
             materials.append(make())
         return keys[key]
 
-    prim_of = gl.geometry_primitives() if gl is not None else {}
     Vs, Fs, Ms, UVs = [], [], [], []
     offset = 0
-    n_points = n_other = 0
-    for node in tscene.graph.nodes_geometry:
-        T, gname = tscene.graph[node]
+    n_points = 0
+    for T, gname, spec in _instances(tscene, path, gl, world):
         geom = tscene.geometry.get(gname)
         if isinstance(geom, trimesh.PointCloud):
             n_points += 1
             continue
         if not isinstance(geom, trimesh.Trimesh):
-            n_other += 1
             continue
         V = np.asarray(geom.vertices, dtype=np.float64).reshape(-1, 3)
         F = np.asarray(geom.faces)
@@ -676,7 +780,8 @@ def _collect(tscene, path: Path, gl: _Gltf | None):
         if F.min() < 0 or F.max() >= len(V):
             raise LoadError("face index out of range", path)
         T = np.asarray(T, dtype=np.float64)
-        W = V @ T[:3, :3].T + T[:3, 3]
+        with np.errstate(invalid="ignore", over="ignore"):
+            W = V @ T[:3, :3].T + T[:3, 3]
         used = np.zeros(len(V), dtype=bool)
         used[F.ravel()] = True
         if not np.isfinite(W[used]).all():
@@ -685,7 +790,8 @@ def _collect(tscene, path: Path, gl: _Gltf | None):
             log.info("%s: %s has unused non-finite vertices (ignored)", path, gname)
             W = np.where(np.isfinite(W), W, 0.0)
         # per-corner UVs, flipped back to the glTF convention (trimesh moves the origin to the bottom)
-        uv = getattr(geom.visual, "uv", None)
+        visual = geom.visual if isinstance(geom.visual, TextureVisuals) else None
+        uv = None if visual is None else visual.uv
         if uv is not None and len(uv) == len(V):
             uvc = np.asarray(uv, dtype=np.float64)[:, :2][F]
             uvc[..., 1] = 1.0 - uvc[..., 1]
@@ -696,23 +802,14 @@ def _collect(tscene, path: Path, gl: _Gltf | None):
             F = F[:, ::-1]
             uvc = uvc[:, ::-1]
         # material
-        mi = None
-        if gl is not None and gname in prim_of:
-            m_, p_ = prim_of[gname]
-            cnt = gl.primitive_vertex_count(m_, p_)
-            if cnt is not None and cnt == len(V):
-                gm = gl.primitive_material(m_, p_)
-                if gm is None:
-                    mi = material_index(_DEFAULT_KEY, lambda: Material(name="default"))
-                elif 0 <= gm < len(gl.doc.materials):
-                    mi = material_index(("gltf", gm), lambda gm=gm: gl.material(gm))
-        if mi is None:
-            tm = getattr(geom.visual, "material", None)
-            if gl is not None:
-                log.warning(
-                    "%s: geometry %r not matched to a glTF primitive; trimesh's material used", path, gname
-                )
-            if tm is None or getattr(geom.visual, "kind", None) != "texture":
+        if spec != "trimesh":
+            if spec is None or not 0 <= spec < len(gl.doc.materials):
+                mi = material_index(_DEFAULT_KEY, lambda: Material(name="default"))
+            else:
+                mi = material_index(("gltf", spec), lambda gm=spec: gl.material(gm))
+        else:
+            tm = None if visual is None else visual.material
+            if tm is None:
                 mi = material_index(_DEFAULT_KEY, lambda: Material(name="default"))
             else:
                 mi = material_index(("trimesh", id(tm)), lambda tm=tm: _trimesh_material(tm, path))
@@ -733,16 +830,55 @@ def _collect(tscene, path: Path, gl: _Gltf | None):
 # ----------------------------------------------------------------------------
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis (faster than np.cross on big arrays)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
+def _norm(a: np.ndarray) -> np.ndarray:
+    return np.sqrt((a * a).sum(axis=-1))
+
+
+def _group_rows(key: np.ndarray):
+    """Group equal rows of an (n, 3) int64 array.
+
+    Returns (order, new_group): ``key[order]`` has equal rows adjacent and
+    ``new_group[i]`` is True where sorted row i starts a new group.
+    """
+    # sort one int64 hash instead of three columns; check the hash did not merge distinct rows
+    with np.errstate(over="ignore"):
+        h = key[:, 0] * np.int64(-7046029254386353131) + key[:, 1] * np.int64(0x5851F42D4C957F2D)
+        h = (h ^ (h >> np.int64(29))) + key[:, 2] * np.int64(0x2545F4914F6CDD1D)
+    order = np.argsort(h, kind="stable")
+    hs = h[order]
+    new_group = np.ones(len(key), dtype=bool)
+    new_group[1:] = hs[1:] != hs[:-1]
+    ks = key[order]
+    same = ~new_group[1:]
+    if same.any() and (ks[1:][same] != ks[:-1][same]).any():  # hash collision: sort by the rows
+        order = np.lexsort(key.T[::-1])
+        ks = key[order]
+        new_group[1:] = (ks[1:] != ks[:-1]).any(axis=1)
+    return order, new_group
+
+
 def weld_vertices(vertices: np.ndarray, faces: np.ndarray, rel_tol: float = WELD_REL_TOL):
     """Merge vertices whose positions agree within ``rel_tol`` x bounding-box diagonal.
 
     vertices : (n, 3) float64; faces : (..., k) int64 indices (negative entries kept as they are)
     Returns (vertices (m, 3) float64 of the used vertices only, faces remapped).
+    Unused vertices are dropped; the order follows a spatial hash, not the input.
     """
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     valid = faces >= 0
-    used = np.unique(faces[valid])
+    used_mask = np.zeros(len(vertices), dtype=bool)
+    used_mask[faces[valid]] = True
+    used = np.flatnonzero(used_mask)
     if len(used) == 0:
         return np.zeros((0, 3)), faces.copy()
     V = vertices[used]
@@ -750,15 +886,11 @@ def weld_vertices(vertices: np.ndarray, faces: np.ndarray, rel_tol: float = WELD
     diag = float(np.linalg.norm(V.max(axis=0) - lo))
     q = max(diag * rel_tol, 1e-300)
     key = np.round((V - lo) / q).astype(np.int64)
-    order = np.lexsort(key.T[::-1])
-    ks = key[order]
-    new_group = np.ones(len(ks), dtype=bool)
-    new_group[1:] = (ks[1:] != ks[:-1]).any(axis=1)
+    order, new_group = _group_rows(key)
     group = np.cumsum(new_group) - 1
     inv_used = np.empty(len(V), dtype=np.int64)
     inv_used[order] = group
-    # representative: first vertex of each group in sorted order
-    out_v = V[order[new_group]]
+    out_v = V[order[new_group]]  # representative: the first of each group
     remap = np.full(len(vertices), -1, dtype=np.int64)
     remap[used] = inv_used
     out_f = faces.copy()
@@ -766,26 +898,56 @@ def weld_vertices(vertices: np.ndarray, faces: np.ndarray, rel_tol: float = WELD
     return out_v, out_f
 
 
+def _weld_some(vertices: np.ndarray, faces: np.ndarray, weldable: np.ndarray, rel_tol: float = WELD_REL_TOL):
+    """:func:`weld_vertices` restricted to the ``weldable`` (n,) bool vertices; the others stay distinct."""
+    faces = np.asarray(faces, dtype=np.int64)
+    w = np.flatnonzero(weldable)
+    Vw = vertices[w]
+    lo = Vw.min(axis=0)
+    q = max(float(np.linalg.norm(Vw.max(axis=0) - lo)) * rel_tol, 1e-300)
+    order, new_group = _group_rows(np.round((Vw - lo) / q).astype(np.int64))
+    remap = np.empty(len(vertices), dtype=np.int64)
+    remap[w[order]] = np.cumsum(new_group) - 1
+    n_w = int(new_group.sum())
+    rest = np.flatnonzero(~weldable)
+    remap[rest] = n_w + np.arange(len(rest))
+    out_v = np.concatenate([Vw[order[new_group]], vertices[rest]])
+    valid = faces >= 0
+    out_f = faces.copy()
+    out_f[valid] = remap[faces[valid]]
+    return compact_vertices(out_v, out_f)
+
+
+def compact_vertices(vertices: np.ndarray, faces: np.ndarray):
+    """Drop the vertices no face uses, keeping the order of the others.
+
+    vertices : (n, 3); faces : (..., k) int64 (negative entries kept as they are)
+    Returns (vertices (m, 3), faces remapped).
+    """
+    faces = np.asarray(faces, dtype=np.int64)
+    valid = faces >= 0
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces[valid]] = True
+    remap = np.cumsum(used) - 1
+    out_f = faces.copy()
+    out_f[valid] = remap[faces[valid]]
+    return np.asarray(vertices)[used], out_f
+
+
 def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(f,) float64 areas of triangles ``faces`` (f, 3)."""
-    v = vertices[faces]
-    return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    v0, v1, v2 = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
+    return 0.5 * _norm(_cross(v1 - v0, v2 - v0))
 
 
 def degenerate_faces(vertices: np.ndarray, faces: np.ndarray, rel: float = 1e-12) -> np.ndarray:
-    """(f,) bool: zero-area triangles (repeated corners, or area below ``rel`` x longest edge squared)."""
-    v = vertices[faces]
-    cr = np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
-    e2 = np.max(
-        [
-            ((v[:, 1] - v[:, 0]) ** 2).sum(1),
-            ((v[:, 2] - v[:, 1]) ** 2).sum(1),
-            ((v[:, 0] - v[:, 2]) ** 2).sum(1),
-        ],
-        axis=0,
-    )
+    """(f,) bool: zero-area triangles (repeated corners, or twice the area below ``rel`` x longest edge²)."""
+    v0, v1, v2 = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
+    e0, e1, e2 = v1 - v0, v2 - v1, v0 - v2
+    cr = _norm(_cross(e0, -e2))
+    longest2 = np.maximum(np.maximum((e0 * e0).sum(1), (e1 * e1).sum(1)), (e2 * e2).sum(1))
     rep = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 2] == faces[:, 0])
-    return rep | (cr <= rel * e2) | (e2 == 0)
+    return rep | (cr <= rel * longest2) | (longest2 == 0)
 
 
 def merge_quads(
@@ -798,94 +960,110 @@ def merge_quads(
 ):
     """Merge coplanar triangle pairs back into convex quads.
 
-    Two triangles pair when they share an edge (used by exactly these two, in
-    opposite directions), have the same material, the same detail UVs on the
+    Two triangles pair when they share an edge (in opposite directions; edges
+    used by up to 8 triangles are searched), have the same material, the same detail UVs on the
     shared corners, normals within ``angle_tol`` radians, and their union is a
-    strictly convex quad. A greedy matching (best-shaped quads first, ties broken
-    by a fixed-seed shuffle) picks disjoint pairs; every step is vectorised.
+    strictly convex quad. A greedy matching (best-shaped quads first: largest
+    smallest corner sine, ties broken by a fixed-seed shuffle) picks disjoint
+    pairs; every step is vectorised.
 
     vertices : (n, 3) float64; faces : (f, 3) int64, non-degenerate
     face_material : (f,) int64; face_uv : (f, 3, 2) float64 or None
     Returns patch_corners (p, 4) int64 (-1 in column 3 for triangles),
     patch_material (p,) int64, patch_uv (p, 4, 2) float64. Quads keep the
-    triangles' winding; patches come in the order of their first triangle.
+    triangles' winding (a split ``[0,1,2],[2,3,0]`` comes back as ``[0,1,2,3]``);
+    patches come in the order of their first triangle.
     """
     V = np.asarray(vertices, dtype=np.float64)
     F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     M = np.asarray(face_material, dtype=np.int64).reshape(-1)
     nf = len(F)
     UV = np.zeros((nf, 3, 2)) if face_uv is None else np.asarray(face_uv, dtype=np.float64).reshape(nf, 3, 2)
+    if nf == 0:
+        return np.zeros((0, 4), dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 4, 2))
 
-    cr = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    N = cr / np.maximum(np.linalg.norm(cr, axis=1, keepdims=True), 1e-300)
+    Ff = F.ravel()  # corner h = 3 f + k; half-edge h goes from Ff[h] to Ff[next(h)]
+    UVf = UV.reshape(-1, 2)
+    v0, v1, v2 = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    N = _cross(v1 - v0, v2 - v0)
+    N /= np.maximum(_norm(N), 1e-300)[:, None]
 
-    # half-edge h = 3 f + k goes from F[f, k] to F[f, k + 1]
-    h_from = F.ravel()
-    h_to = F[:, [1, 2, 0]].ravel()
-    nv = max(int(F.max()) + 1, 1) if nf else 1
-    key = np.minimum(h_from, h_to) * nv + np.maximum(h_from, h_to)
+    h = np.arange(3 * nf)
+    h_next = h - h % 3 + (h % 3 + 1) % 3
+    h_to = Ff[h_next]
+    nv = int(F.max()) + 1
+    key = np.minimum(Ff, h_to) * nv + np.maximum(Ff, h_to)
     order = np.argsort(key, kind="stable")
     ks = key[order]
     start = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
     length = np.diff(np.r_[start, len(ks)])
-    two = start[length == 2]
-    ha, hb = order[two], order[two + 1]
-    fa, ka = ha // 3, ha % 3
-    fb, kb = hb // 3, hb % 3
+    # candidate pairs: every two half-edges on the same edge (an edge shared by more than two
+    # triangles, as in double-sided walls, gives all its pairs; the filters below pick the valid ones)
+    cand_a, cand_b = [], []
+    for c in np.unique(length[(length >= 2) & (length <= 8)]):
+        st = start[length == c]
+        ii, jj = np.triu_indices(int(c), 1)
+        cand_a.append(order[(st[:, None] + ii).ravel()])
+        cand_b.append(order[(st[:, None] + jj).ravel()])
+    ha = np.concatenate(cand_a) if cand_a else np.zeros(0, dtype=np.int64)
+    hb = np.concatenate(cand_b) if cand_b else np.zeros(0, dtype=np.int64)
+    del key, order, ks, start, length, cand_a, cand_b
 
-    ok = (h_from[ha] == h_to[hb]) & (fa != fb) & (M[fa] == M[fb])
-    ok &= (N[fa] * N[fb]).sum(axis=1) >= np.cos(angle_tol)
-    # same UVs at the two shared corners: a[ka] == b[kb+1], a[ka+1] == b[kb]
-    ka1, kb1 = (ka + 1) % 3, (kb + 1) % 3
-    du = np.abs(UV[fa, ka] - UV[fb, kb1]).max(axis=1)
-    du = np.maximum(du, np.abs(UV[fa, ka1] - UV[fb, kb]).max(axis=1))
-    ok &= du <= uv_tol * np.maximum(1.0, np.abs(UV[fa, ka]).max(axis=1))
-    fa, ka, fb, kb, ka1 = fa[ok], ka[ok], fb[ok], kb[ok], ka1[ok]
-    ka2, kb2 = (ka + 2) % 3, (kb + 2) % 3
-    # quad around a's winding: a[k+1], a[k+2], a[k], b's opposite corner
-    quad = np.stack([F[fa, ka1], F[fa, ka2], F[fa, ka], F[fb, kb2]], axis=1)
-    P = V[quad]
-    E = np.roll(P, -1, axis=1) - P  # E_i = P_{i+1} - P_i
-    Ep = np.roll(E, 1, axis=1)  # E_{i-1}
-    turn = (np.cross(Ep, E) * N[fa][:, None, :]).sum(axis=2)
-    le = np.linalg.norm(E, axis=2)
-    sin = turn / np.maximum(le * np.roll(le, 1, axis=1), 1e-300)
-    convex = (sin > 1e-6).all(axis=1)
-    quad, fa, fb, ka, kb, ka1, ka2, kb2 = (x[convex] for x in (quad, fa, fb, ka, kb, ka1, ka2, kb2))
-    score = sin[convex].min(axis=1)
+    fa, fb = ha // 3, hb // 3
+    ok = (Ff[ha] == h_to[hb]) & (fa != fb) & (M[fa] == M[fb])
+    ha, hb, fa, fb = ha[ok], hb[ok], fa[ok], fb[ok]
+    ok = (N[fa] * N[fb]).sum(axis=1) >= np.cos(angle_tol)
+    ha, hb, fa, fb = ha[ok], hb[ok], fa[ok], fb[ok]
+    ha1, hb1 = h_next[ha], h_next[hb]
+    ha2, hb2 = h_next[ha1], h_next[hb1]
+    # same UVs at the two shared corners: a[k] == b[k'+1] and a[k+1] == b[k']
+    du = np.maximum(np.abs(UVf[ha] - UVf[hb1]).max(axis=1), np.abs(UVf[ha1] - UVf[hb]).max(axis=1))
+    ok = du <= uv_tol * np.maximum(1.0, np.abs(UVf[ha]).max(axis=1))
+    ha, hb, fa, fb, ha1, ha2, hb2 = (x[ok] for x in (ha, hb, fa, fb, ha1, ha2, hb2))
+
+    # quad around a's winding: a[k+1], a[k+2], a[k], b's opposite corner; corners 1 and 3
+    # are triangle corners (convex by construction), corners 0 and 2 end the shared diagonal
+    p0, p1, p2, p3 = V[Ff[ha1]], V[Ff[ha2]], V[Ff[ha]], V[Ff[hb2]]
+    n = N[fa]
+    e01, e12, e23, e30 = p1 - p0, p2 - p1, p3 - p2, p0 - p3
+    l01, l12, l23, l30 = _norm(e01), _norm(e12), _norm(e23), _norm(e30)
+    s0 = (_cross(e30, e01) * n).sum(1) / np.maximum(l30 * l01, 1e-300)
+    s1 = (_cross(e01, e12) * n).sum(1) / np.maximum(l01 * l12, 1e-300)
+    s2 = (_cross(e12, e23) * n).sum(1) / np.maximum(l12 * l23, 1e-300)
+    s3 = (_cross(e23, e30) * n).sum(1) / np.maximum(l23 * l30, 1e-300)
+    score = np.minimum(np.minimum(s0, s1), np.minimum(s2, s3))
+    ok = (s0 > 1e-6) & (s2 > 1e-6)
+    ha, hb, fa, fb, ha1, ha2, hb2, score = (x[ok] for x in (ha, hb, fa, fb, ha1, ha2, hb2, score))
 
     # greedy matching: a candidate wins when it ranks best at both of its faces
-    m = len(quad)
+    m = len(ha)
     rng = np.random.default_rng(0)
-    order = np.lexsort((rng.random(m), -np.round(score, 3)))
     rank = np.empty(m, dtype=np.int64)
-    rank[order] = np.arange(m)
+    rank[np.lexsort((rng.random(m), -np.round(score, 3)))] = np.arange(m)
     matched = np.zeros(nf, dtype=bool)
-    active = np.ones(m, dtype=bool)
-    chosen = []
     best = np.full(nf, m, dtype=np.int64)
-    while True:
-        idx = np.flatnonzero(active)
-        if len(idx) == 0:
-            break
-        best[fa[idx]] = m
-        best[fb[idx]] = m
-        np.minimum.at(best, fa[idx], rank[idx])
-        np.minimum.at(best, fb[idx], rank[idx])
-        r = rank[idx]
-        win = idx[(best[fa[idx]] == r) & (best[fb[idx]] == r)]
-        chosen.append(win)
-        matched[fa[win]] = True
-        matched[fb[win]] = True
-        active[idx] = ~(matched[fa[idx]] | matched[fb[idx]])
+    idx = np.arange(m)
+    chosen = []
+    while len(idx):
+        a_, b_, r = fa[idx], fb[idx], rank[idx]
+        best[a_] = m
+        best[b_] = m
+        np.minimum.at(best, a_, r)
+        np.minimum.at(best, b_, r)
+        win = (best[a_] == r) & (best[b_] == r)
+        chosen.append(idx[win])
+        matched[a_[win]] = True
+        matched[b_[win]] = True
+        idx = idx[~(matched[a_] | matched[b_])]
     win = np.concatenate(chosen) if chosen else np.zeros(0, dtype=np.int64)
 
     qa, qb = fa[win], fb[win]
-    q_corners = quad[win]
-    q_uv = np.stack([UV[qa, ka1[win]], UV[qa, ka2[win]], UV[qa, ka[win]], UV[qb, kb2[win]]], axis=1)
+    qh = np.stack([ha1[win], ha2[win], ha[win], hb2[win]], axis=1)
+    q_corners = Ff[qh]
+    q_uv = UVf[qh]
     tri = np.flatnonzero(~matched)
     t_corners = np.concatenate([F[tri], np.full((len(tri), 1), -1, dtype=np.int64)], axis=1)
-    t_uv = np.concatenate([UV[tri], UV[tri][:, 2:3]], axis=1)
+    t_uv = UV[tri][:, [0, 1, 2, 2]]
 
     first = np.concatenate([np.minimum(qa, qb), tri])
     o = np.argsort(first, kind="stable")
@@ -907,9 +1085,11 @@ def split_patches(
     A quad whose longest edge exceeds ``max_edge`` becomes ``n x m`` quads with
     ``n = ceil(longest u-edge / max_edge)``, ``m = ceil(longest v-edge / max_edge)``
     (bilinear in its own parametrisation); a triangle becomes ``4**k`` triangles,
-    ``k = ceil(log2(longest edge / max_edge))``. Materials are copied and UVs
-    interpolated; new vertices are welded to their neighbours.
+    ``k = ceil(log2(longest edge / max_edge))``. Materials are copied, UVs
+    interpolated, windings kept; new vertices are welded to their neighbours.
 
+    vertices : (n, 3) float64; patch_corners : (p, 4) int64; patch_material : (p,) int64;
+    patch_uv : (p, 4, 2) float64.
     Returns (vertices, patch_corners, patch_material, patch_uv), children in
     place of their parent.
     """
@@ -919,87 +1099,118 @@ def split_patches(
     C = np.asarray(patch_corners, dtype=np.int64).reshape(-1, 4)
     Mat = np.asarray(patch_material, dtype=np.int64).reshape(-1)
     UV = np.asarray(patch_uv, dtype=np.float64).reshape(-1, 4, 2)
-    p = len(C)
     is_quad = C[:, 3] >= 0
-    C3 = np.where(is_quad, C[:, 3], C[:, 2])
-    P = V[np.stack([C[:, 0], C[:, 1], C[:, 2], C3], axis=1)]
+    P = V[np.where(is_quad[:, None], C, C[:, [0, 1, 2, 2]])]
 
-    new_pos, new_uv, new_mat, new_parent = [], [], [], []
+    pts, on_edge, kids, kid_mat, kid_uv, kid_parent = [], [], [], [], [], []
+    n_pts = len(V)  # index of the next new point
 
-    # quads
+    # quads: an (n + 1) x (m + 1) lattice of points per parent, point (a, b) at base + b (n + 1) + a
     q = np.flatnonzero(is_quad)
     c = P[q]
-    length = lambda a, b: np.linalg.norm(c[:, b] - c[:, a], axis=1)  # noqa: E731
-    n = np.maximum(np.ceil(np.maximum(length(0, 1), length(3, 2)) / max_edge), 1).astype(np.int64)
-    m = np.maximum(np.ceil(np.maximum(length(0, 3), length(1, 2)) / max_edge), 1).astype(np.int64)
-    sq = (n > 1) | (m > 1)
-    q, c, n, m = q[sq], c[sq], n[sq], m[sq]
+    n = np.ceil(np.maximum(_norm(c[:, 1] - c[:, 0]), _norm(c[:, 2] - c[:, 3])) / max_edge)
+    m = np.ceil(np.maximum(_norm(c[:, 3] - c[:, 0]), _norm(c[:, 2] - c[:, 1])) / max_edge)
+    n, m = np.maximum(n, 1).astype(np.int64), np.maximum(m, 1).astype(np.int64)
+    sel = (n > 1) | (m > 1)
+    q, c, n, m = q[sel], c[sel], n[sel], m[sel]
     if len(q):
+        cnt = (n + 1) * (m + 1)
+        base = n_pts + np.cumsum(cnt) - cnt
+        pid = np.repeat(np.arange(len(q)), cnt)
+        local = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        a, b = local % (n[pid] + 1), local // (n[pid] + 1)
+        u, v = a / n[pid], b / m[pid]
+        w = [(1 - u) * (1 - v), u * (1 - v), u * v, (1 - u) * v]
+        acc = w[0][:, None] * c[pid, 0]
+        for i in range(1, 4):
+            acc += w[i][:, None] * c[pid, i]
+        pts.append(acc)
+        on_edge.append((a == 0) | (b == 0) | (a == n[pid]) | (b == m[pid]))
+        n_pts += len(u)
+        del acc, w, u, v, a, b, local, pid
         cnt = n * m
         pid = np.repeat(np.arange(len(q)), cnt)
         local = np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
         nn, mm = n[pid], m[pid]
         a, b = local % nn, local // nn
-        us = np.stack([a, a + 1, a + 1, a], axis=1) / nn[:, None]
-        vs = np.stack([b, b, b + 1, b + 1], axis=1) / mm[:, None]
-        w = np.stack(
-            [(1 - us) * (1 - vs), us * (1 - vs), us * vs, (1 - us) * vs], axis=2
-        )  # (k, 4 corners, 4 weights)
-        new_pos.append(np.einsum("kcw,kwd->kcd", w, c[pid]))
-        new_uv.append(np.einsum("kcw,kwd->kcd", w, UV[q][pid]))
-        new_mat.append(Mat[q][pid])
-        new_parent.append(q[pid])
+        row = nn + 1
+        first = base[pid] + b * row + a
+        kids.append(np.stack([first, first + 1, first + row + 1, first + row], axis=1))
+        uvq = UV[q]
+        if uvq.any():
+            us = np.stack([a, a + 1, a + 1, a], axis=1) / nn[:, None]
+            vs = np.stack([b, b, b + 1, b + 1], axis=1) / mm[:, None]
+            uvp = uvq[pid]
+            kid_uv.append(
+                ((1 - us) * (1 - vs))[..., None] * uvp[:, None, 0]
+                + (us * (1 - vs))[..., None] * uvp[:, None, 1]
+                + (us * vs)[..., None] * uvp[:, None, 2]
+                + ((1 - us) * vs)[..., None] * uvp[:, None, 3]
+            )
+        else:
+            kid_uv.append(np.zeros((len(pid), 4, 2)))
+        kid_mat.append(Mat[q][pid])
+        kid_parent.append(q[pid])
 
-    # triangles
+    # triangles: the lattice i + j <= N, N = 2**k, per parent
     t = np.flatnonzero(~is_quad)
     c = P[t][:, :3]
-    longest = np.max([np.linalg.norm(c[:, (i + 1) % 3] - c[:, i], axis=1) for i in range(3)], axis=0)
-    with np.errstate(divide="ignore"):
-        k = np.ceil(np.log2(np.maximum(longest, 1e-300) / max_edge))
-    k = np.maximum(k, 0).astype(np.int64)
-    for level in np.unique(k[k > 0]):
+    longest = np.maximum(
+        np.maximum(_norm(c[:, 1] - c[:, 0]), _norm(c[:, 2] - c[:, 1])), _norm(c[:, 0] - c[:, 2])
+    )
+    k = np.zeros(len(t), dtype=np.int64)
+    big = longest > max_edge
+    k[big] = np.ceil(np.log2(longest[big] / max_edge)).astype(np.int64)
+    for level in np.unique(k[big]):
         sel = t[k == level]
         cs = P[sel][:, :3]
         N = 1 << int(level)
-        i, j = np.meshgrid(np.arange(N), np.arange(N), indexing="ij")
-        up = (i + j) <= N - 1
-        dn = (i + j) <= N - 2
+        i, j = np.meshgrid(np.arange(N + 1), np.arange(N + 1), indexing="ij")
+        inside = (i + j) <= N
+        table = np.full((N + 1, N + 1), -1, dtype=np.int64)
+        table[inside] = np.arange(int(inside.sum()))
+        li, lj = i[inside], j[inside]
+        u, v = li / N, lj / N
+        w = np.stack([1 - u - v, u, v])  # (3, s)
+        pts.append(np.einsum("ws,twd->tsd", w, cs).reshape(-1, 3))
+        n_lat = len(li)
+        on_edge.append(np.tile((li == 0) | (lj == 0) | (li + lj == N), len(sel)))
+        bases = n_pts + n_lat * np.arange(len(sel))
+        n_pts += n_lat * len(sel)
+        i, j = i[:N, :N], j[:N, :N]
+        up, dn = (i + j) <= N - 1, (i + j) <= N - 2
         iu, ju, idn, jdn = i[up], j[up], i[dn], j[dn]
-        # (s, 3) lattice corners of each sub-triangle; the down ones keep the parent's winding
+        # the down triangles keep the parent's winding: (i+1, j+1), (i, j+1), (i+1, j)
         ci = np.concatenate([np.stack([iu, iu + 1, iu], 1), np.stack([idn + 1, idn, idn + 1], 1)])
         cj = np.concatenate([np.stack([ju, ju, ju + 1], 1), np.stack([jdn + 1, jdn + 1, jdn], 1)])
+        sub = table[ci, cj]  # (s, 3)
+        s = len(sub)
+        tri = (bases[:, None, None] + sub[None]).reshape(-1, 3)
+        kids.append(np.concatenate([tri, np.full((len(tri), 1), -1, dtype=np.int64)], axis=1))
         u, v = ci / N, cj / N
-        w = np.stack([1 - u - v, u, v], axis=2)  # (s, 3, 3)
-        s = len(ci)
-        pos = np.einsum("scw,twd->tscd", w, cs).reshape(-1, 3, 3)
-        uvs = np.einsum("scw,twd->tscd", w, UV[sel][:, :3]).reshape(-1, 3, 2)
-        new_pos.append(np.concatenate([pos, pos[:, 2:3]], axis=1))
-        new_uv.append(np.concatenate([uvs, uvs[:, 2:3]], axis=1))
-        new_mat.append(np.repeat(Mat[sel], s))
-        new_parent.append(np.repeat(sel, s))
-    if not new_pos:
+        wt = np.stack([1 - u - v, u, v], axis=2)  # (s, 3, 3)
+        uvs = np.einsum("scw,twd->tscd", wt, UV[sel][:, :3]).reshape(-1, 3, 2)
+        kid_uv.append(uvs[:, [0, 1, 2, 2]])
+        kid_mat.append(np.repeat(Mat[sel], s))
+        kid_parent.append(np.repeat(sel, s))
+    if not kids:
+        V, C = compact_vertices(V, C)
         return V, C, Mat, UV
 
-    split = np.zeros(p, dtype=bool)
-    split[np.concatenate(new_parent)] = True
+    split = np.zeros(len(C), dtype=bool)
+    split[q] = True
+    split[t[big]] = True
     keep = np.flatnonzero(~split)
-    pos = np.concatenate(new_pos)
-    k_new = len(pos)
-    new_is_quad = np.concatenate(
-        [np.ones(len(x), dtype=bool) for x in new_pos[: 1 if len(q) else 0]]
-        + [np.zeros(len(x), dtype=bool) for x in new_pos[1 if len(q) else 0 :]]
-    )
-    idx = len(V) + np.arange(k_new * 4).reshape(k_new, 4)
-    idx[~new_is_quad, 3] = -1
-    allV = np.concatenate([V, pos.reshape(-1, 3)])
-    corners = np.concatenate([C[keep], idx])
-    material = np.concatenate([Mat[keep], np.concatenate(new_mat)])
-    uv = np.concatenate([UV[keep], np.concatenate(new_uv)])
-    parent = np.concatenate([keep, np.concatenate(new_parent)])
+    allV = np.concatenate([V, *pts])
+    corners = np.concatenate([C[keep], *kids])
+    material = np.concatenate([Mat[keep], *kid_mat])
+    uv = np.concatenate([UV[keep], *kid_uv])
+    parent = np.concatenate([keep, *kid_parent])
     o = np.argsort(parent, kind="stable")
-    corners, material, uv = corners[o], material[o], uv[o]
-    allV, corners = weld_vertices(allV, corners)
-    return allV, corners, material, uv
+    # only points on a parent's boundary can coincide with others: weld those, keep the interior as is
+    weldable = np.concatenate([np.ones(len(V), dtype=bool), *on_edge])
+    allV, corners = _weld_some(allV, corners[o], weldable)
+    return allV, corners, material[o], uv[o]
 
 
 def load_scene(path: str | Path, max_edge: float | None = None) -> Scene:
@@ -1033,7 +1244,8 @@ def load_scene(path: str | Path, max_edge: float | None = None) -> Scene:
     if ext == ".obj":
         _check_obj_textures(path)
     tscene = _load_trimesh(path, ext)
-    V, F, M, UV, materials = _collect(tscene, path, gl)
+    world = gl.node_world() if gl is not None else None
+    V, F, M, UV, materials = _collect(tscene, path, gl, world)
 
     V, F = weld_vertices(V, F)
     bad = degenerate_faces(V, F)
@@ -1045,7 +1257,8 @@ def load_scene(path: str | Path, max_edge: float | None = None) -> Scene:
     corners, pmat, puv = merge_quads(V, F, M, UV)
     if max_edge is not None:
         V, corners, pmat, puv = split_patches(V, corners, pmat, puv, max_edge)
-    V, corners = weld_vertices(V, corners)  # compact to the vertices in use
+    else:
+        V, corners = compact_vertices(V, corners)  # dropped faces may leave vertices unused
 
     scene = Scene(
         vertices=V,
@@ -1056,9 +1269,8 @@ def load_scene(path: str | Path, max_edge: float | None = None) -> Scene:
         path=str(path),
     )
     if gl is not None:
-        world = gl.node_world()
         scene.lights = gl.lights(world)
-        scene.cameras = gl.cameras(world, scene.bounds)
+        scene.cameras = gl.cameras(world, scene)
         scene.camera_paths = gl.camera_paths()
     log.info(
         "%s: %d triangles -> %d patches (%d quads), %d materials, %d lights, %d cameras",
@@ -1076,8 +1288,9 @@ def load_scene(path: str | Path, max_edge: float | None = None) -> Scene:
 def scene_digest(scene: Scene) -> str:
     """sha1 hex digest of the geometry and materials a solution depends on.
 
-    Covers vertices, patch corners, patch materials and each material's albedo
-    and emission (not names, lights' names, cameras or the path).
+    Covers vertices, patch corners, patch materials, each material's albedo and
+    emission, and the lights (kind, position, direction, radiant intensity,
+    cones): not names, detail textures, UVs, cameras or the path.
     """
     h = hashlib.sha1()
     h.update(b"iat-scene-v1")
@@ -1087,4 +1300,8 @@ def scene_digest(scene: Scene) -> str:
     for m in scene.materials:
         h.update(np.ascontiguousarray(m.albedo, dtype="<f8").tobytes())
         h.update(np.ascontiguousarray(m.emission, dtype="<f8").tobytes())
+    for lt in scene.lights:
+        h.update(lt.kind.encode())
+        for a in (lt.position, lt.direction, lt.radiant_intensity, [lt.inner_cone, lt.outer_cone]):
+            h.update(np.ascontiguousarray(a, dtype="<f8").tobytes())
     return h.hexdigest()

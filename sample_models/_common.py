@@ -61,7 +61,7 @@ _TRI = np.array([[0, 1, 2], [2, 3, 0]], dtype=np.uint32)
 def _subdivide(breaks: list[float], panel: float) -> list[float]:
     """Sorted break points with every interval split into equal parts no longer than ``panel``."""
     out = [breaks[0]]
-    for a, b in zip(breaks[:-1], breaks[1:]):
+    for a, b in zip(breaks[:-1], breaks[1:], strict=True):
         n = max(1, math.ceil((b - a) / panel - 1e-9))
         out.extend(a + (b - a) * k / n for k in range(1, n + 1))
     return out
@@ -86,8 +86,14 @@ class ModelBuilder:
         self._objects: dict[str, dict] = {}  # name -> {material, quads: [...], tris: [...]}
 
     # -- materials ---------------------------------------------------------------------------------
-    def material(self, name: str, base_color=(0.7, 0.7, 0.7), emissive=(0.0, 0.0, 0.0),
-                 texture: bytes | None = None, period: float | None = None) -> str:
+    def material(
+        self,
+        name: str,
+        base_color=(0.7, 0.7, 0.7),
+        emissive=(0.0, 0.0, 0.0),
+        texture: bytes | None = None,
+        period: float | None = None,
+    ) -> str:
         """Add a material; returns its name (used to pick it in :meth:`face` and friends).
 
         texture : PNG bytes of a detail texture (baseColorTexture) repeated every ``period``
@@ -95,8 +101,9 @@ class ModelBuilder:
         """
         if texture is not None and not (period and period > 0):
             raise ValueError(f"material {name!r}: a texture needs a period > 0")
-        self._mat_index[name] = self.glb.add_material(name, base_color, emissive=emissive,
-                                                      base_color_png=texture)
+        self._mat_index[name] = self.glb.add_material(
+            name, base_color, emissive=emissive, base_color_png=texture
+        )
         self._mat_period[name] = float(period) if texture is not None else None
         return name
 
@@ -120,8 +127,17 @@ class ModelBuilder:
         self._object(obj, material)["tris"].append(c)
 
     # -- axis-aligned rectangles --------------------------------------------------------------------
-    def face(self, obj: str, material: str, lo, hi, sign: int, holes=(), panel: float | None = None,
-             skip_cells=None) -> int:
+    def face(
+        self,
+        obj: str,
+        material: str,
+        lo,
+        hi,
+        sign: int,
+        holes=(),
+        panel: float | None = None,
+        skip_cells=None,
+    ) -> int:
         """An axis-aligned rectangle split into panels; returns the number of quads added.
 
         lo, hi : (3,) opposite corners; exactly one axis has ``lo == hi`` (the plane)
@@ -176,8 +192,17 @@ class ModelBuilder:
                 n += 1
         return n
 
-    def box(self, obj: str, material: str, lo, hi, skip=("-y",), inward: bool = False,
-            holes: dict | None = None, panel: float | None = None) -> None:
+    def box(
+        self,
+        obj: str,
+        material: str,
+        lo,
+        hi,
+        skip=("-y",),
+        inward: bool = False,
+        holes: dict | None = None,
+        panel: float | None = None,
+    ) -> None:
         """The faces of the axis-aligned box ``[lo, hi]``.
 
         skip : face names (``"-x"``, ``"+y"``, ...) left out: hidden ones (on the floor,
@@ -195,8 +220,15 @@ class ModelBuilder:
                 flo[axis] = hi[axis]
             else:
                 fhi[axis] = lo[axis]
-            self.face(obj, material, flo, fhi, -sign if inward else sign,
-                      holes=(holes or {}).get(fname, ()), panel=panel)
+            self.face(
+                obj,
+                material,
+                flo,
+                fhi,
+                -sign if inward else sign,
+                holes=(holes or {}).get(fname, ()),
+                panel=panel,
+            )
 
     # -- output ------------------------------------------------------------------------------------
     def counts(self) -> dict:
@@ -251,27 +283,49 @@ class ModelBuilder:
 # -- camera paths ------------------------------------------------------------------------------------
 
 
-def _catmull_rom(points: np.ndarray, samples_per_segment: int = 64) -> np.ndarray:
-    """Dense ``(m, k)`` samples of the uniform Catmull-Rom curve through ``points`` ``(n, k)``."""
+def _catmull_rom(points: np.ndarray, samples_per_segment: int = 64, knot_dims: int = 3) -> np.ndarray:
+    """Dense ``(m, k)`` samples of the centripetal Catmull-Rom curve through ``points`` ``(n, k)``.
+
+    Centripetal knots (square root of the distance between way points, measured on the
+    first ``knot_dims`` coordinates) keep the curve free of loops and overshoot where
+    way points are unevenly spaced. The ends are extended by reflection.
+    """
     p = np.asarray(points, dtype=np.float64)
     ext = np.concatenate([p[:1] * 2 - p[1:2], p, p[-1:] * 2 - p[-2:-1]])
-    t = np.linspace(0.0, 1.0, samples_per_segment, endpoint=False)[:, None]
+    gaps = np.linalg.norm(np.diff(ext[:, :knot_dims], axis=0), axis=1)
+    knots = np.concatenate([[0.0], np.cumsum(np.sqrt(np.maximum(gaps, 1e-9)))])
+    u = np.linspace(0.0, 1.0, samples_per_segment, endpoint=False)[:, None]
     out = []
     for i in range(1, len(ext) - 2):
         p0, p1, p2, p3 = ext[i - 1], ext[i], ext[i + 1], ext[i + 2]
-        out.append(0.5 * ((2 * p1) + (-p0 + p2) * t + (2 * p0 - 5 * p1 + 4 * p2 - p3) * t**2
-                          + (-p0 + 3 * p1 - 3 * p2 + p3) * t**3))
+        t0, t1, t2, t3 = knots[i - 1], knots[i], knots[i + 1], knots[i + 2]
+        t = t1 + (t2 - t1) * u
+        a1 = ((t1 - t) * p0 + (t - t0) * p1) / (t1 - t0)
+        a2 = ((t2 - t) * p1 + (t - t1) * p2) / (t2 - t1)
+        a3 = ((t3 - t) * p2 + (t - t2) * p3) / (t3 - t2)
+        b1 = ((t2 - t) * a1 + (t - t0) * a2) / (t2 - t0)
+        b2 = ((t3 - t) * a2 + (t - t1) * a3) / (t3 - t1)
+        out.append(((t2 - t) * b1 + (t - t1) * b2) / (t2 - t1))
     out.append(p[-1:])
     return np.concatenate(out)
 
 
-def walk_path(waypoints, n: int, yfov: float = 60.0, look_ahead: float = 1.5, look_down: float = 0.25,
-              targets=None) -> list[dict]:
+def walk_path(
+    waypoints,
+    n: int,
+    yfov: float = 60.0,
+    look_ahead: float = 1.5,
+    look_down: float = 0.25,
+    targets=None,
+    lean_towards=None,
+    lean: float = 0.0,
+) -> list[dict]:
     """A smooth walk of ``n`` poses through ``waypoints`` ``(k, 3)`` eye positions.
 
     The eyes are spaced evenly by arc length along a Catmull-Rom curve. The target is
     the point ``look_ahead`` metres further along the curve, ``look_down`` metres lower
-    (past the end: along the last tangent). ``targets`` ``(k, 3)``, when given, is
+    (past the end: along the last tangent), moved the fraction ``lean`` of the way towards
+    the point ``lean_towards`` (to keep something in view). ``targets`` ``(k, 3)``, when given, is
     interpolated along the same curve instead (for a walk that looks at a fixed spot).
     Returns ``[{"eye", "target", "up", "yfov"}, ...]`` with numbers rounded to 1e-4.
     """
@@ -297,14 +351,50 @@ def walk_path(waypoints, n: int, yfov: float = 60.0, look_ahead: float = 1.5, lo
             tangent = eyes[-1] - eyes[-8]
             tangent /= np.linalg.norm(tangent)
             tg[over] = eyes[-1] + tangent * (ahead[over] - total)[:, None]
+        if lean_towards is not None:
+            tg += lean * (np.asarray(lean_towards, dtype=np.float64)[None] - tg)
         tg[:, 1] -= look_down
     else:
         tg = e[:, 3:]
     return [
-        {"eye": [round(float(x), 4) for x in e[i, :3]], "target": [round(float(x), 4) for x in tg[i]],
-         "up": [0.0, 1.0, 0.0], "yfov": float(yfov)}
+        {
+            "eye": [round(float(x), 4) for x in e[i, :3]],
+            "target": [round(float(x), 4) for x in tg[i]],
+            "up": [0.0, 1.0, 0.0],
+            "yfov": float(yfov),
+        }
         for i in range(n)
     ]
+
+
+def loop_waypoints(ax: float, az: float, rc: float, y: float, gap: float = 0.6) -> np.ndarray:
+    """``(k, 3)`` way points once around a rounded rectangle at height ``y``.
+
+    Half extents ``ax``, ``az``, corner radius ``rc``; counter-clockwise seen from above
+    (+x towards +z), from the middle of the +x side back to ``gap`` metres short of it.
+    Every side gets way points at most 2 m apart so the spline keeps straight.
+    """
+    corners = (
+        (ax - rc, az - rc, 0.0),
+        (-(ax - rc), az - rc, 90.0),
+        (-(ax - rc), -(az - rc), 180.0),
+        (ax - rc, -(az - rc), 270.0),
+    )
+    pts = [(ax, 0.0)]
+    for cx, cz, a0 in corners:
+        arc = [
+            (cx + rc * math.cos(math.radians(a0 + da)), cz + rc * math.sin(math.radians(a0 + da)))
+            for da in (0.0, 45.0, 90.0)
+        ]
+        start = np.array(pts[-1])
+        n = max(1, math.ceil(np.linalg.norm(np.array(arc[0]) - start) / 2.0))
+        pts += [tuple(start + (np.array(arc[0]) - start) * k / n) for k in range(1, n)]
+        pts += arc
+    end = np.array((ax, -gap))
+    start = np.array(pts[-1])
+    n = max(1, math.ceil(np.linalg.norm(end - start) / 2.0))
+    pts += [tuple(start + (end - start) * k / n) for k in range(1, n + 1)]
+    return np.array([(x, y, z) for x, z in pts])
 
 
 def add_cameras(mb: ModelBuilder, cameras: list[Camera], path: list[dict], aspect: float = 16 / 9) -> None:
@@ -322,10 +412,12 @@ _M64 = np.uint64(0xFFFFFFFFFFFFFFFF)
 def _hash3(ix: np.ndarray, iy: np.ndarray, iz: np.ndarray, seed: int) -> np.ndarray:
     """Uniform ``[0, 1)`` float64 from integer lattice coordinates (splitmix64-style mixing)."""
     with np.errstate(over="ignore"):
-        h = (ix.astype(np.int64).astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
-             ^ iy.astype(np.int64).astype(np.uint64) * np.uint64(0xC2B2AE3D27D4EB4F)
-             ^ iz.astype(np.int64).astype(np.uint64) * np.uint64(0x165667B19E3779F9)
-             ^ np.uint64(seed) * np.uint64(0xD6E8FEB86659FD93))
+        h = (
+            ix.astype(np.int64).astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+            ^ iy.astype(np.int64).astype(np.uint64) * np.uint64(0xC2B2AE3D27D4EB4F)
+            ^ iz.astype(np.int64).astype(np.uint64) * np.uint64(0x165667B19E3779F9)
+            ^ np.uint64(seed) * np.uint64(0xD6E8FEB86659FD93)
+        )
         h ^= h >> np.uint64(30)
         h *= np.uint64(0xBF58476D1CE4E5B9)
         h ^= h >> np.uint64(27)
@@ -346,8 +438,11 @@ def value_noise3(p, seed: int = 0) -> np.ndarray:
         for dy in (0, 1):
             for dz in (0, 1):
                 h = _hash3(i0[:, 0] + dx, i0[:, 1] + dy, i0[:, 2] + dz, seed)
-                wt = ((w[:, 0] if dx else 1 - w[:, 0]) * (w[:, 1] if dy else 1 - w[:, 1])
-                      * (w[:, 2] if dz else 1 - w[:, 2]))
+                wt = (
+                    (w[:, 0] if dx else 1 - w[:, 0])
+                    * (w[:, 1] if dy else 1 - w[:, 1])
+                    * (w[:, 2] if dz else 1 - w[:, 2])
+                )
                 out += wt * h
     return out * 2.0 - 1.0
 
@@ -384,20 +479,34 @@ def png_bytes(linear_rgb) -> bytes:
     raw = b"".join(b"\x00" + img[y].tobytes() for y in range(h))  # filter type 0 per row
     blocks = bytearray(b"\x78\x01")
     for k in range(0, max(len(raw), 1), 65535):
-        part = raw[k:k + 65535]
+        part = raw[k : k + 65535]
         final = 1 if k + 65535 >= len(raw) else 0
         blocks += struct.pack("<BHH", final, len(part), len(part) ^ 0xFFFF) + part
     blocks += struct.pack(">I", zlib.adler32(raw) & 0xFFFFFFFF)
 
     def chunk(kind: bytes, data: bytes) -> bytes:
-        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+        return (
+            struct.pack(">I", len(data))
+            + kind
+            + data
+            + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+        )
 
     ihdr = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)
     return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", bytes(blocks)) + chunk(b"IEND", b"")
 
 
-def tile_texture(size: int, tiles: int, color, grout, grout_width: float = 0.06, variation: float = 0.06,
-                 speckle: float = 0.03, seed: int = 0, offset_rows: bool = False) -> np.ndarray:
+def tile_texture(
+    size: int,
+    tiles: int,
+    color,
+    grout,
+    grout_width: float = 0.06,
+    variation: float = 0.06,
+    speckle: float = 0.03,
+    seed: int = 0,
+    offset_rows: bool = False,
+) -> np.ndarray:
     """``(size, size, 3) float64`` linear RGB image of ``tiles x tiles`` square tiles with grout.
 
     color, grout : (3,) linear RGB of the tiles and the joints

@@ -30,10 +30,12 @@ from pathlib import Path
 import numpy as np
 
 _HERE = Path(__file__).resolve().parent
-if str(_HERE) not in sys.path:
-    sys.path.insert(0, str(_HERE))
-
-from _common import Camera, ModelBuilder, add_cameras, walk_path  # noqa: E402
+if __package__:  # imported as sample_models.house
+    from ._common import Camera, ModelBuilder, add_cameras, walk_path
+else:  # run as a script
+    if str(_HERE) not in sys.path:
+        sys.path.insert(0, str(_HERE))
+    from _common import Camera, ModelBuilder, add_cameras, walk_path  # noqa: I001
 
 DEFAULT_PATH = _HERE / "house.glb"
 
@@ -52,8 +54,12 @@ ROOMS = {  # name: (x0, x1, z0, z1)
 }
 
 # door openings: (name, wall axis, centre along the wall) - "x" walls sit at x = XW, "z" walls at z = ZW
-DOORS = [("living_kitchen", "x", 2.0), ("bedroom_study", "x", 7.0),
-         ("living_bedroom", "z", 2.5), ("kitchen_study", "z", 9.5)]
+DOORS = [
+    ("living_kitchen", "x", 2.0),
+    ("bedroom_study", "x", 7.0),
+    ("living_bedroom", "z", 2.5),
+    ("kitchen_study", "z", 9.5),
+]
 
 # windows (emissive daylight panes): (room, wall face, (lo, hi) box of the hole)
 WINDOWS = [
@@ -110,12 +116,27 @@ def _room_holes(room: str) -> dict:
     return holes
 
 
-def _table(mb: ModelBuilder, obj: str, mat: str, x0, x1, z0, z1, top: float, thick: float = 0.04,
-           leg: float = 0.06, skip=()) -> None:
+def _table(
+    mb: ModelBuilder,
+    obj: str,
+    mat: str,
+    x0,
+    x1,
+    z0,
+    z1,
+    top: float,
+    thick: float = 0.04,
+    leg: float = 0.06,
+    skip=(),
+) -> None:
     """A table: top slab (``skip``: its faces against a wall) and four legs."""
     mb.box(obj, mat, (x0, top - thick, z0), (x1, top, z1), skip=skip)
-    for lx, lz in ((x0 + 0.05, z0 + 0.05), (x1 - 0.05 - leg, z0 + 0.05),
-                   (x1 - 0.05 - leg, z1 - 0.05 - leg), (x0 + 0.05, z1 - 0.05 - leg)):
+    for lx, lz in (
+        (x0 + 0.05, z0 + 0.05),
+        (x1 - 0.05 - leg, z0 + 0.05),
+        (x1 - 0.05 - leg, z1 - 0.05 - leg),
+        (x0 + 0.05, z1 - 0.05 - leg),
+    ):
         mb.box(obj, mat, (lx, 0.0, lz), (lx + leg, top - thick, lz + leg), skip=("-y", "+y"))
 
 
@@ -123,13 +144,28 @@ def _chair(mb: ModelBuilder, obj: str, mat: str, x, z, facing: str) -> None:
     """A chair 0.45 m square centred at (x, z), facing ``facing``; its back is on the other side."""
     s, seat = 0.225, 0.45
     _table(mb, obj, mat, x - s, x + s, z - s, z + s, seat, thick=0.04, leg=0.04)
-    back = {"+x": (x - s, x - s + 0.04, z - s, z + s), "-x": (x + s - 0.04, x + s, z - s, z + s),
-            "+z": (x - s, x + s, z - s, z - s + 0.04), "-z": (x - s, x + s, z + s - 0.04, z + s)}[facing]
+    back = {
+        "+x": (x - s, x - s + 0.04, z - s, z + s),
+        "-x": (x + s - 0.04, x + s, z - s, z + s),
+        "+z": (x - s, x + s, z - s, z - s + 0.04),
+        "-z": (x - s, x + s, z + s - 0.04, z + s),
+    }[facing]
     mb.box(obj, mat, (back[0], seat, back[2]), (back[1], seat + 0.45, back[3]), skip=("-y",))
 
 
-def _shelf(mb: ModelBuilder, obj: str, mat: str, x0, x1, z0, z1, height: float, boards: int,
-           back: str, books_seed: int) -> None:
+def _shelf(
+    mb: ModelBuilder,
+    obj: str,
+    mat: str,
+    x0,
+    x1,
+    z0,
+    z1,
+    height: float,
+    boards: int,
+    back: str,
+    books_seed: int,
+) -> None:
     """An open shelf standing against a wall: two sides, ``boards`` boards, rows of books.
 
     back : the box face against the wall, ``"-z"`` or ``"+z"`` (the shelf runs along x).
@@ -155,29 +191,32 @@ def _shelf(mb: ModelBuilder, obj: str, mat: str, x0, x1, z0, z1, height: float, 
             h = gap * (0.6 + 0.08 * ((books_seed + k + 2 * n) % 4))
             if (books_seed + k + n) % 3 != 2:
                 colour = (books_seed + 2 * k + n) % len(BOOKS)
-                mb.box(f"{obj}_books_{colour}", f"books_{colour}", (pos, y + th, zb0), (pos + w, y + th + h, zb1),
-                       skip=("-y", back))
+                mb.box(
+                    f"{obj}_books_{colour}",
+                    f"books_{colour}",
+                    (pos, y + th, zb0),
+                    (pos + w, y + th + h, zb1),
+                    skip=("-y", back),
+                )
             pos += w + 0.02
             n += 1
 
 
 def build_geometry(mb: ModelBuilder) -> None:
     """Rooms, door openings, windows and furniture."""
-    mat = {
-        "plaster": mb.material("plaster", PLASTER),
-        "ceiling": mb.material("ceiling", CEILING),
-        "wood_floor": mb.material("wood_floor", WOOD_FLOOR),
-        "tile_floor": mb.material("tile_floor", TILE_FLOOR),
-        "carpet": mb.material("carpet", CARPET),
-        "wood": mb.material("wood", WOOD),
-        "dark_wood": mb.material("dark_wood", DARK_WOOD),
-        "fabric_blue": mb.material("fabric_blue", FABRIC_BLUE),
-        "fabric_red": mb.material("fabric_red", FABRIC_RED),
-        "linen": mb.material("linen", LINEN),
-        "lacquer": mb.material("lacquer", WHITE_LACQUER),
-        "window": mb.material("window", (0.8, 0.8, 0.8), emissive=WINDOW_RADIANCE),
-        "lamp_panel": mb.material("lamp_panel", (0.8, 0.8, 0.8), emissive=PANEL_RADIANCE),
-    }
+    mb.material("plaster", PLASTER)
+    mb.material("ceiling", CEILING)
+    mb.material("wood_floor", WOOD_FLOOR)
+    mb.material("tile_floor", TILE_FLOOR)
+    mb.material("carpet", CARPET)
+    mb.material("wood", WOOD)
+    mb.material("dark_wood", DARK_WOOD)
+    mb.material("fabric_blue", FABRIC_BLUE)
+    mb.material("fabric_red", FABRIC_RED)
+    mb.material("linen", LINEN)
+    mb.material("lacquer", WHITE_LACQUER)
+    mb.material("window", (0.8, 0.8, 0.8), emissive=WINDOW_RADIANCE)
+    mb.material("lamp_panel", (0.8, 0.8, 0.8), emissive=PANEL_RADIANCE)
     for k, c in enumerate(BOOKS):
         mb.material(f"books_{k}", c)
     floors = {"living": "wood_floor", "kitchen": "tile_floor", "bedroom": "carpet", "study": "wood_floor"}
@@ -188,13 +227,15 @@ def build_geometry(mb: ModelBuilder) -> None:
         mb.face(f"{room}_floor", floors[room], (x0, 0.0, z0), (x1, 0.0, z1), +1)
         mb.face(f"{room}_ceiling", "ceiling", (x0, H, z0), (x1, H, z1), -1)
         for fname, (lo, hi, sign) in {
-            "-x": ((x0, 0.0, z0), (x0, H, z1), +1), "+x": ((x1, 0.0, z0), (x1, H, z1), -1),
-            "-z": ((x0, 0.0, z0), (x1, H, z0), +1), "+z": ((x0, 0.0, z1), (x1, H, z1), -1),
+            "-x": ((x0, 0.0, z0), (x0, H, z1), +1),
+            "+x": ((x1, 0.0, z0), (x1, H, z1), -1),
+            "-z": ((x0, 0.0, z0), (x1, H, z0), +1),
+            "+z": ((x0, 0.0, z1), (x1, H, z1), -1),
         }.items():
             mb.face(f"{room}_walls", "plaster", lo, hi, sign, holes=holes.get(fname, ()))
 
     # door openings: jambs, lintel underside, threshold
-    for name, kind, c in DOORS:
+    for _name, kind, c in DOORS:
         lo, hi = _door_box(kind, c)
         lo, hi = np.array(lo), np.array(hi)
         a = 2 if kind == "x" else 0  # axis along the wall
@@ -222,8 +263,14 @@ def build_geometry(mb: ModelBuilder) -> None:
 
     # -- kitchen (x 6.06..12, z 0..4.44): counters along the east and south walls, table, chairs
     mb.box("counter", "lacquer", (11.4, 0.0, 0.6), (12.0, 0.9, 4.0), skip=("-y", "+x", "-z"))
-    mb.box("counter", "lacquer", (8.2, 0.0, 0.0), (12.0, 0.9, 0.6), skip=("-y", "-z", "+x"),
-           holes={"+z": [((11.4, 0.0, 0.6), (12.0, 0.9, 0.6))]})
+    mb.box(
+        "counter",
+        "lacquer",
+        (8.2, 0.0, 0.0),
+        (12.0, 0.9, 0.6),
+        skip=("-y", "-z", "+x"),
+        holes={"+z": [((11.4, 0.0, 0.6), (12.0, 0.9, 0.6))]},
+    )
     mb.box("cabinets", "lacquer", (11.65, 1.5, 0.6), (12.0, 2.2, 4.0), skip=("+x",))
     mb.box("cabinets", "lacquer", (8.2, 1.5, 0.0), (12.0, 2.2, 0.35), skip=("-z", "+x"))
     _table(mb, "kitchen_table", "wood", 7.0, 8.4, 0.5, 1.3, 0.75)
@@ -250,8 +297,9 @@ def lights(mb: ModelBuilder) -> None:
     mb.glb.add_point_light("living_lamp", LAMP_COLOR, 10.0, (3.0, 2.35, 2.0))
     mb.glb.add_point_light("bedroom_lamp", LAMP_COLOR, 8.0, (3.2, 2.35, 6.6))
     mb.glb.add_point_light("study_lamp", LAMP_COLOR, 8.0, (8.8, 2.35, 6.5))
-    mb.glb.add_spot_light("desk_lamp", (1.0, 0.95, 0.85), 12.0, (10.9, 1.7, 6.9), (0.45, -1.0, 0.0),
-                          inner=0.35, outer=0.6)
+    mb.glb.add_spot_light(
+        "desk_lamp", (1.0, 0.95, 0.85), 12.0, (10.9, 1.7, 6.9), (0.45, -1.0, 0.0), inner=0.35, outer=0.6
+    )
     mb.face("kitchen_lamp", "lamp_panel", (8.6, H - 0.02, 2.2), (9.4, H - 0.02, 3.0), -1)
 
 
@@ -259,19 +307,30 @@ def camera_path() -> list[dict]:
     """36 poses: a loop living room -> kitchen -> study -> bedroom -> living room through the doors."""
     y = EYE
     wp = [
-        (3.0, y, 0.9), (4.3, y, 1.6), (5.2, y, 2.0),  # living room, towards the kitchen door
-        (6.8, y, 2.0), (8.6, y, 2.3), (9.5, y, 3.5),  # kitchen, towards the study door
-        (9.5, y, 5.5), (9.0, y, 7.0), (6.9, y, 7.0),  # study, towards the bedroom door
-        (5.1, y, 7.0), (3.6, y, 6.2), (2.5, y, 5.3),  # bedroom, towards the living room door
-        (2.5, y, 3.7), (3.0, y, 2.5),  # back into the living room
+        (3.0, y, 0.9),
+        (4.3, y, 1.6),
+        (5.2, y, 2.0),  # living room, towards the kitchen door
+        (6.8, y, 2.0),
+        (8.6, y, 2.3),
+        (9.5, y, 3.5),  # kitchen, towards the study door
+        (9.5, y, 5.5),
+        (9.0, y, 7.0),
+        (6.9, y, 7.0),  # study, towards the bedroom door
+        (5.1, y, 7.0),
+        (3.6, y, 6.2),
+        (2.5, y, 5.3),  # bedroom, towards the living room door
+        (2.5, y, 3.7),
+        (3.0, y, 2.5),  # back into the living room
     ]
     return walk_path(wp, 36, yfov=YFOV, look_ahead=1.6, look_down=0.3)
 
 
 def cameras() -> list[Camera]:
     return [
-        Camera(eye=(5.5, EYE, 0.4), target=(1.2, 0.8, 3.2), yfov=YFOV, znear=0.05, zfar=50.0, name="living"),
-        Camera(eye=(6.6, EYE, 4.1), target=(11.0, 0.8, 1.0), yfov=YFOV, znear=0.05, zfar=50.0, name="kitchen"),
+        Camera(eye=(5.6, EYE, 0.7), target=(1.2, 0.8, 3.2), yfov=YFOV, znear=0.05, zfar=50.0, name="living"),
+        Camera(
+            eye=(6.6, EYE, 4.1), target=(11.0, 0.8, 1.0), yfov=YFOV, znear=0.05, zfar=50.0, name="kitchen"
+        ),
         Camera(eye=(5.5, EYE, 5.0), target=(1.5, 0.6, 8.5), yfov=YFOV, znear=0.05, zfar=50.0, name="bedroom"),
     ]
 
@@ -292,7 +351,9 @@ def build(path: str | Path = DEFAULT_PATH) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description="Write the house sample scene (after the report's maus) as a GLB.")
+    ap = argparse.ArgumentParser(
+        description="Write the house sample scene (after the report's maus) as a GLB."
+    )
     ap.add_argument("-o", "--output", default=str(DEFAULT_PATH), help="output .glb (default: %(default)s)")
     args = ap.parse_args(argv)
     print(build(args.output))

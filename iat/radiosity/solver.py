@@ -82,6 +82,18 @@ class SolveOptions:
         patches into a grid of roots (``load_scene(max_edge=...)``); the solver
         itself takes the scene as it is.
     seed : int, default 0. Seed of the sample jitter; a solve is deterministic.
+    criterion : "variation" (default) or "interpolation". What ``tolerance`` bounds:
+        "variation" splits on max - min over the element's corners and probes (the
+        classic test; smooth gradients refine too, so meshes are dense and safe);
+        "interpolation" splits on the largest gap between a probe and the value the
+        corners interpolate there (linear gradients stay coarse; about half the
+        elements for the same mean error on the Cornell box, but features that
+        fall between the probes can be missed).
+    refine_indirect : bool, default True. After shooting, refine once more on the
+        total (direct + indirect) radiance, so that surfaces lit only indirectly (a
+        ceiling) get elements too; every new vertex gets its direct light and every
+        shot made so far replayed exactly (never interpolated). Costs one gather per
+        shot over the new vertices.
     """
 
     max_depth: int = 6
@@ -92,6 +104,8 @@ class SolveOptions:
     max_shots: int = 20000
     max_edge: float | None = None
     seed: int = 0
+    criterion: str = "variation"
+    refine_indirect: bool = True
 
     def validate(self) -> "SolveOptions":
         """Raise :class:`iat.errors.OptionError` on an out-of-range option; return self."""
@@ -128,6 +142,10 @@ class SolveOptions:
         if self.max_edge is not None and not num("max_edge") > 0:
             bad("max_edge", "must be > 0 or None")
         integer("seed")
+        if not isinstance(self.refine_indirect, bool | np.bool_):
+            bad("refine_indirect", "must be True or False")
+        if self.criterion not in ("variation", "interpolation"):
+            bad("criterion", 'must be "variation" or "interpolation"')
         return self
 
     def to_dict(self) -> dict:
@@ -144,6 +162,7 @@ class _Cancel(Exception):
 class _Geo:
     """Receiver geometry of a set of vertices (all (n, ...) arrays)."""
 
+    key: np.ndarray  # (n,) int64 vertex keys
     patch: np.ndarray  # (n,) int64
     pos: np.ndarray  # (n, 3) world position on the patch
     normal: np.ndarray  # (n, 3)
@@ -151,7 +170,7 @@ class _Geo:
     origin: np.ndarray  # (n, 3) ray origin, off the surface
 
     def take(self, idx) -> "_Geo":
-        return _Geo(self.patch[idx], self.pos[idx], self.normal[idx], self.ff[idx], self.origin[idx])
+        return _Geo(self.key[idx], self.patch[idx], self.pos[idx], self.normal[idx], self.ff[idx], self.origin[idx])
 
 
 class _Context:
@@ -177,7 +196,12 @@ class _Context:
         self.vis = vis
         self.lights = [lt for lt in scene.lights if lt.kind in ("point", "spot")]
         self.emitters = np.flatnonzero((self.emission > 0).any(axis=1))
-        self.shot_count = np.zeros(len(self.area), dtype=np.int64)
+        # a tangent frame per patch (for cosine-distributed directions)
+        helper = np.where(np.abs(self.normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+        t1 = np.cross(self.normal, helper)
+        t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+        self.tangent = np.stack([t1, np.cross(self.normal, t1)], axis=1)  # (P, 2, 3)
+        self._shooters: dict[int, _Shooter] = {}
 
     # -- geometry -------------------------------------------------------------
     def polygon(self, s: int) -> np.ndarray:
@@ -193,24 +217,39 @@ class _Context:
         that = t / np.maximum(tl, 1e-300)[:, None]
         ff = pos + np.minimum(self.eps_ff, 0.5 * tl)[:, None] * that
         origin = pos + self.eps_ray * nrm + np.minimum(self.eps_ray, 0.5 * tl)[:, None] * that
-        return _Geo(p, pos, nrm, ff, origin)
+        return _Geo(np.asarray(keys, dtype=np.int64), p, pos, nrm, ff, origin)
 
-    def samples(self, s: int, m: int) -> np.ndarray:
-        """(m*m, 3) stratified jittered points on patch s, offset off its front side."""
-        rng = np.random.default_rng([self.opts.seed, int(s), int(self.shot_count[s])])
+    def pattern(self, s: int, m: int, shot: int) -> np.ndarray:
+        """(m*m, 2) stratified jittered (u, v) in [0, 1)^2 for patch s (fixed per seed, patch, shot)."""
+        rng = np.random.default_rng([self.opts.seed, int(s), int(shot)])
         a, b = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
-        u = ((a.ravel() + rng.random(m * m)) / m)[:, None]
-        v = ((b.ravel() + rng.random(m * m)) / m)[:, None]
-        c = self.corners[s]
-        if self.is_quad[s]:
-            pts = (1 - u) * (1 - v) * c[0] + u * (1 - v) * c[1] + u * v * c[2] + (1 - u) * v * c[3]
-        else:
+        return np.stack([(a.ravel() + rng.random(m * m)) / m, (b.ravel() + rng.random(m * m)) / m], axis=1)
+
+    def points(self, s: int, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Points at (u, v) in [0, 1)^2 of patch s (area-uniform warp on triangles).
+
+        Returns (..., 3) points on the surface, (..., 3) ray targets offset off its
+        front side and towards its centre, and their lattice parameters u, v (...,).
+        """
+        if not self.is_quad[s]:  # area-uniform square -> triangle warp, in lattice parameters
             su = np.sqrt(u)
-            pts = (1 - su) * c[0] + su * (1 - v) * c[1] + su * v * c[2]
+            u, v = su * (1 - v), su * v
+        pts = qt.lattice_to_world(
+            self.corners, self.is_quad, np.full(u.size, s), u.ravel(), v.ravel(), 1
+        ).reshape(u.shape + (3,))
+        return pts, self.targets(s, pts), u, v
+
+    def targets(self, s: int, pts: np.ndarray) -> np.ndarray:
+        """(..., 3) ray targets for points on patch s: off its front side and towards its centre."""
         toward = self.centre[s] - pts
-        tl = np.linalg.norm(toward, axis=1, keepdims=True)
-        pts = pts + np.minimum(self.eps_ray, 0.5 * tl) * toward / np.maximum(tl, 1e-300)
-        return pts + self.eps_ray * self.normal[s]
+        tl = np.linalg.norm(toward, axis=-1, keepdims=True)
+        target = pts + np.minimum(self.eps_ray, 0.5 * tl) * toward / np.maximum(tl, 1e-300)
+        return target + self.eps_ray * self.normal[s]
+
+    def shooter(self, s: int) -> "_Shooter":
+        if s not in self._shooters:
+            self._shooters[s] = _Shooter(self.corners[s], bool(self.is_quad[s]), self.normal[s], float(self.area[s]))
+        return self._shooters[s]
 
     # -- kernels --------------------------------------------------------------
     def receivers(self, s: int, geo: _Geo) -> np.ndarray:
@@ -223,37 +262,88 @@ class _Context:
         front = np.einsum("nc,c->n", geo.ff - self.centre[s], self.normal[s]) > 0.1 * self.eps_ff
         return np.flatnonzero(front & sees[geo.patch])
 
-    def gather(self, s: int, geo: _Geo, m: int) -> np.ndarray:
-        """(n,) form factor x visible fraction from every vertex of ``geo`` to patch s."""
-        out = np.zeros(len(geo.patch))
+    def gather(self, s: int, geo: _Geo, m: int, shot: int = 0, field: np.ndarray | None = None) -> np.ndarray:
+        """Form factor x visible fraction from every vertex of ``geo`` to patch s.
+
+        m : the sample patterns are m x m; shot : index of this patch's shot (0 for the
+        direct pass), which fixes the jitter (a vertex re-evaluated later gets the same value).
+        field : None for a uniform shooter, returning (n,) ``F * vis``; or the shooter's
+        radiance on its lattice, (N+1, N+1, 3), returning (n, 3) ``F * <vis * L>``: a
+        shooter need not be uniform.
+
+        ``F`` is the analytic form factor; ``<vis * L>`` is a ratio of two estimates of
+        the kernel integral (with and without ``vis * L``) from the same samples, so it is
+        exact for an unoccluded uniform shooter. The samples combine two strategies with
+        the balance heuristic: m x m stratified points on the shooter's area (good when the
+        shooter is far and small) and m x m cosine-distributed directions from the receiver
+        that hit the shooter (good when it is near and large: the kernel is then too peaked
+        for area samples). Both patterns are rotated per receiver (Cranley-Patterson,
+        keyed by the vertex), so errors are decorrelated between vertices.
+        """
+        out = np.zeros(len(geo.patch) if field is None else (len(geo.patch), 3))
         idx = self.receivers(s, geo)
         if len(idx) == 0:
             return out
         f = point_polygon(geo.ff[idx], geo.normal[idx], self.polygon(s))
         keep = f > 1e-12
         idx, f = idx[keep], f[keep]
-        y = self.samples(s, m)
-        ns = self.normal[s]
-        floor_r2 = self.area[s] / len(y)
+        sh = self.shooter(s)
+        pat = self.pattern(s, m, shot)
+        n_a = n_d = len(pat)
+        salt = (int(self.opts.seed) * 1_000_003 + int(s)) * 1_000_003 + int(shot)
         for a in range(0, len(idx), GATHER_BLOCK):
             ii = idx[a : a + GATHER_BLOCK]
-            o = geo.origin[ii]
-            d = y[None, :, :] - o[:, None, :]  # (b, S, 3)
-            r = np.linalg.norm(d, axis=2)
-            u = d / np.maximum(r, 1e-300)[..., None]
-            cos_r = np.einsum("bsc,bc->bs", u, geo.normal[ii])
-            cos_s = -(u @ ns)
-            w = np.clip(cos_r, 0, None) * np.clip(cos_s, 0, None) / np.maximum(r * r, floor_r2)
-            need = w > 0
-            occ = np.zeros(need.shape, dtype=bool)
+            x, nr, o = geo.ff[ii], geo.normal[ii], geo.origin[ii]
+            rot = _hash_uniform(geo.key[ii], salt, 4)
+            # area samples
+            uv = (pat[None, :, :] + rot[:, None, :2]) % 1.0
+            ya, yra, ua, va = self.points(s, uv[..., 0], uv[..., 1])  # (b, S, ...)
+            da = ya - x[:, None, :]
+            r2 = np.einsum("bsc,bsc->bs", da, da)
+            ka = (
+                np.clip(np.einsum("bsc,bc->bs", da, nr), 0, None)
+                * np.clip(-(da @ sh.normal), 0, None)
+                / (np.pi * np.maximum(r2, 1e-300) ** 2)
+            )
+            pa = 1.0 / sh.jacobian(ua, va)
+            wa = ka / (n_a * pa + n_d * ka)
+            # direction samples (cosine-weighted about the receiver normal)
+            dv = (pat[None, :, :] + rot[:, None, 2:]) % 1.0
+            t1, t2 = self.tangent[geo.patch[ii]].transpose(1, 0, 2)  # (b, 3) each
+            dx, dy = _concentric(dv[..., 0], dv[..., 1])
+            dz = np.sqrt(np.clip(1.0 - dx * dx - dy * dy, 0.0, None))
+            w = dx[..., None] * t1[:, None, :] + dy[..., None] * t2[:, None, :] + dz[..., None] * nr[:, None, :]
+            den = w @ sh.normal  # < 0: towards the front of the shooter
+            t = np.einsum("bc,c->b", sh.origin - x, sh.normal)[:, None] / np.where(den < 0, den, -1.0)
+            yd = x[:, None, :] + t[..., None] * w
+            hit = (den < -1e-12) & (t > 0) & sh.inside(yd)
+            ud, vd = sh.uv(yd)
+            kd = np.where(hit, dz * -den / (np.pi * np.maximum(t * t, 1e-300)), 0.0)
+            pd = 1.0 / sh.jacobian(ud, vd)
+            wd = np.where(hit, kd / (n_a * pd + n_d * kd + 1e-300), 0.0)
+            ydr = self.targets(s, yd)
+            # visibility of both sets of samples
+            y_all = np.concatenate([yra, ydr], axis=1)
+            wt = np.concatenate([wa, wd], axis=1)
+            need = wt > 0
+            vis = np.zeros(need.shape, dtype=bool)
             if need.any():
-                ob = np.broadcast_to(o[:, None, :], d.shape)
-                occ[need] = self.vis.occluded(
-                    ob[need], u[need], np.maximum(r[need] - 0.5 * self.eps_ray, 0.0)
+                dr = y_all - o[:, None, :]
+                r = np.linalg.norm(dr, axis=2)
+                ob = np.broadcast_to(o[:, None, :], dr.shape)
+                rn = r[need]
+                vis[need] = ~self.vis.occluded(
+                    ob[need], dr[need] / np.maximum(rn, 1e-300)[:, None], np.maximum(rn - 0.5 * self.eps_ray, 0.0)
                 )
-            wsum = w.sum(axis=1)
-            frac = np.where(wsum > 0, (w * ~occ).sum(axis=1) / np.where(wsum > 0, wsum, 1.0), 0.0)
-            out[ii] = f[a : a + GATHER_BLOCK] * frac
+            wsum = wt.sum(axis=1)
+            wv = wt * vis / np.where(wsum > 0, wsum, 1.0)[:, None]  # (b, 2S), rows sum to the visible fraction
+            fb = f[a : a + GATHER_BLOCK]
+            if field is None:
+                out[ii] = fb * wv.sum(axis=1)
+            else:
+                lu = np.concatenate([ua, ud], axis=1)
+                lv = np.concatenate([va, vd], axis=1)
+                out[ii] = fb[:, None] * np.einsum("bs,bsc->bc", wv, _sample_lattice(field, lu, lv))
         return out
 
     def light_irradiance(self, light, geo: _Geo) -> np.ndarray:
@@ -305,6 +395,167 @@ class _Context:
         return p
 
 
+def _hash_uniform(keys: np.ndarray, salt: int, k: int = 2) -> np.ndarray:
+    """(n, k) float64 in [0, 1): k splitmix64 hashes of (key, salt)."""
+    z = np.asarray(keys, dtype=np.int64).astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+    z ^= np.uint64(salt & 0xFFFFFFFFFFFFFFFF)
+    out = []
+    for _ in range(k):
+        z = z + np.uint64(0x9E3779B97F4A7C15)
+        x = z.copy()
+        x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        x = x ^ (x >> np.uint64(31))
+        out.append((x >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53)))
+    return np.stack(out, axis=1)
+
+
+def _concentric(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Shirley-Chiu concentric map of the unit square onto the unit disc."""
+    a, b = 2.0 * u - 1.0, 2.0 * v - 1.0
+    first = np.abs(a) > np.abs(b)
+    r = np.where(first, a, b)
+    safe_a = np.where(a == 0, 1.0, a)
+    safe_b = np.where(b == 0, 1.0, b)
+    phi = np.where(first, (np.pi / 4) * b / safe_a, np.pi / 2 - (np.pi / 4) * a / safe_b)
+    phi = np.where((a == 0) & (b == 0), 0.0, phi)
+    return r * np.cos(phi), r * np.sin(phi)
+
+
+def _cross2(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    return p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0]
+
+
+class _Shooter:
+    """Geometry of one patch as a shooter: inside test, inverse parametrisation, area Jacobian.
+
+    Quads: ``p(u, v) = c0 + u e1 + v e2 + u v e3`` (bilinear); triangles: ``c0 + u e1 + v e2``.
+    """
+
+    def __init__(self, corners: np.ndarray, is_quad: bool, normal: np.ndarray, area: float):
+        self.is_quad = is_quad
+        self.normal = normal
+        self.area = area
+        c = corners if is_quad else corners[:3]
+        self.origin = c[0]
+        self.poly = c
+        self.e1 = corners[1] - corners[0]
+        self.e2 = (corners[3] if is_quad else corners[2]) - corners[0]
+        self.e3 = corners[0] - corners[1] + corners[2] - corners[3] if is_quad else np.zeros(3)
+        t1 = self.e1 / max(np.linalg.norm(self.e1), 1e-300)
+        self.frame = np.stack([t1, np.cross(normal, t1)])  # (2, 3) in-plane axes
+        self.edge_n = np.cross(np.roll(c, -1, axis=0) - c, normal)  # (k, 3) outward edge normals
+        self.edge_o = c
+        self.tol = 1e-9 * max(float(np.abs(c - c.mean(axis=0)).max()), 1e-300)
+
+    def inside(self, pts: np.ndarray) -> np.ndarray:
+        """(...) bool: points (..., 3) on the plane inside the convex polygon."""
+        ok = np.ones(pts.shape[:-1], dtype=bool)
+        for o, en in zip(self.edge_o, self.edge_n):
+            ok &= (pts - o) @ en <= self.tol * np.linalg.norm(en)
+        return ok
+
+    def uv(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Lattice parameters (u, v) of points (..., 3) on the patch plane (clipped to the patch)."""
+        h = (pts - self.origin) @ self.frame.T  # (..., 2)
+        e, f, g = self.frame @ self.e1, self.frame @ self.e2, self.frame @ self.e3
+        if not self.is_quad or np.abs(g).max() <= 1e-12 * max(np.abs(e).max(), np.abs(f).max()):
+            det = _cross2(e, f)
+            u, v = _cross2(h, f) / det, _cross2(e, h) / det
+        else:  # inverse bilinear: k2 v^2 + k1 v + k0 = 0
+            k2 = _cross2(g, f)
+            k1 = _cross2(e, f) + _cross2(h, g)
+            k0 = _cross2(h, e)
+            if abs(k2) < 1e-14:
+                v = -k0 / np.where(k1 == 0, 1e-300, k1)
+            else:
+                disc = np.sqrt(np.clip(k1 * k1 - 4 * k0 * k2, 0.0, None))
+                v1, v2 = (-k1 - disc) / (2 * k2), (-k1 + disc) / (2 * k2)
+                v = np.where((v1 >= -1e-9) & (v1 <= 1 + 1e-9), v1, v2)
+            den = e[None] + v[..., None] * g if np.ndim(v) else e + v * g
+            u = np.einsum("...c,...c->...", h - v[..., None] * f, den) / np.maximum(
+                np.einsum("...c,...c->...", den, den), 1e-300
+            )
+        u, v = np.clip(u, 0.0, 1.0), np.clip(v, 0.0, 1.0)
+        if not self.is_quad:
+            over = u + v > 1.0
+            tot = np.where(over, u + v, 1.0)
+            u, v = u / tot, v / tot
+        return u, v
+
+    def jacobian(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Area per unit (u, v) of the area samples at lattice parameters (u, v)."""
+        if not self.is_quad:  # the square -> triangle warp is area-uniform
+            return np.full(np.shape(u), self.area)
+        du = self.e1 + np.asarray(v)[..., None] * self.e3
+        dv = self.e2 + np.asarray(u)[..., None] * self.e3
+        return np.maximum(np.linalg.norm(np.cross(du, dv), axis=-1), 1e-300)
+
+
+def _sample_lattice(grid: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(..., 3) piecewise-linear interpolation of a lattice grid (N+1, N+1, 3) at lattice parameters u, v.
+
+    Each lattice cell is split along its anti-diagonal, so triangle patches (points with
+    ``u + v <= 1``) only ever read lattice points inside the triangle.
+    """
+    n = grid.shape[0] - 1
+    x, y = np.asarray(u) * n, np.asarray(v) * n
+    a = np.clip(np.floor(x), 0, n - 1).astype(np.int64)
+    b = np.clip(np.floor(y), 0, n - 1).astype(np.int64)
+    fx, fy = (x - a)[..., None], (y - b)[..., None]
+    lower = fx + fy <= 1.0
+    g00, g10, g01, g11 = grid[a, b], grid[a + 1, b], grid[a, b + 1], grid[a + 1, b + 1]
+    lo = g00 * (1 - fx - fy) + g10 * fx + g01 * fy
+    hi = g11 * (fx + fy - 1) + g01 * (1 - fx) + g10 * (1 - fy)
+    return np.where(lower, lo, hi)
+
+
+class _Lattice:
+    """Per-patch radiance on the full lattice from vertex values (the shooters' radiance fields)."""
+
+    def __init__(self, forest: qt.Forest, keys: np.ndarray):
+        self.forest = forest
+        self.n = forest.n
+        self.corner = qt.lookup(keys, qt.leaf_corner_keys(forest))  # (L, 4)
+        self.order = np.argsort(forest.leaf_patch, kind="stable")
+        self.starts = np.searchsorted(forest.leaf_patch[self.order], np.arange(forest.n_patches + 1))
+        self._offsets: dict[int, tuple] = {}
+
+    def _level(self, level: int):
+        if level not in self._offsets:
+            s = self.n >> level
+            a, b = np.meshgrid(np.arange(s + 1), np.arange(s + 1), indexing="ij")
+            a, b = a.ravel(), b.ravel()
+            x, y = a / s, b / s
+            wq = np.stack([(1 - x) * (1 - y), x * (1 - y), x * y, (1 - x) * y], axis=1)
+            up = np.flatnonzero(a + b <= s)
+            down = np.flatnonzero(a + b >= s)
+            wu = np.stack([1 - x - y, x, y, 0 * x], axis=1)[up]  # corners (0,0), (1,0), (0,1)
+            wd = np.stack([x + y - 1, 1 - x, 1 - y, 0 * x], axis=1)[down]  # (1,1), (0,1), (1,0)
+            self._offsets[level] = (a, b, wq, up, wu, down, wd)
+        return self._offsets[level]
+
+    def grid(self, p: int, values: np.ndarray) -> np.ndarray:
+        """(N+1, N+1, 3) values of patch p on its lattice, interpolated in its leaves from ``values`` (V, 3)."""
+        n, fo = self.n, self.forest
+        g = np.zeros((n + 1, n + 1, 3))
+        leaves = self.order[self.starts[p] : self.starts[p + 1]]
+        lvl = fo.leaf_level[leaves]
+        for level in np.unique(lvl):
+            sel = leaves[lvl == level]
+            a, b, wq, up, wu, down, wd = self._level(int(level))
+            vals = values[self.corner[sel]]  # (l, 4, 3)
+            i0, j0 = fo.leaf_i[sel][:, None], fo.leaf_j[sel][:, None]
+            if fo.patch_is_quad[p]:
+                g[i0 + a, j0 + b] = np.einsum("gk,lkc->lgc", wq, vals)
+                continue
+            flip = fo.leaf_flip[sel]
+            for mask, pts, w in ((~flip, up, wu), (flip, down, wd)):
+                if mask.any():
+                    g[i0[mask] + a[pts], j0[mask] + b[pts]] = np.einsum("gk,lkc->lgc", w, vals[mask])
+        return g
+
+
 def _side(samples: int) -> int:
     return max(1, math.ceil(math.sqrt(samples) - 1e-9))
 
@@ -337,6 +588,21 @@ def _probe_keys(forest: qt.Forest) -> tuple[np.ndarray, np.ndarray]:
     valid = np.ones((forest.n_leaves, 5), dtype=bool)
     valid[tri, 3:] = False
     return qt.make_key(forest.leaf_patch[:, None], pi, pj, forest.n), valid
+
+
+def _probe_interp(forest: qt.Forest) -> np.ndarray:
+    """(L, 5, 4) int64 corner slots whose mean interpolates each probe of :func:`_probe_keys`."""
+    q = forest.leaf_is_quad
+    down = ~q & forest.leaf_flip
+    out = np.empty((forest.n_leaves, 5, 4), dtype=np.int64)
+    # quad corners 0:(0,0) 1:(s,0) 2:(s,s) 3:(0,s); probes centre, bottom, right, top, left
+    out[q] = [[0, 1, 2, 3], [0, 1, 0, 1], [1, 2, 1, 2], [2, 3, 2, 3], [3, 0, 3, 0]]
+    # up corners 0:(0,0) 1:(s,0) 2:(0,s); probes (h,0), (h,h), (0,h)
+    up = ~q & ~forest.leaf_flip
+    out[up] = [[0, 1, 0, 1], [1, 2, 1, 2], [0, 2, 0, 2], [0, 1, 0, 1], [0, 1, 0, 1]]
+    # down corners 0:(s,s) 1:(0,s) 2:(s,0); probes (h,s), (h,h), (s,h)
+    out[down] = [[0, 1, 0, 1], [1, 2, 1, 2], [0, 2, 0, 2], [0, 1, 0, 1], [0, 1, 0, 1]]
+    return out
 
 
 def _leaf_longest_edge(forest: qt.Forest, corners: np.ndarray) -> np.ndarray:
@@ -416,12 +682,111 @@ def solve(scene, options: SolveOptions | None = None, progress: Progress | None 
         vis.close()
 
 
+class _Cache:
+    """Values (n, 3) at sorted vertex keys (n,), grown by :meth:`add`."""
+
+    def __init__(self, keys=None, vals=None):
+        self.keys = np.zeros(0, dtype=np.int64) if keys is None else np.asarray(keys, dtype=np.int64)
+        self.vals = np.zeros((0, 3)) if vals is None else np.asarray(vals, dtype=np.float64)
+
+    def find(self, keys: np.ndarray) -> np.ndarray:
+        return qt.lookup(self.keys, keys)
+
+    def get(self, keys: np.ndarray) -> np.ndarray:
+        """(n, 3) values at ``keys``; 0 where unknown."""
+        i = self.find(keys)
+        out = np.zeros((len(keys), 3))
+        out[i >= 0] = self.vals[i[i >= 0]]
+        return out
+
+    def add(self, keys: np.ndarray, vals: np.ndarray) -> None:
+        k = np.concatenate([self.keys, keys])
+        v = np.concatenate([self.vals, vals])
+        order = np.argsort(k, kind="stable")
+        self.keys, self.vals = k[order], v[order]
+
+
+def _refine(ctx: _Context, forest: qt.Forest, cache: _Cache, evaluate, report, label: str, span):
+    """Split elements until nothing varies by more than the tolerance (see the module docstring).
+
+    cache : reflected radiance (n, 3) at vertex keys, extended with ``evaluate(new_keys)``.
+    Returns (forest, passes); on cancel the last forest whose vertices are all evaluated
+    (or the given one) is returned and ``_Cancel`` is re-raised by the caller's check.
+    """
+    opts, D = ctx.opts, ctx.opts.max_depth
+    emission_y = _lum(ctx.emission)
+    good, passes = forest, 0
+    try:
+        while True:
+            keys = qt.vertex_keys(forest)
+            cand = forest.leaf_level < D
+            if opts.min_element_size > 0 and cand.any():
+                cand &= _leaf_longest_edge(forest, ctx.corners) / 2 >= opts.min_element_size
+            sub = forest.take(cand)
+            pk, pvalid = _probe_keys(sub)
+            need = np.union1d(keys, pk[pvalid])
+            new = need[cache.find(need) < 0]
+            report(
+                span[0] + (span[1] - span[0]) * passes / (D + 1),
+                f"{label}: pass {passes + 1}, {forest.n_leaves} elements, {len(new)} new points",
+            )
+            cache.add(new, evaluate(new))
+            good, passes = forest, passes + 1
+            if not cand.any():
+                break
+            # split test on luminance of the outgoing radiance (emission + reflected)
+            refl_y = _lum(cache.vals)
+            eps_abs = max(ABS_FLOOR * _area_mean(forest, keys, cache.find(keys), refl_y, ctx), 1e-30)
+            y = refl_y + emission_y[qt.decode_key(cache.keys, ctx.n)[0]]
+            vy = np.concatenate([y[cache.find(qt.leaf_corner_keys(sub))], y[cache.find(pk)]], axis=1)
+            vm = np.concatenate([np.ones((sub.n_leaves, 4), dtype=bool), pvalid], axis=1)
+            mean = (vy * vm).sum(axis=1) / vm.sum(axis=1)
+            if opts.criterion == "variation":
+                hi = np.where(vm, vy, -np.inf).max(axis=1)
+                lo = np.where(vm, vy, np.inf).min(axis=1)
+                score = hi - lo
+            else:
+                slots = _probe_interp(sub)
+                ck = vy[:, :4]
+                interp = np.take_along_axis(ck, slots.reshape(len(ck), -1), axis=1).reshape(slots.shape).mean(axis=2)
+                score = np.where(pvalid, np.abs(vy[:, 4:] - interp), 0.0).max(axis=1)
+            split = score > opts.tolerance * (mean + eps_abs)
+            if not split.any():
+                break
+            mask = np.zeros(forest.n_leaves, dtype=bool)
+            mask[cand] = split
+            forest = qt.balance(qt.split(forest, mask))
+    except _Cancel:
+        return good, passes, True
+    return forest, passes, False
+
+
+def _interpolation_bias(keys: np.ndarray, old_keys: np.ndarray, cache: _Cache, ctx: _Context) -> tuple[float, int]:
+    """Mean relative error (sum |interpolated - exact| / sum exact, luminance of reflected radiance)
+    that parent interpolation would have given the vertices of ``keys`` not in ``old_keys``."""
+    late = keys[qt.lookup(old_keys, keys) < 0]
+    if len(late) == 0:
+        return 0.0, 0
+    pkeys, pw = _parent_interpolation(late, ctx.is_quad, ctx.n)
+    pi = cache.find(pkeys)
+    ok = (pi >= 0).all(axis=1) & (cache.find(late) >= 0)
+    if not ok.any():
+        return 0.0, 0
+    y = _lum(cache.vals)
+    interp = (y[pi[ok]] * pw[ok]).sum(axis=1)
+    exact = y[cache.find(late[ok])]
+    tot = exact.sum()
+    return (float(np.abs(interp - exact).sum() / tot) if tot > 0 else 0.0), int(ok.sum())
+
+
 def _solve(scene, opts: SolveOptions, progress, vis: Visibility, t_start: float) -> Solution:
     ctx = _Context(scene, opts, vis)
-    D = opts.max_depth
-    state = {"cancelled": False, "last": 0.0}
+    P = len(ctx.area)
+    m_side = _side(opts.samples)
+    state = {"cancelled": False, "last": 0.0, "fraction": 0.0, "message": ""}
 
     def report(fraction: float, message: str) -> None:
+        state["fraction"], state["message"] = fraction, message
         if progress is not None and progress(float(min(max(fraction, 0.0), 1.0)), message) is False:
             state["cancelled"] = True
             raise _Cancel
@@ -430,138 +795,138 @@ def _solve(scene, opts: SolveOptions, progress, vis: Visibility, t_start: float)
         now = time.perf_counter()
         if progress is not None and now - state["last"] > 0.05:
             state["last"] = now
-            report(state.get("fraction", 0.0), state.get("message", ""))
-
-    # ---- 1. meshing by direct light -------------------------------------------
-    forest = qt.roots(ctx.is_quad, D)
-    good = forest
-    known_k = np.zeros(0, dtype=np.int64)
-    known_v = np.zeros((0, 3))
-    root_keys = qt.vertex_keys(forest)
-    iterations = 0
-    t_mesh = time.perf_counter()
-    try:
-        while True:
-            keys = qt.vertex_keys(forest)
-            cand = forest.leaf_level < D
-            if opts.min_element_size > 0 and cand.any():
-                cand &= _leaf_longest_edge(forest, ctx.corners) / 2 >= opts.min_element_size
-            pk, pvalid = _probe_keys(forest.take(cand))
-            need = np.union1d(keys, pk[pvalid])
-            new = need[qt.lookup(known_k, need) < 0]
-            state["fraction"] = 0.3 * iterations / (D + 1)
-            state["message"] = f"meshing: pass {iterations + 1}, {forest.n_leaves} elements, {len(new)} new points"
             report(state["fraction"], state["message"])
-            vals = ctx.direct(new, check)
-            known_k = np.concatenate([known_k, new])
-            known_v = np.concatenate([known_v, vals])
-            order = np.argsort(known_k, kind="stable")
-            known_k, known_v = known_k[order], known_v[order]
-            good = forest
-            iterations += 1
-            # split test on total direct radiance (luminance)
-            y_all = _lum(known_v)
-            refl_mean = _area_mean(forest, keys, qt.lookup(known_k, keys), y_all, ctx)
-            eps_abs = max(ABS_FLOOR * refl_mean, 1e-30)
-            y_all = y_all + _lum(ctx.emission)[qt.decode_key(known_k, ctx.n)[0]]
-            if not cand.any():
-                break
-            sub = forest.take(cand)
-            vy = np.concatenate(
-                [y_all[qt.lookup(known_k, qt.leaf_corner_keys(sub))], y_all[qt.lookup(known_k, pk)]], axis=1
-            )
-            vm = np.concatenate([np.ones((sub.n_leaves, 4), dtype=bool), pvalid], axis=1)
-            hi = np.where(vm, vy, -np.inf).max(axis=1)
-            lo = np.where(vm, vy, np.inf).min(axis=1)
-            mean = (vy * vm).sum(axis=1) / vm.sum(axis=1)
-            split = hi - lo > opts.tolerance * (mean + eps_abs)
-            if not split.any():
-                break
-            mask = np.zeros(forest.n_leaves, dtype=bool)
-            mask[cand] = split
-            forest = qt.balance(qt.split(forest, mask))
-    except _Cancel:
-        forest = good
-    t_mesh = time.perf_counter() - t_mesh
 
-    keys = qt.vertex_keys(forest)
-    vidx = qt.lookup(known_k, keys)
-    if len(keys) and (vidx < 0).any():  # cancelled before the roots were evaluated
-        forest = qt.roots(ctx.is_quad, D)
-        keys = qt.vertex_keys(forest)
-        vidx = qt.lookup(known_k, keys)
-    direct = np.where((vidx >= 0)[:, None], known_v[np.maximum(vidx, 0)], 0.0) if len(known_k) else np.zeros(
-        (len(keys), 3)
+    stats: dict = {"interpolation_bias_total": 0.0, "interpolation_bias_total_vertices": 0}
+    timings = {}
+
+    # ---- A. meshing by direct light --------------------------------------------------
+    t0 = time.perf_counter()
+    roots = qt.roots(ctx.is_quad, opts.max_depth)
+    root_keys = qt.vertex_keys(roots)
+    direct_cache = _Cache()
+    forest, passes_a, _ = _refine(
+        ctx, roots, direct_cache, lambda k: ctx.direct(k, check), report, "meshing", (0.0, 0.2)
     )
-    vpatch = qt.decode_key(keys, ctx.n)[0]
-    emission_v = ctx.emission[vpatch]
+    keys = qt.vertex_keys(forest)
+    bias, bias_n = _interpolation_bias(keys, root_keys, direct_cache, ctx)
+    timings["meshing_s"] = time.perf_counter() - t0
 
-    # ---- bias that parent interpolation would have had --------------------------
-    late = qt.lookup(root_keys, keys) < 0
-    bias, bias_n = 0.0, 0
-    if late.any() and len(known_k):
-        pkeys, pw = _parent_interpolation(keys[late], ctx.is_quad, ctx.n)
-        pi = qt.lookup(known_k, pkeys)
-        ok = (pi >= 0).all(axis=1)
-        if ok.any():
-            interp = (_lum(known_v[pi[ok]]) * pw[ok]).sum(axis=1)
-            exact = _lum(direct[late][ok])
-            tot = exact.sum()
-            bias = float(np.abs(interp - exact).sum() / tot) if tot > 0 else 0.0
-            bias_n = int(ok.sum())
-
-    # ---- 2. progressive refinement --------------------------------------------
-    M = _averaging_matrix(forest, keys, ctx.corners, ctx.area)
-    vert_w = np.asarray(M.sum(axis=0)).ravel()  # one non-zero per column: weight in its own patch
-    radiance = emission_v + direct
-    unshot = M @ direct
+    # ---- B. progressive refinement -------------------------------------------------
+    reflected = direct_cache.get(keys)  # 0 where a cancel left a vertex unevaluated
+    unshot_v = reflected.copy()  # per-vertex unshot radiance: shooters need not be uniform
     power0 = ctx.emitted_power()
-    shots = 0
-    t_shoot = time.perf_counter()
-    unshot_power = np.pi * _lum(unshot) * ctx.area
-    u_start = max(float(unshot_power.sum()), 1e-300)
     target = opts.convergence * power0
-    geo = ctx.geometry(keys) if len(keys) else None
-    rho_v = ctx.albedo[vpatch]
+    shots = 0
+    shot_index = np.ones(P, dtype=np.int64)  # jitter index per patch; 0 was the direct pass
+    mesh = {}
+
+    def set_mesh(forest, keys):
+        mesh["forest"], mesh["keys"] = forest, keys
+        mesh["M"] = _averaging_matrix(forest, keys, ctx.corners, ctx.area)
+        mesh["lattice"] = _Lattice(forest, keys)
+        mesh["start"] = np.searchsorted(keys, qt.make_key(np.arange(P + 1), 0, 0, ctx.n))
+        mesh["geo"] = ctx.geometry(keys) if len(keys) else None
+        mesh["rho"] = ctx.albedo[qt.decode_key(keys, ctx.n)[0]]
+
+    def patch_power(unshot_v):
+        return np.pi * _lum(mesh["M"] @ unshot_v) * ctx.area
+
+    set_mesh(forest, keys)
+    u_start = max(float(patch_power(unshot_v).sum()), 1e-300)
+
+    def shoot(span):
+        """Shoot until converged or max_shots, updating ``reflected`` and ``unshot_v`` in place."""
+        nonlocal shots, reflected, unshot_v
+        if power0 <= 0 or len(mesh["keys"]) == 0:
+            return
+        span_log = math.log(u_start / target) if u_start > target else 1.0
+        while shots < opts.max_shots:
+            power = patch_power(unshot_v)
+            total = float(power.sum())
+            if total <= target:
+                break
+            done = min(1.0, max(0.0, math.log(u_start / max(total, 1e-300)) / span_log))
+            state["fraction"] = span[0] + (span[1] - span[0]) * done
+            state["message"] = f"shooting: {shots} shots, unshot {total / power0:.3g} of emitted"
+            check()
+            s = int(np.argmax(power))
+            a, b = mesh["start"][s], mesh["start"][s + 1]
+            field = mesh["lattice"].grid(s, unshot_v)
+            g = ctx.gather(s, mesh["geo"], m_side, int(shot_index[s]), field)
+            shot_index[s] += 1
+            shots += 1
+            unshot_v[a:b] = 0.0
+            dv = mesh["rho"] * g
+            reflected += dv
+            unshot_v += dv
+
+    t0 = time.perf_counter()
     if not state["cancelled"]:
         try:
-            while shots < opts.max_shots and power0 > 0:
-                total = float(unshot_power.sum())
-                if total <= target:
-                    break
-                span = math.log(u_start / target) if u_start > target else 1.0
-                frac = 0.3 + 0.7 * min(1.0, max(0.0, math.log(u_start / max(total, 1e-300)) / span))
-                state["fraction"] = frac
-                state["message"] = f"shooting: {shots} shots, unshot {total / power0:.3g} of emitted"
-                report(frac, state["message"])
-                s = int(np.argmax(unshot_power))
-                d_l = unshot[s].copy()
-                unshot[s] = 0.0
-                unshot_power[s] = 0.0
-                m = _side(opts.samples)
-                f = ctx.gather(s, geo, m)
-                ctx.shot_count[s] += 1
-                hit = np.flatnonzero(f > 0)
-                dv = rho_v[hit] * d_l[None, :] * f[hit, None]
-                radiance[hit] += dv
-                add = np.stack(
-                    [np.bincount(vpatch[hit], weights=vert_w[hit] * dv[:, c], minlength=len(ctx.area)) for c in range(3)],
-                    axis=1,
-                )
-                unshot += add
-                changed = np.flatnonzero(add.any(axis=1))
-                unshot_power[changed] = np.pi * _lum(unshot[changed]) * ctx.area[changed]
-                shots += 1
+            shoot((0.2, 0.8))
         except _Cancel:
             pass
-    t_shoot = time.perf_counter() - t_shoot
+    timings["shooting_s"] = time.perf_counter() - t0
+
+    # ---- C. refinement on the total radiance: new vertices gather everything shot so far ----
+    passes_c = 0
+    t0 = time.perf_counter()
+    if opts.refine_indirect and shots and not state["cancelled"]:
+        total_cache = _Cache(keys, reflected.copy())
+        # what each patch has shot so far (a sum of shots is linear: gathering it once equals
+        # replaying every shot, up to the sample jitter)
+        shot_field = np.maximum(reflected - unshot_v, 0.0)
+        lattice_b = mesh["lattice"]
+        sources = [p for p in range(P) if shot_index[p] > 1]
+        grids = {p: lattice_b.grid(p, shot_field) for p in sources}
+
+        def evaluate_total(new: np.ndarray) -> np.ndarray:
+            out = direct_cache.get(new)
+            missing = direct_cache.find(new) < 0
+            if missing.any():
+                out[missing] = ctx.direct(new[missing], check)
+            if len(new):
+                geo = ctx.geometry(new)
+                rho = ctx.albedo[geo.patch]
+                for p in sources:
+                    out += rho * ctx.gather(p, geo, m_side, int(shot_index[p]), grids[p])
+                    check()
+            return out
+
+        old_keys = keys
+        forest, passes_c, _ = _refine(ctx, forest, total_cache, evaluate_total, report, "refining", (0.8, 0.95))
+        keys = qt.vertex_keys(forest)
+        reflected = total_cache.get(keys)
+        b, bn = _interpolation_bias(keys, old_keys, total_cache, ctx)
+        stats["interpolation_bias_total"], stats["interpolation_bias_total_vertices"] = b, bn
+        # carry the (small) unshot remainder over to the refined mesh
+        p_new, i_new, j_new = qt.decode_key(keys, ctx.n)
+        old_idx = qt.lookup(old_keys, keys)
+        new_unshot = np.zeros((len(keys), 3))
+        new_unshot[old_idx >= 0] = unshot_v[old_idx[old_idx >= 0]]
+        for p in np.unique(p_new[old_idx < 0]):
+            sel = np.flatnonzero((old_idx < 0) & (p_new == p))
+            new_unshot[sel] = lattice_b.grid(int(p), unshot_v)[i_new[sel], j_new[sel]]
+        unshot_v = new_unshot
+        set_mesh(forest, keys)
+        if not state["cancelled"]:
+            try:  # normally nothing left: B converged; further shots reach the refined mesh
+                shoot((0.95, 1.0))
+            except _Cancel:
+                pass
+    timings["refining_s"] = time.perf_counter() - t0
+    unshot_power = patch_power(unshot_v)
+
 
     # ---- result ------------------------------------------------------------------
+    vpatch = qt.decode_key(keys, ctx.n)[0]
+    radiance = ctx.emission[vpatch] + reflected
     if not np.isfinite(radiance).all():
         raise FloatingPointError("radiosity produced non-finite radiance (a solver bug)")
     radiance = np.maximum(radiance, 0.0)
     unshot_fraction = float(unshot_power.sum() / power0) if power0 > 0 else 0.0
-    if not state["cancelled"] and progress is not None:
+    if not state["cancelled"]:
         try:
             report(1.0, f"done: {shots} shots, {len(keys)} vertices")
         except _Cancel:
@@ -585,12 +950,13 @@ def _solve(scene, opts: SolveOptions, progress, vis: Visibility, t_start: float)
         "rays": int(vis.rays),
         "rays_per_s": float(vis.rays / vis.seconds) if vis.seconds > 0 else 0.0,
         "time_s": float(elapsed),
-        "meshing_s": float(t_mesh),
-        "shooting_s": float(t_shoot),
-        "mesh_passes": int(iterations),
+        **{k: float(v) for k, v in timings.items()},
+        "mesh_passes": int(passes_a),
+        "refine_passes": int(passes_c),
         "unshot_fraction": unshot_fraction,
         "interpolation_bias": bias,
         "interpolation_bias_vertices": bias_n,
+        **stats,
         "max_depth_reached": int(forest.leaf_level.max()) if forest.n_leaves else 0,
         "emitted_power": float(power0),
         "cancelled": bool(state["cancelled"]),

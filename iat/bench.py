@@ -1,0 +1,758 @@
+"""``iat bench``: the report's Figure 3 (mesh against IAT), and more.
+
+For each model: triangles, frame rate over the model's camera path and texture
+memory, the columns of the report's Figure 3; and beyond it draw calls, the
+IAT-against-mesh image error (PSNR and FLIP over path frames), the seam error,
+solve, bake, re-bake and load times.
+
+Frame rate: the path's poses are interpolated to a fixed number of frames, each
+drawn offscreen with :meth:`iat.render.Renderer.draw` (tone-mapped into an RGBA8
+framebuffer, as a window would be) and finished with ``ctx.finish()``; the rate
+is ``frames / wall time``, best of ``repeats`` rounds, mesh and IAT rounds
+interleaved so that background load hits both alike. It is measured at the
+requested size and at a tiny size (:data:`TINY_SIZE`): Mesa's llvmpipe is a
+software rasteriser, fill-bound at 640x480, so the tiny size shows the
+triangle-bound case that the report's Onyx was in.
+
+Solutions are cached in ``cache_dir/<model>-<options hash>.npz`` and solved
+again when the model file is newer or the options differ.
+
+Library: :func:`run_bench` returns a JSON-able dict, :func:`format_table` turns
+it into Markdown; :func:`main` is the CLI wrapper.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import math
+import os
+import platform
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .camera import Camera
+from .errors import LoadError
+
+log = logging.getLogger(__name__)
+
+Progress = Callable[[float, str], "bool | None"]
+
+#: the sample models, in the order of the table
+DEFAULT_MODELS = ("cornell_box", "house", "cave", "lavapit", "pool")
+#: where the sample models live
+SAMPLE_DIR = Path(__file__).resolve().parents[1] / "sample_models"
+#: default solution cache
+DEFAULT_CACHE = Path("out") / "bench"
+#: the triangle-bound case: few pixels, so per-vertex work dominates the frame
+TINY_SIZE = (64, 48)
+#: bump when the JSON layout changes
+SCHEMA_VERSION = 1
+
+#: the report's Figure 3 (Silicon Graphics Onyx Reality Engine 2, 16 MB texture memory, Performer):
+#: name -> (our model, triangles polygon, fps polygon, triangles IAT, fps IAT, texture MB IAT)
+REPORT_FIGURE3 = {
+    "maus": ("house", 95536, 7.5, 39820, 15.0, 1.26),
+    "cave": ("cave", 43960, 20.0, 19492, 30.0, 0.77),
+    "lavapit": ("lavapit", 55158, 8.6, 7183, 30.0, 1.48),
+    "pool": ("pool", 84384, 8.6, 39865, 15.0, 2.76),
+}
+_REPORT_BY_MODEL = {v[0]: k for k, v in REPORT_FIGURE3.items()}
+
+
+# -- models and solutions ----------------------------------------------------------------------
+def resolve_model(name: str | Path) -> Path:
+    """A model file from a path or a sample model's name (``house`` -> ``sample_models/house.glb``)."""
+    p = Path(name)
+    if p.is_file():
+        return p
+    for cand in (SAMPLE_DIR / f"{p.name}.glb", SAMPLE_DIR / p.name):
+        if p.suffix == "" and cand.is_file():
+            return cand
+    raise LoadError("no such model file (nor a sample model of that name)", p)
+
+
+def default_models() -> tuple[list[Path], list[str]]:
+    """The sample models that exist, and the names of those that do not (yet)."""
+    found, missing = [], []
+    for name in DEFAULT_MODELS:
+        f = SAMPLE_DIR / f"{name}.glb"
+        (found if f.is_file() else missing).append(f if f.is_file() else name)
+    return found, missing
+
+
+def options_key(options) -> str:
+    """First 10 hex digits of a hash of the solve options (names a cached solution)."""
+    d = json.dumps(asdict(options), sort_keys=True, default=str)
+    return hashlib.sha256(d.encode()).hexdigest()[:10]
+
+
+def cached_solve(model: str | Path, options=None, cache_dir: str | Path = DEFAULT_CACHE, progress=None):
+    """``(scene, solution, info)`` for a model, the solution read from or written to the cache.
+
+    options : SolveOptions (None: defaults). The cached file
+    ``cache_dir/<stem>-<options_key>.npz`` is used when it is newer than the model
+    file and was solved with the same options; otherwise the model is solved again.
+    info : ``{"load_s", "solve_s", "cached", "cache_file"}``; ``solve_s`` is the time the
+    solve took when it ran (read from the solution's stats when cached).
+    """
+    from .radiosity import SolveOptions, Solution, solve
+    from .scene import load_scene
+
+    options = SolveOptions() if options is None else options
+    model = Path(model)
+    t0 = time.perf_counter()
+    scene = load_scene(model, max_edge=options.max_edge)
+    load_s = time.perf_counter() - t0
+    cache = Path(cache_dir) / f"{model.stem}-{options_key(options)}.npz"
+    sol = None
+    if cache.is_file() and cache.stat().st_mtime >= model.stat().st_mtime:
+        try:
+            sol = Solution.load(cache)
+        except Exception as e:  # a damaged or old cache file: solve again
+            log.info("cache %s not used: %s", cache, e)
+            sol = None
+        if sol is not None and (
+            json.loads(json.dumps(sol.options, default=str))
+            != json.loads(json.dumps(asdict(options), default=str))
+            or len(sol.patch_is_quad) != scene.n_patches
+        ):
+            sol = None
+    cached = sol is not None
+    if sol is None:
+        t0 = time.perf_counter()
+        sol = solve(scene, options, progress=progress)
+        solve_s = time.perf_counter() - t0
+        sol.model_path = str(model.resolve())
+        sol.stats = {**sol.stats, "wall_s": solve_s}
+        sol.save(cache)
+    solve_s = float(sol.stats.get("wall_s", sol.stats.get("time_s", float("nan"))))
+    return scene, sol, {"load_s": load_s, "solve_s": solve_s, "cached": cached, "cache_file": str(cache)}
+
+
+# -- camera paths ------------------------------------------------------------------------------
+def path_poses(scene) -> list[Camera]:
+    """The model's walkthrough: ``camera_paths["default"]`` (or the first path), else its cameras."""
+    paths = getattr(scene, "camera_paths", {}) or {}
+    poses = paths.get("default") or (next(iter(paths.values())) if paths else None)
+    if poses:
+        return list(poses)
+    return list(scene.cameras) or [scene.default_camera()]
+
+
+def interpolate_path(poses: list[Camera], frames: int) -> list[Camera]:
+    """``frames`` cameras evenly along the open polyline of ``poses`` (eye, target, up, fov linear).
+
+    The first frame is the first pose, the last frame the last pose; a single pose repeats.
+    """
+    frames = int(frames)
+    if frames < 1:
+        raise ValueError("frames must be >= 1")
+    k = len(poses)
+    if k == 0:
+        raise ValueError("a camera path needs at least one pose")
+    eye = np.array([p.eye for p in poses])
+    tgt = np.array([p.target for p in poses])
+    up = np.array([p.up for p in poses])
+    fov = np.array([p.yfov for p in poses], dtype=np.float64)
+    t = np.linspace(0.0, k - 1.0, frames) if frames > 1 else np.zeros(1)
+    i0 = np.minimum(np.floor(t).astype(int), k - 1)
+    i1 = np.minimum(i0 + 1, k - 1)
+    w = (t - i0)[:, None]
+    out = []
+    for f in range(frames):
+        a, b, s = i0[f], i1[f], float(w[f, 0])
+        u = (1 - s) * up[a] + s * up[b]
+        if np.linalg.norm(u) < 1e-9:
+            u = up[a]
+        out.append(
+            Camera(
+                eye=(1 - s) * eye[a] + s * eye[b],
+                target=(1 - s) * tgt[a] + s * tgt[b],
+                up=u,
+                yfov=float((1 - s) * fov[a] + s * fov[b]),
+                znear=min(poses[a].znear, poses[b].znear),
+                zfar=max(poses[a].zfar, poses[b].zfar),
+                name=f"frame {f}",
+            )
+        )
+    return out
+
+
+def pick(items: list, n: int) -> list:
+    """``n`` items evenly spread over ``items`` (all when there are fewer)."""
+    if n >= len(items):
+        return list(items)
+    idx = np.unique(np.round(np.linspace(0, len(items) - 1, max(n, 1))).astype(int))
+    return [items[i] for i in idx]
+
+
+# -- measurements ------------------------------------------------------------------------------
+class FrameTimer:
+    """Times whole frames of a :class:`~iat.render.Renderer` into its own offscreen RGBA8 target."""
+
+    def __init__(self, renderer, size: tuple[int, int]):
+        self.r = renderer
+        self.size = (int(size[0]), int(size[1]))
+        ctx = renderer.ctx
+        self._prev = ctx.fbo
+        self._color = ctx.renderbuffer(self.size, 4)
+        self._depth = ctx.depth_renderbuffer(self.size)
+        self.fbo = ctx.framebuffer(color_attachments=[self._color], depth_attachment=self._depth)
+
+    def run(self, cameras: list[Camera], mode: str) -> float:
+        """Draw every camera once in ``mode``, ``ctx.finish()`` after each; returns wall seconds."""
+        ctx = self.r.ctx
+        w, h = self.size
+        t0 = time.perf_counter()
+        for cam in cameras:
+            self.r.draw(cam, mode, viewport=(0, 0, w, h), target=self.fbo, tonemap=True)
+            ctx.finish()
+        return time.perf_counter() - t0
+
+    def release(self) -> None:
+        if self._prev is not None:
+            try:
+                self._prev.use()
+            except Exception:  # pragma: no cover - a released default framebuffer
+                pass
+        for o in (self.fbo, self._color, self._depth):
+            o.release()
+
+
+def frame_rates(
+    renderer, cameras: list[Camera], size: tuple[int, int], modes=("mesh", "iat"), repeats: int = 2, warmup: int = 2
+) -> dict:
+    """Frames per second per mode: ``len(cameras) / best round time``, rounds interleaved across modes.
+
+    Returns ``{mode: {"fps", "frame_ms", "rounds_s": [...]}}``.
+    """
+    timer = FrameTimer(renderer, size)
+    try:
+        for m in modes:  # first frames pay for shader variants and texture residency
+            timer.run(cameras[: max(1, warmup)], m)
+        rounds: dict[str, list[float]] = {m: [] for m in modes}
+        for _ in range(max(1, int(repeats))):
+            for m in modes:
+                rounds[m].append(timer.run(cameras, m))
+    finally:
+        timer.release()
+    out = {}
+    for m in modes:
+        best = min(rounds[m])
+        out[m] = {
+            "fps": len(cameras) / best if best > 0 else float("inf"),
+            "frame_ms": 1000.0 * best / len(cameras),
+            "rounds_s": rounds[m],
+        }
+    return out
+
+
+def image_errors(renderer, cameras: list[Camera], size: tuple[int, int], with_flip: bool = True) -> dict:
+    """IAT against mesh, same solution, over ``cameras``: PSNR, FLIP and relative error.
+
+    Both are rendered as float32 linear radiance. PSNR's peak is the frame's
+    display white: the radiance that the automatic exposure of the mesh frame
+    (:func:`iat.imageio.auto_exposure`) maps to 1, so a bright emitter in view
+    does not inflate it. FLIP compares the two tone-mapped with that exposure.
+    The relative error is over the lit pixels of the mesh frame.
+    Returns ``{"frames", "psnr_db" (over all frames' pixels), "psnr_db_min" (worst frame),
+    "flip_mean", "flip_max", "rel_error_lit"}``.
+    """
+    from .imageio import auto_exposure
+    from .metrics import flip, lit_mask, relative_error
+
+    sq, n, psnrs, flips, rels = 0.0, 0, [], [], []
+    for cam in cameras:
+        ref = renderer.render(cam, size=size, mode="mesh")
+        img = renderer.render(cam, size=size, mode="iat")
+        e = auto_exposure(ref)
+        peak = 1.0 / e
+        mse = float(np.mean((img.astype(np.float64) - ref) ** 2))
+        sq += mse / (peak * peak)
+        n += 1
+        psnrs.append(_psnr_from(mse / (peak * peak)))
+        if with_flip:
+            flips.append(flip(img, ref, exposure=e))
+        m = lit_mask(ref)
+        if m.any():
+            rels.append(relative_error(img, ref, mask=m))
+    return {
+        "frames": n,
+        "psnr_db": _psnr_from(sq / max(n, 1)),
+        "psnr_db_min": min(psnrs) if psnrs else None,
+        "flip_mean": float(np.mean(flips)) if flips else None,
+        "flip_max": float(np.max(flips)) if flips else None,
+        "rel_error_lit": float(np.mean(rels)) if rels else None,
+    }
+
+
+#: PSNR reported for identical images (JSON has no infinity)
+PSNR_IDENTICAL = 200.0
+
+
+def _psnr_from(normalised_mse: float) -> float:
+    if normalised_mse <= 0.0:
+        return PSNR_IDENTICAL
+    return min(PSNR_IDENTICAL, float(-10.0 * math.log10(normalised_mse)))
+
+
+def seam_errors(baked, solution=None, scene=None) -> dict | None:
+    """The baker's seam error of ``baked`` (see :func:`iat.bake.seam_error`), as a dict; None when absent."""
+    try:
+        from .bake import seam_error
+    except ImportError:
+        return None
+    import inspect
+
+    params = inspect.signature(seam_error).parameters
+    kw = {}
+    if "solution" in params:
+        kw["solution"] = solution
+    if "scene" in params:
+        kw["scene"] = scene
+    res = seam_error(baked, **kw)
+    if hasattr(res, "to_dict"):
+        res = res.to_dict()
+    elif isinstance(res, tuple):
+        res = {"max": float(res[0]), "mean": float(res[1])}
+    elif not isinstance(res, dict):
+        res = {"value": float(res)}
+    return _jsonable(res)
+
+
+def _jsonable(o):
+    if isinstance(o, dict):
+        return {str(k): _jsonable(v) for k, v in o.items()}
+    if isinstance(o, list | tuple):
+        return [_jsonable(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return _jsonable(o.tolist())
+    if isinstance(o, np.generic):
+        o = o.item()
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    if isinstance(o, Path):
+        return str(o)
+    return o
+
+
+def _policy_dict(policy) -> dict:
+    try:
+        return asdict(policy)
+    except TypeError:
+        return dict(vars(policy))
+
+
+def _memory(baked) -> dict:
+    mem = baked.memory
+    return mem.to_dict() if hasattr(mem, "to_dict") else dict(vars(mem))
+
+
+def _texture_bytes(mem: dict) -> int:
+    for k in ("texture_bytes", "gpu_texture_bytes", "texture"):
+        if k in mem:
+            return int(mem[k])
+    if "texture_mb" in mem:
+        return int(round(float(mem["texture_mb"]) * 2**20))
+    raise KeyError(f"memory report has no texture bytes: {sorted(mem)}")
+
+
+def _rebake_policy(policy):
+    """A policy one slider step away (threshold + 1), to time a re-bake."""
+    from dataclasses import replace
+
+    return replace(policy, threshold=int(policy.threshold) + 1)
+
+
+def bench_model(
+    model: str | Path,
+    frames: int = 60,
+    size: tuple[int, int] = (640, 480),
+    tiny_size: tuple[int, int] | None = TINY_SIZE,
+    solve_options=None,
+    policy=None,
+    cache_dir: str | Path = DEFAULT_CACHE,
+    error_frames: int = 8,
+    repeats: int = 2,
+    with_flip: bool = True,
+    error_size: tuple[int, int] | None = None,
+    progress: Progress | None = None,
+) -> dict:
+    """One model's row of the benchmark (see :func:`run_bench` for the fields)."""
+    from .bake import Baker, BakePolicy
+    from .render import Renderer
+
+    def step(frac: float, msg: str) -> None:
+        if progress is not None:
+            progress(frac, msg)
+
+    model = resolve_model(model)
+    policy = BakePolicy() if policy is None else policy
+
+    def solve_progress(f, m):
+        if progress is not None:
+            return progress(0.3 * f, f"solve: {m}")
+        return True
+
+    step(0.0, "load + solve")
+    scene, sol, sinfo = cached_solve(model, solve_options, cache_dir, progress=solve_progress)
+    step(0.3, "bake")
+    baker = Baker(sol, scene)
+    t0 = time.perf_counter()
+    baked = baker.bake(policy)
+    bake_s = time.perf_counter() - t0
+    # a slider step: the threshold one up (pages re-blitted from cached tiles), and back (cached pages)
+    other = _rebake_policy(policy)
+    t0 = time.perf_counter()
+    baker.bake(other)
+    rebake_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    baked = baker.bake(policy)
+    rebake_cached_s = time.perf_counter() - t0
+    mem = _memory(baked)
+    seam = seam_errors(baked, sol, scene)
+
+    step(0.4, "upload")
+    poses = path_poses(scene)
+    cams = interpolate_path(poses, frames)
+    r = Renderer()
+    try:
+        gl_renderer = str(r.ctx.info.get("GL_RENDERER", ""))
+        r.ctx.finish()
+        t0 = time.perf_counter()
+        r.set_solution(sol)
+        r.ctx.finish()
+        up_mesh = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        r.set_baked(baked)
+        r.ctx.finish()
+        up_iat = time.perf_counter() - t0
+
+        counts = {}
+        for m in ("mesh", "iat"):
+            r.render(cams[0], size=(8, 6), mode=m)
+            st = r.stats()
+            counts[m] = (int(st["triangles"]), int(st["draw_calls"]))
+
+        step(0.45, f"frames {size[0]}x{size[1]}")
+        rates = {_size_key(size): frame_rates(r, cams, size, repeats=repeats)}
+        if tiny_size is not None and tuple(tiny_size) != tuple(size):
+            step(0.65, f"frames {tiny_size[0]}x{tiny_size[1]}")
+            rates[_size_key(tiny_size)] = frame_rates(r, cams, tiny_size, repeats=repeats)
+        step(0.75, "image error")
+        esize = tuple(size) if error_size is None else tuple(error_size)
+        err = image_errors(r, pick(cams, error_frames), esize, with_flip=with_flip)
+    finally:
+        r.release()
+    step(1.0, "done")
+
+    tri_mesh = int(len(sol.tri_vertices))
+    tri_iat = int(len(baked.mesh_indices) + len(baked.tex_indices))
+    textured = np.asarray(baked.patch_textured, dtype=bool)
+    row = {
+        "model": model.stem,
+        "file": str(model),
+        "patches": int(scene.n_patches),
+        "path_poses": len(poses),
+        "triangles_mesh": tri_mesh,
+        "triangles_iat": tri_iat,
+        "triangles_drawn_mesh": counts["mesh"][0],
+        "triangles_drawn_iat": counts["iat"][0],
+        "textured_patches": int(textured.sum()),
+        "draw_calls_mesh": counts["mesh"][1],
+        "draw_calls_iat": counts["iat"][1],
+        "texture_mb": _texture_bytes(mem) / 2**20,
+        "memory": mem,
+        "frame_rate": {
+            k: {m: v[m]["fps"] for m in v} | {f"{m}_frame_ms": v[m]["frame_ms"] for m in v}
+            for k, v in rates.items()
+        },
+        "error": err,
+        "psnr_db": err["psnr_db"],
+        "flip": err["flip_mean"],
+        "seam_error": seam,
+        "solve_s": sinfo["solve_s"],
+        "solve_cached": sinfo["cached"],
+        "solve_stats": {k: v for k, v in sol.stats.items() if k != "options"},
+        "bake_s": bake_s,
+        "rebake_s": rebake_s,
+        "rebake_cached_s": rebake_cached_s,
+        "load_s": {"scene": sinfo["load_s"], "upload_mesh": up_mesh, "upload_iat": up_iat},
+        "policy": _policy_dict(baked.policy if getattr(baked, "policy", None) is not None else policy),
+        "bake_timings": dict(getattr(baked, "timings", {}) or {}),
+        "gl_renderer": gl_renderer,
+        "report": _report_row(model.stem),
+    }
+    return _jsonable(row)
+
+
+def _size_key(size) -> str:
+    return f"{int(size[0])}x{int(size[1])}"
+
+
+def _report_row(stem: str) -> dict | None:
+    name = _REPORT_BY_MODEL.get(stem)
+    if name is None:
+        return None
+    _, tm, fm, ti, fi, mb = REPORT_FIGURE3[name]
+    return {
+        "name": name,
+        "triangles_mesh": tm,
+        "fps_mesh": fm,
+        "triangles_iat": ti,
+        "fps_iat": fi,
+        "texture_mb": mb,
+    }
+
+
+def machine_info(gl_renderer: str = "") -> dict:
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        cores = os.cpu_count()
+    return {
+        "cpu_cores": cores,
+        "cpu": platform.processor() or platform.machine(),
+        "platform": platform.platform(),
+        "python": platform.python_version(),
+        "gl_renderer": gl_renderer,
+        "lp_num_threads": os.environ.get("LP_NUM_THREADS"),
+    }
+
+
+def run_bench(
+    models=(),
+    frames: int = 60,
+    size: tuple[int, int] = (640, 480),
+    tiny_size: tuple[int, int] | None = TINY_SIZE,
+    solve_options=None,
+    policy=None,
+    cache_dir: str | Path = DEFAULT_CACHE,
+    error_frames: int = 8,
+    repeats: int = 2,
+    with_flip: bool = True,
+    error_size: tuple[int, int] | None = None,
+    progress: Progress | None = None,
+) -> dict:
+    """The benchmark of ``models`` (names or paths; empty: every sample model that exists).
+
+    frames : frames drawn per round over the camera path (interpolated to that many poses)
+    size, tiny_size : (w, h) of the fill-bound and of the triangle-bound measurement
+    solve_options : :class:`iat.radiosity.SolveOptions` (None: defaults); policy : BakePolicy
+    (None: the default policy); error_frames : path frames compared mesh vs IAT, at
+    ``error_size`` (None: ``size``; at a tiny size the mip-mapped IAT image is filtered
+    where the mesh aliases, so the comparison says little there).
+    progress : ``progress(fraction, message)`` over the whole run.
+
+    Returns ``{"schema", "settings", "machine", "models": [row, ...], "skipped", "report_figure3"}``;
+    a row holds ``model, file, patches, triangles_mesh, triangles_iat, draw_calls_mesh,
+    draw_calls_iat, texture_mb, memory, frame_rate: {"WxH": {mesh, iat, mesh_frame_ms,
+    iat_frame_ms}}, psnr_db, flip, error: {...}, seam_error, solve_s, solve_cached, bake_s,
+    rebake_s, load_s: {scene, upload_mesh, upload_iat}, policy, report`` (the report's
+    Figure 3 numbers for the matching model, or None).
+    """
+    from .bake import BakePolicy
+    from .radiosity import SolveOptions
+
+    solve_options = SolveOptions() if solve_options is None else solve_options
+    policy = BakePolicy() if policy is None else policy
+    skipped: list[str] = []
+    if models:
+        paths = [resolve_model(m) for m in models]
+    else:
+        paths, skipped = default_models()
+    rows = []
+    n = max(len(paths), 1)
+    for k, p in enumerate(paths):
+
+        def sub(f, m, k=k, p=p):
+            if progress is not None:
+                return progress((k + f) / n, f"{Path(p).stem}: {m}")
+            return True
+
+        rows.append(
+            bench_model(
+                p,
+                frames=frames,
+                size=size,
+                tiny_size=tiny_size,
+                solve_options=solve_options,
+                policy=policy,
+                cache_dir=cache_dir,
+                error_frames=error_frames,
+                repeats=repeats,
+                with_flip=with_flip,
+                error_size=error_size,
+                progress=sub,
+            )
+        )
+    gl = rows[0]["gl_renderer"] if rows else ""
+    return _jsonable(
+        {
+            "schema": SCHEMA_VERSION,
+            "settings": {
+                "frames": int(frames),
+                "size": [int(size[0]), int(size[1])],
+                "tiny_size": None if tiny_size is None else [int(tiny_size[0]), int(tiny_size[1])],
+                "error_frames": int(error_frames),
+                "error_size": list(size if error_size is None else error_size),
+                "repeats": int(repeats),
+                "solve_options": asdict(solve_options),
+                "policy": _policy_dict(policy),
+                "cache_dir": str(cache_dir),
+            },
+            "machine": machine_info(gl),
+            "models": rows,
+            "skipped": skipped,
+            "report_figure3": {
+                k: dict(zip(("model", "triangles_mesh", "fps_mesh", "triangles_iat", "fps_iat", "texture_mb"), v))
+                for k, v in REPORT_FIGURE3.items()
+            },
+        }
+    )
+
+
+# -- output ------------------------------------------------------------------------------------
+def _f(v, fmt: str = ".1f", none: str = "–") -> str:
+    if v is None:
+        return none
+    if isinstance(v, float) and not math.isfinite(v):
+        return none
+    return format(v, fmt)
+
+
+def format_table(result: dict) -> str:
+    """Markdown: Figure 3 (ours beside the report's), then the columns beyond it."""
+    st = result["settings"]
+    big = f"{st['size'][0]}x{st['size'][1]}"
+    tiny = f"{st['tiny_size'][0]}x{st['tiny_size'][1]}" if st.get("tiny_size") else None
+    lines = [
+        f"Figure 3, ours: {st['frames']} frames over each model's camera path; "
+        f"{result['machine']['gl_renderer'] or 'OpenGL'}, {result['machine']['cpu_cores']} cores. "
+        f"Policy: {_policy_brief(st['policy'])}.",
+        "",
+    ]
+    head = ["name", "triangles", f"fps {big}"] + ([f"fps {tiny}"] if tiny else [])
+    head += ["texture MB", "draw calls", "report: name", "triangles", "fps", "texture MB"]
+    lines += ["| " + " | ".join(head) + " |", "|" + "|".join(["---"] * len(head)) + "|"]
+    for row in result["models"]:
+        rep = row.get("report")
+        for kind in ("mesh", "iat"):
+            label = "polygon" if kind == "mesh" else "IAT"
+            cells = [
+                f"{row['model']} ({label})",
+                f"{row[f'triangles_{kind}']:,}",
+                _f(row["frame_rate"][big][kind]),
+            ]
+            if tiny:
+                cells.append(_f(row["frame_rate"].get(tiny, {}).get(kind)))
+            cells += [
+                "-" if kind == "mesh" else _f(row["texture_mb"], ".2f"),
+                str(row[f"draw_calls_{kind}"]),
+            ]
+            if rep:
+                cells += [
+                    f"{rep['name']} ({label})",
+                    f"{rep[f'triangles_{kind}']:,}",
+                    _f(rep[f"fps_{kind}"]),
+                    "-" if kind == "mesh" else _f(rep["texture_mb"], ".2f"),
+                ]
+            else:
+                cells += ["", "", "", ""]
+            lines.append("| " + " | ".join(cells) + " |")
+    shown = {row["report"]["name"] for row in result["models"] if row.get("report")}
+    rest = [k for k in REPORT_FIGURE3 if k not in shown]
+    if rest:
+        lines += ["", "The report's Figure 3 (SGI Onyx Reality Engine 2, Performer), models not run here:", ""]
+        lines += ["| name | triangles | fps | texture MB |", "|---|---|---|---|"]
+        for k in rest:
+            _, tm, fm, ti, fi, mb = REPORT_FIGURE3[k]
+            lines.append(f"| {k} (polygon) | {tm:,} | {fm:.1f} | - |")
+            lines.append(f"| {k} (IAT) | {ti:,} | {fi:.1f} | {mb:.2f} |")
+    lines += [
+        "",
+        "Beyond Figure 3 (IAT against the mesh of the same solution; times in seconds):",
+        "",
+    ]
+    head2 = [
+        "model",
+        "IAT/mesh triangles",
+        f"speed-up {big}",
+    ]
+    head2 += [f"speed-up {tiny}"] if tiny else []
+    head2 += ["PSNR dB (worst)", "FLIP (max)", "seam max", "solve", "bake", "re-bake", "load scene", "upload mesh", "upload IAT"]
+    lines += ["| " + " | ".join(head2) + " |", "|" + "|".join(["---"] * len(head2)) + "|"]
+    for row in result["models"]:
+        fr = row["frame_rate"]
+        e = row["error"]
+        seam = row.get("seam_error") or {}
+        cells = [
+            row["model"],
+            _f(row["triangles_iat"] / max(row["triangles_mesh"], 1), ".3f"),
+            _f(_ratio(fr[big]["iat"], fr[big]["mesh"]), ".2f") + "x",
+        ]
+        if tiny:
+            cells.append(_f(_ratio(fr.get(tiny, {}).get("iat"), fr.get(tiny, {}).get("mesh")), ".2f") + "x")
+        cells += [
+            f"{_f(e['psnr_db'])} ({_f(e['psnr_db_min'])})",
+            f"{_f(e['flip_mean'], '.4f')} ({_f(e['flip_max'], '.4f')})",
+            _f(_seam_value(seam), ".3g"),
+            _f(row["solve_s"], ".2f") + (" (cached)" if row["solve_cached"] else ""),
+            _f(row["bake_s"], ".3f"),
+            _f(row["rebake_s"], ".3f"),
+            _f(row["load_s"]["scene"], ".3f"),
+            _f(row["load_s"]["upload_mesh"], ".3f"),
+            _f(row["load_s"]["upload_iat"], ".3f"),
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    if result.get("skipped"):
+        lines += ["", f"Not benchmarked (no model file yet): {', '.join(result['skipped'])}."]
+    return "\n".join(lines) + "\n"
+
+
+def _ratio(a, b):
+    if a is None or b is None or not b:
+        return None
+    return a / b
+
+
+def _seam_value(seam: dict):
+    for k in ("max", "max_abs", "seam_max", "value", "mean"):
+        if k in seam and isinstance(seam[k], int | float):
+            return seam[k]
+    return None
+
+
+def _policy_brief(p: dict) -> str:
+    keys = ("threshold", "scale", "method", "budget_mb", "pixel_format", "mipmaps")
+    return ", ".join(f"{k}={p[k]}" for k in keys if k in p)
+
+
+# -- CLI ---------------------------------------------------------------------------------------
+def main(args) -> int:
+    """``iat bench [MODEL…] [--json] [--frames N] [--size WxH]``: Markdown on stdout, or JSON."""
+    import sys
+
+    from .cli import ProgressBar, _parse_size
+    from .errors import OptionError
+
+    size = _parse_size(getattr(args, "size", "640x480") or "640x480")
+    frames = int(getattr(args, "frames", 60) or 60)
+    if frames < 1:
+        raise OptionError(f"--frames must be >= 1, got {frames}")
+    bar = ProgressBar("bench")
+    try:
+        result = run_bench(list(getattr(args, "models", []) or []), frames=frames, size=size, progress=bar)
+    finally:
+        bar.close()
+    if getattr(args, "json", False):
+        print(json.dumps(result, indent=2))
+    else:
+        sys.stdout.write(format_table(result))
+    return 0

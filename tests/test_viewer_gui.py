@@ -1,0 +1,206 @@
+"""The viewer end to end: the real app driven by imgui-bundle's test engine (needs a display).
+
+``make test`` runs the suite under ``xvfb-run``; without a DISPLAY these tests skip.
+One app run does everything (starting a window costs seconds): open the Cornell
+box (solved at max_depth 4 into a temporary cache), drag the threshold slider
+and see triangles and texture memory change, switch the modes and compare the
+3D view's pixels, drag the split divider, turn the budget on, then open a broken
+file and see the error while the app keeps rendering the last good model.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+HAS_DISPLAY = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+needs_display = pytest.mark.skipif(not HAS_DISPLAY, reason="no DISPLAY: run under xvfb-run (make test does)")
+
+# Tolerances, in 8-bit sRGB levels over the 3D view (about 700 x 780 pixels at 1280 x 800):
+# mesh (Gouraud on the leaf triangles) and IAT (bilinear texels at the lattice points) agree at
+# every mesh vertex but interpolate differently inside the elements, so they differ by a few levels
+# in places; a wrong texture placement or a missing patch gives tens of levels over large areas.
+MESH_IAT_MEAN = 2.0  # mean |mesh - IAT|; measured about 0.5
+MESH_IAT_P99 = 16.0  # 99th percentile; measured about 7
+DIFF_MEAN = 6.0  # mean level of the difference view at gain 1 (black is 0)
+SPLIT_EXACT = 1.0  # each side of the split equals the single-mode image there
+
+
+def wait_until(ctx, cond, seconds: float, what: str) -> None:
+    end = time.monotonic() + seconds
+    while not cond():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out after {seconds} s waiting for {what}")
+        ctx.yield_()
+
+
+@pytest.mark.gui
+@needs_display
+def test_viewer_end_to_end(tmp_path, monkeypatch):
+    from imgui_bundle import ImVec2, imgui
+    from imgui_bundle.immapp import testing
+
+    from iat.radiosity import SolveOptions
+    from viewer.app import ViewerApp
+    from viewer.state import default_model
+
+    monkeypatch.setenv("IAT_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("IAT_SCREENSHOT_DIR", str(tmp_path / "shots"))
+    broken = tmp_path / "broken.glb"
+    broken.write_bytes(b"glTF\x02\x00\x00\x00 this is not a model")
+
+    app = ViewerApp(default_model(), size=(1280, 800), solve_options=SolveOptions(max_depth=4), idle=False)
+    s = app.state
+    s.tuning.threshold = 0  # texture every patch: the IAT image is then all texture
+    s.diff_gain = 1.0
+    got: dict = {}
+    images: dict[str, np.ndarray] = {}
+
+    def settle(ctx, frames=3):
+        wait_until(ctx, lambda: not s.rebaking and not s.opening, 30, "the re-bake")
+        ctx.yield_(frames)
+
+    def shot(ctx, mode: str) -> None:
+        """F12 in ``mode``: the app writes the 3D view; keep its pixels."""
+        s.last_screenshot = ""
+        ctx.key_press(imgui.Key.f12)
+        wait_until(ctx, lambda: s.last_screenshot, 10, f"the {mode} screenshot")
+        from PIL import Image
+
+        got.setdefault("shots", []).append(s.last_screenshot)
+        images[mode] = np.asarray(Image.open(s.last_screenshot).convert("RGB")).astype(np.int16)
+        testing.capture(ctx, str(tmp_path / f"window-{mode}.png"))
+
+    def drive(ctx) -> None:
+        wait_until(ctx, lambda: s.baked is not None and s.solution is not None, 120, "the Cornell box")
+        settle(ctx)
+        got["deepest"] = s.deepest
+        got["t0"] = (s.baked.policy.threshold, s.iat_triangles, s.memory["texture_bytes"], s.memory["patches_textured"])
+
+        # the threshold slider, through the real widget: all mesh, then back to all texture
+        ctx.item_input_value("//**/Threshold", s.deepest + 1)
+        settle(ctx)
+        got["t_top"] = (s.baked.policy.threshold, s.iat_triangles, s.memory["texture_bytes"], s.memory["patches_textured"])
+        ctx.item_input_value("//**/Threshold", 0)
+        settle(ctx)
+        got["t_back"] = (s.baked.policy.threshold, s.iat_triangles, s.memory["texture_bytes"])
+
+        # modes, by their radio buttons, each with an F12 screenshot
+        for label, mode in (("Mesh", "mesh"), ("IAT", "iat"), ("Split", "split"), ("Difference", "diff")):
+            ctx.item_click(f"//**/{label}")
+            ctx.yield_(2)
+            got.setdefault("modes", []).append((s.mode, app.shown_mode()))
+            shot(ctx, mode)
+        got["split_at"] = s.split
+
+        # drag the split divider in the view from the middle to 25 %
+        ctx.item_click("//**/Split")
+        ctx.yield_(2)
+        x, y, w, h = s.view_rect
+        ctx.mouse_move_to_pos(ImVec2(x + 0.5 * w, y + 0.5 * h))
+        ctx.mouse_down(0)
+        ctx.mouse_move_to_pos(ImVec2(x + 0.25 * w, y + 0.5 * h))
+        ctx.yield_(2)
+        ctx.mouse_up(0)
+        got["split_dragged"] = s.split
+        # a drag elsewhere in the view looks around
+        before = s.camera.forward.copy()
+        ctx.mouse_move_to_pos(ImVec2(x + 0.7 * w, y + 0.5 * h))
+        ctx.mouse_down(0)
+        ctx.mouse_move_to_pos(ImVec2(x + 0.8 * w, y + 0.55 * h))
+        ctx.yield_(2)
+        ctx.mouse_up(0)
+        got["look_turned"] = float(np.degrees(np.arccos(np.clip(before @ s.camera.forward, -1, 1))))
+        ctx.item_click("//**/Reset view")
+        ctx.item_click("//**/IAT")
+
+        # a texture budget smaller than any texture: everything becomes mesh
+        ctx.item_click("//**/Budget")
+        ctx.item_input_value("//**/Budget (MB)", 0.01)
+        settle(ctx)
+        m = s.memory
+        got["budget"] = (s.tuning.budget_on, m["budget_mb"], m["texture_bytes"], m["budget_too_small"], s.iat_triangles)
+        ctx.item_click("//**/Budget")
+        settle(ctx)
+        got["budget_off"] = s.memory["texture_bytes"]
+
+        # a broken file: typed into the File panel and opened
+        ctx.item_click("//**/File")
+        ctx.item_input_value("//**/Model or solution", str(broken))
+        ctx.item_click("//**/Open")
+        wait_until(ctx, lambda: bool(s.error), 30, "the error")
+        got["error"] = s.error
+        drawn = app.frames_drawn
+        ctx.yield_(5)
+        got["drawn_after_error"] = app.frames_drawn - drawn
+        got["model_after_error"] = s.model_path
+        got["error_window"] = ctx.item_exists("//Error/Dismiss")
+        testing.capture(ctx, str(tmp_path / "window-error.png"))
+        shot(ctx, "after-error")
+        ctx.item_click("//Error/Dismiss")
+        ctx.yield_(2)
+        got["error_cleared"] = s.error
+
+    t0 = time.monotonic()
+    testing.run(test_function=drive, runner_params=app.runner_params(), add_ons_params=app.addons())
+    got["seconds"] = time.monotonic() - t0
+
+    deepest = got["deepest"]
+    mesh_tris = s.mesh_triangles
+    # threshold 0: every patch is one textured polygon, few triangles, texture memory used
+    thr, tris, tex, textured = got["t0"]
+    assert thr == 0 and textured == s.solution.patch_is_quad.size
+    assert tris < 100 < mesh_tris and tex > 0
+    # above the deepest tree: all mesh, no texture memory, the mesh's triangles
+    thr, tris, tex, textured = got["t_top"]
+    assert thr == deepest + 1 and textured == 0
+    assert tris == mesh_tris and tex == 0
+    assert got["t_back"] == got["t0"][:3]
+
+    assert got["modes"] == [("mesh", "mesh"), ("iat", "iat"), ("split", "split"), ("diff", "diff")]
+    mesh, iat, split, diff = (images[k] for k in ("mesh", "iat", "split", "diff"))
+    assert mesh.shape == iat.shape and mesh.shape[0] > 300 and mesh.shape[1] > 300
+    assert mesh.mean() > 40  # a lit room, not a black frame
+    d = np.abs(mesh - iat)
+    assert d.mean() < MESH_IAT_MEAN, f"mesh vs IAT mean difference {d.mean():.2f}"
+    assert np.percentile(d, 99) < MESH_IAT_P99, f"mesh vs IAT p99 difference {np.percentile(d, 99):.1f}"
+    assert diff.mean() < DIFF_MEAN, f"difference view mean {diff.mean():.2f}"
+    assert diff.mean() < 0.1 * iat.mean()
+    # split: mesh left of the divider, IAT right of it, pixel for pixel
+    sx = int(round(got["split_at"] * split.shape[1]))
+    assert np.abs(split[:, : sx - 1] - mesh[:, : sx - 1]).max() <= SPLIT_EXACT
+    assert np.abs(split[:, sx + 1 :] - iat[:, sx + 1 :]).max() <= SPLIT_EXACT
+    assert got["split_dragged"] == pytest.approx(0.25, abs=0.02)
+    assert got["look_turned"] > 1.0
+    assert all(Path(p).is_file() and Path(p).parent == tmp_path / "shots" for p in got["shots"])
+
+    on, budget_mb, tex, too_small, tris = got["budget"]
+    assert on and budget_mb == pytest.approx(0.01) and tex == 0 and too_small and tris == mesh_tris
+    assert got["budget_off"] > 0
+
+    # the broken file: named in the error, shown in a window; the last good model stays and renders
+    assert "broken.glb" in got["error"]
+    assert got["error_window"]
+    assert got["drawn_after_error"] >= 5
+    assert Path(got["model_after_error"]).name == "cornell_box.glb"
+    after = images["after-error"]
+    assert np.abs(after - iat).mean() < MESH_IAT_MEAN  # still the IAT Cornell box
+    assert got["error_cleared"] == ""
+    assert got["seconds"] < 120
+
+
+def test_no_display_returns_2():
+    """Without a display ``main`` prints one line and returns 2 (the CLI then falls back)."""
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    code = "import sys; from viewer.app import main; sys.exit(main(None, size=(320, 240)))"
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if ln.startswith("iat view")]
+    assert len(lines) == 1 and "cannot open a window" in lines[0]

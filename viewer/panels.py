@@ -1,0 +1,460 @@
+"""The viewer's panels: imgui widgets that read and change :class:`~viewer.state.AppState`.
+
+Panels never call GL and never do long work: they set state fields (tuning
+values, the mode, ``request_*`` fields) and the app acts on them next frame.
+
+Windows (docked by the app around the 3D view): **Tuning** (threshold, scale,
+method, budget, detail textures, exposure), **View** (mode, divider, cameras,
+speed, camera paths), **Stats** (frame rate and frame-time plot, triangles and
+draw calls, texture memory against the budget, atlas utilisation, patches,
+solve and re-bake times, solve progress with ETA and cancel), **File** (open,
+solve options, export, save). Plus the menus, the error window and the overlay
+drawn over the 3D view (split divider, labels).
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+from imgui_bundle import ImVec2, ImVec4, hello_imgui, imgui, implot
+
+from .navigation import paths_file
+from .state import METHODS, MODE_LABELS, MODES, AppState
+
+RED = ImVec4(0.85, 0.2, 0.2, 1.0)
+GREEN = ImVec4(0.3, 0.75, 0.35, 1.0)
+DIM = ImVec4(0.65, 0.65, 0.65, 1.0)
+MB = float(1 << 20)
+MODEL_FILTERS = ["Models and solutions", "*.glb *.gltf *.obj *.ply *.stl *.off *.npz", "All files", "*"]
+
+
+def has_native_dialogs() -> bool:
+    """portable_file_dialogs needs zenity, kdialog, matedialog or qarma on Linux."""
+    import sys
+
+    if sys.platform != "linux":
+        return True
+    return any(shutil.which(t) for t in ("zenity", "kdialog", "matedialog", "qarma"))
+
+
+def _help(text: str) -> None:
+    imgui.same_line()
+    imgui.text_disabled("(?)")
+    imgui.set_item_tooltip(text)
+
+
+def _mb(nbytes: float) -> str:
+    return f"{nbytes / MB:.2f} MB"
+
+
+def _seconds(s: float | None) -> str:
+    if s is None:
+        return "..."
+    return f"{s * 1000:.0f} ms" if s < 1 else f"{s:.1f} s"
+
+
+# -- Tuning -----------------------------------------------------------------------------------------
+def tuning_panel(state: AppState) -> None:
+    t = state.tuning
+    if not state.loaded:
+        imgui.text_disabled("nothing open yet")
+    auto = t.budget_on
+    resolved = state.baked.policy if state.baked is not None else None
+
+    imgui.begin_disabled(auto)
+    top = state.deepest + 1
+    shown = resolved.threshold if (auto and resolved is not None) else t.threshold
+    changed, v = imgui.slider_int("Threshold", int(shown), 0, max(top, 1))
+    if changed and not auto:
+        t.threshold = int(v)
+    _help(
+        "Patches whose tree depth is at least the threshold become one textured polygon;\n"
+        f"the others stay a mesh. 0 textures every patch, {top} keeps all as mesh."
+    )
+    shown = resolved.scale if (auto and resolved is not None) else t.scale
+    changed, v = imgui.slider_float("Scale", float(shown), 0.125, 2.0, "%.3f", imgui.SliderFlags_.logarithmic)
+    if changed and not auto:
+        t.scale = float(v)
+    _help("Texture side factor: below 1 saves memory (blur), above 1 costs memory.")
+    imgui.end_disabled()
+
+    changed, k = imgui.combo("Method", METHODS.index(t.method) if t.method in METHODS else 0, list(METHODS))
+    if changed:
+        t.method = METHODS[k]
+    _help("bilinear: the report's flattening; scan: scan-converted mesh; bicubic: smooth fit.")
+    changed, naive = imgui.checkbox("Naive scaling", t.scale_mode == "naive")
+    if changed:
+        t.scale_mode = "naive" if naive else "clamped"
+    _help("Resize textures as images (the report's correspondence errors) instead of clamped resampling.")
+
+    imgui.separator()
+    changed, t.budget_on = imgui.checkbox("Budget", t.budget_on)
+    _help("When on, threshold and scale are chosen to fit the texture memory budget.")
+    imgui.begin_disabled(not t.budget_on)
+    changed, v = imgui.slider_float("Budget (MB)", float(t.budget_mb), 0.0, 256.0, "%.2f MB",
+                                    imgui.SliderFlags_.logarithmic)
+    if changed:
+        t.budget_mb = max(float(v), 0.0)
+    imgui.end_disabled()
+
+    changed, t.detail = imgui.checkbox("Detail textures", t.detail)
+    _help("Store incoming light where a material has a detail texture; the shader multiplies both.")
+    changed, v = imgui.slider_float("Exposure", float(t.exposure), 0.05, 20.0, "%.2f", imgui.SliderFlags_.logarithmic)
+    if changed:
+        t.exposure = float(v)
+    changed, state.tonemap = imgui.checkbox("sRGB tone map", state.tonemap)
+
+    imgui.separator()
+    if state.rebaking:
+        imgui.text_colored(DIM, "re-baking... (showing the previous bake)")
+    elif resolved is not None:
+        imgui.text_colored(DIM, f"on screen: {state.policy_summary()}")
+
+
+# -- View -------------------------------------------------------------------------------------------
+def view_panel(state: AppState) -> None:
+    for i, m in enumerate(MODES):
+        if i:
+            imgui.same_line()
+        if imgui.radio_button(MODE_LABELS[m], state.mode == m):
+            state.mode = m
+    if state.mode == "split":
+        changed, v = imgui.slider_float("Divider", float(state.split), 0.0, 1.0, "%.2f")
+        if changed:
+            state.split = float(v)
+        imgui.text_colored(DIM, "mesh left, IAT right; drag the line in the view")
+    if state.mode == "diff":
+        changed, v = imgui.slider_float("Diff gain", float(state.diff_gain), 1.0, 256.0, "x%.0f",
+                                        imgui.SliderFlags_.logarithmic)
+        if changed:
+            state.diff_gain = float(v)
+        imgui.text_colored(DIM, "|mesh - IAT| x gain")
+
+    imgui.separator()
+    cams = state.cameras
+    names = [c.name or f"camera {k}" for k, c in enumerate(cams)] or ["(none)"]
+    changed, k = imgui.combo("Camera", min(state.camera_index, len(names) - 1), names)
+    if changed and cams:
+        state.camera_index = k
+        if state.nav is not None:
+            state.nav.reset(cams[k])
+    if imgui.button("Reset view") and state.nav is not None:
+        state.nav.reset()
+    nav = state.nav
+    if nav is not None:
+        imgui.same_line()
+        imgui.text(f"speed {nav.speed * nav.effective_gear:.3g}/s")
+        _help(
+            "WASD / arrows walk and turn, Q/E fall and rise, Shift x4, drag to look, wheel changes speed.\n"
+            "Gamepad: left stick walks and turns, right stick looks, triggers rise and fall,\n"
+            "A changes speed gear, B or Start resets."
+        )
+
+    imgui.separator()
+    imgui.text("Camera paths")
+    names = list(state.paths)
+    if names:
+        cur = names.index(state.path_name) if state.path_name in names else 0
+        changed, k = imgui.combo("Path", cur, names)
+        state.path_name = names[k]
+    else:
+        imgui.text_disabled("no paths yet: record one")
+    if state.recorder is None:
+        if imgui.button("Record"):
+            state.start_recording()
+    else:
+        if imgui.button("Stop recording"):
+            state.stop_recording()
+        imgui.same_line()
+        imgui.text_colored(RED, f"REC {len(state.recorder.cameras)}")
+    imgui.same_line()
+    if state.player is None:
+        imgui.begin_disabled(not names)
+        if imgui.button("Play"):
+            state.start_playback(state.path_name or names[0])
+        imgui.end_disabled()
+    else:
+        if imgui.button("Stop"):
+            state.stop_playback()
+        imgui.same_line()
+        p = state.player
+        imgui.text(f"{p.index}/{p.frames}" if state.playback_frames else f"{p.index} frames")
+    changed, v = imgui.input_int("Frames", int(state.playback_frames))
+    if changed:
+        state.playback_frames = max(int(v), 0)
+    _help("0 plays the path in real time; N plays exactly N frames (benchmark).")
+    imgui.begin_disabled(not state.model_path or not state.paths)
+    if imgui.button("Save paths"):
+        state.request_save_paths = True
+    imgui.end_disabled()
+    if state.model_path:
+        imgui.same_line()
+        imgui.text_colored(DIM, paths_file(state.model_path).name)
+    imgui.text_colored(DIM, "F12: screenshot")
+
+
+# -- Stats ------------------------------------------------------------------------------------------
+def _bar(fraction: float, text: str, color: ImVec4 | None = None) -> None:
+    if color is not None:
+        imgui.push_style_color(imgui.Col_.plot_histogram, color)
+    imgui.progress_bar(float(min(max(fraction, 0.0), 1.0)), ImVec2(-1, 0), text)
+    if color is not None:
+        imgui.pop_style_color()
+
+
+def stats_panel(state: AppState) -> None:
+    h = state.frame_history()
+    recent = h[-60:]
+    mean = float(recent.mean()) if recent.size else 0.0
+    imgui.text(f"{state.fps:5.1f} fps   {mean:5.1f} ms/frame   max {float(recent.max()) if recent.size else 0:5.1f} ms")
+    if h.size and implot.begin_plot("##frametimes", ImVec2(-1, hello_imgui.em_size(7.0)),
+                                    implot.Flags_.no_legend | implot.Flags_.no_mouse_text):
+        implot.setup_axes("", "ms", implot.AxisFlags_.no_tick_labels, 0)
+        top = max(50.0, float(h.max()) * 1.1)
+        implot.setup_axes_limits(0, max(len(h) - 1, 1), 0, top, implot.Cond_.always)
+        xs = np.arange(len(h), dtype=np.float32)
+        implot.plot_line("frame ms", xs, h.astype(np.float32))
+        limit = implot.Spec(line_color=RED, flags=int(implot.InfLinesFlags_.horizontal))
+        implot.plot_inf_lines("50 ms", np.array([50.0], np.float32), limit)
+        implot.end_plot()
+
+    mem = state.memory
+    if imgui.begin_table("counts", 3, imgui.TableFlags_.borders_inner_h | imgui.TableFlags_.sizing_stretch_prop):
+        imgui.table_setup_column("")
+        imgui.table_setup_column("triangles")
+        imgui.table_setup_column("draw calls")
+        imgui.table_headers_row()
+        rows = [("Mesh", state.mesh_triangles, 1 if state.loaded else 0)]
+        if mem:
+            rows.append(("IAT", state.iat_triangles, mem.get("draw_calls", 0)))
+            rows.append(("  mesh part", mem.get("triangles_mesh_part", 0), int(mem.get("triangles_mesh_part", 0) > 0)))
+            rows.append(("  textured", mem.get("triangles_textured_part", 0),
+                         mem.get("draw_calls", 0) - int(mem.get("triangles_mesh_part", 0) > 0)))
+        for name, tris, calls in rows:
+            imgui.table_next_row()
+            imgui.table_next_column()
+            imgui.text(name)
+            imgui.table_next_column()
+            imgui.text(f"{tris:,}")
+            imgui.table_next_column()
+            imgui.text(f"{calls}")
+        imgui.end_table()
+    if state.mesh_triangles and mem:
+        imgui.text(f"IAT / mesh triangles: {state.iat_triangles / state.mesh_triangles:.3f}")
+    rs = state.render_stats
+    if rs:
+        imgui.text_colored(DIM, f"last frame drew {rs.get('triangles', 0):,} triangles in {rs.get('draw_calls', 0)} calls")
+
+    imgui.separator()
+    used = float(mem.get("texture_bytes", 0)) if mem else 0.0
+    budget = float(state.tuning.budget_mb) * MB
+    over = state.tuning.budget_on and used > budget
+    frac = used / budget if budget > 0 else (1.0 if used > 0 else 0.0)
+    label = f"{_mb(used)} / {_mb(budget)}" + ("" if state.tuning.budget_on else " (budget off)")
+    imgui.text("Texture memory")
+    _bar(frac, label, RED if (over or (budget <= 0 and used > 0 and state.tuning.budget_on)) else None)
+    if mem:
+        imgui.text(f"Atlas utilisation   {mem.get('pages', 0)} page(s) {mem.get('page_width', 0)}x{mem.get('page_height', 0)}")
+        _bar(float(mem.get("utilisation", 0.0)), f"{100 * float(mem.get('utilisation', 0.0)):.0f} %")
+        pt, pm = int(mem.get("patches_textured", 0)), int(mem.get("patches_meshed", 0))
+        imgui.text(f"Patches textured {pt:,}   meshed {pm:,}")
+        _bar(pt / max(pt + pm, 1), f"{pt} / {pt + pm}", GREEN)
+        imgui.text_colored(DIM, f"vertex + index bytes {_mb(mem.get('vertex_bytes', 0) + mem.get('index_bytes', 0))}")
+
+    imgui.separator()
+    solve = _seconds(state.solve_seconds) if state.loaded else "-"
+    if state.solution_from_cache:
+        solve += " (cached)"
+    imgui.text(f"Solve {solve}")
+    imgui.text(f"Re-bake {_seconds(state.bake_seconds) if state.rebakes else '-'}   ({state.rebakes} bakes)")
+    if state.rebaking:
+        imgui.same_line()
+        imgui.text_colored(DIM, "baking...")
+
+    job = state.open_job
+    if job is not None and not job.done:
+        imgui.separator()
+        eta = job.eta
+        imgui.text(f"Opening {Path(job.path).name}: {job.message}")
+        _bar(job.fraction, f"{100 * job.fraction:.0f} %  ETA {_seconds(eta) if eta is not None else '...'}")
+        if imgui.button("Cancel"):
+            job.cancel()
+    if state.status:
+        imgui.separator()
+        imgui.text_wrapped(state.status)
+
+
+# -- File -------------------------------------------------------------------------------------------
+_file_fields = {"open": "", "export": "", "solution": ""}
+
+
+def file_panel(state: AppState) -> None:
+    imgui.text_wrapped(f"Open: {state.model_path or '(nothing)'}")
+    if not _file_fields["open"]:
+        _file_fields["open"] = state.model_path
+    _, _file_fields["open"] = imgui.input_text("Model or solution", _file_fields["open"])
+    if imgui.button("Open") and _file_fields["open"].strip():
+        state.request_open = _file_fields["open"].strip()
+    if has_native_dialogs():
+        imgui.same_line()
+        if imgui.button("Browse..."):
+            open_dialog(state)
+    o = state.solve_options
+    changed, v = imgui.slider_int("Solve depth", int(o.max_depth), 1, 10)
+    if changed:
+        o.max_depth = int(v)
+    _help("max_depth of the radiosity solve for models opened from now on")
+    changed, v = imgui.slider_float("Tolerance", float(o.tolerance), 0.005, 0.5, "%.3f", imgui.SliderFlags_.logarithmic)
+    if changed:
+        o.tolerance = float(v)
+    changed, state.use_cache = imgui.checkbox("Use solution cache", state.use_cache)
+
+    imgui.separator()
+    if not _file_fields["export"] and state.model_path:
+        _file_fields["export"] = str(Path(state.model_path).with_name(Path(state.model_path).stem + "-iat.glb"))
+    _, _file_fields["export"] = imgui.input_text("GLB file", _file_fields["export"])
+    imgui.begin_disabled(state.baked is None)
+    if imgui.button("Export GLB") and _file_fields["export"].strip():
+        state.request_export = _file_fields["export"].strip()
+    imgui.end_disabled()
+    if not _file_fields["solution"] and state.model_path:
+        _file_fields["solution"] = str(Path(state.model_path).with_suffix(".npz"))
+    _, _file_fields["solution"] = imgui.input_text("Solution file", _file_fields["solution"])
+    imgui.begin_disabled(state.solution is None)
+    if imgui.button("Save solution") and _file_fields["solution"].strip():
+        state.request_save_solution = _file_fields["solution"].strip()
+    imgui.end_disabled()
+
+
+def open_dialog(state: AppState) -> None:
+    from imgui_bundle import portable_file_dialogs as pfd
+
+    start = str(Path(state.model_path).parent) if state.model_path else str(Path.cwd())
+    state.dialogs["open"] = pfd.open_file("Open a model or solution", start, MODEL_FILTERS)
+
+
+def export_dialog(state: AppState) -> None:
+    from imgui_bundle import portable_file_dialogs as pfd
+
+    default = Path(state.model_path).stem + "-iat.glb" if state.model_path else "iat.glb"
+    state.dialogs["export"] = pfd.save_file("Export the bake as GLB", default, ["glTF binary", "*.glb"])
+
+
+def poll_dialogs(state: AppState) -> None:
+    """Pick up the answers of native file dialogs (they run in their own process)."""
+    for kind in list(state.dialogs):
+        d = state.dialogs[kind]
+        if not d.ready(0):
+            continue
+        del state.dialogs[kind]
+        res = d.result()
+        if kind == "open" and res:
+            state.request_open = res[0]
+            _file_fields["open"] = res[0]
+        elif kind == "export" and res:
+            state.request_export = res if res.lower().endswith(".glb") else res + ".glb"
+
+
+# -- menus, errors, overlay ---------------------------------------------------------------------------
+def menus(state: AppState) -> None:
+    native = has_native_dialogs()
+    if imgui.begin_menu("File"):
+        if imgui.menu_item_simple("Open...", "Ctrl+O"):
+            if native:
+                open_dialog(state)
+            else:
+                _focus("File")
+                state.set_status("no native file dialog here (install zenity): type the path in the File panel")
+        if imgui.menu_item_simple("Open the Cornell box"):
+            from .state import default_model
+
+            state.request_open = str(default_model())
+        if imgui.menu_item_simple("Export GLB...", enabled=state.baked is not None):
+            if native:
+                export_dialog(state)
+            else:
+                _focus("File")
+        if imgui.menu_item_simple("Save camera paths", enabled=bool(state.model_path and state.paths)):
+            state.request_save_paths = True
+        if imgui.menu_item_simple("Screenshot", "F12"):
+            state.request_screenshot = ""
+        imgui.separator()
+        if imgui.menu_item_simple("Quit"):
+            state.request_quit = True
+        imgui.end_menu()
+    if imgui.begin_menu("Mode"):
+        for m in MODES:
+            if imgui.menu_item_simple(MODE_LABELS[m], None, state.mode == m):
+                state.mode = m
+        imgui.separator()
+        if imgui.menu_item_simple("Reset view", "R") and state.nav is not None:
+            state.nav.reset()
+        for k, c in enumerate(state.cameras):
+            if imgui.menu_item_simple(f"Camera: {c.name or k}", None, k == state.camera_index) and state.nav:
+                state.camera_index = k
+                state.nav.reset(c)
+        imgui.end_menu()
+
+
+def _focus(window: str) -> None:
+    try:
+        hello_imgui.get_runner_params().docking_params.focus_dockable_window(window)
+    except Exception:  # outside a hello_imgui run (tests)
+        pass
+
+
+def error_window(state: AppState) -> None:
+    """The last error, in a small window over the view, until dismissed."""
+    if not state.error:
+        return
+    vp = imgui.get_main_viewport()
+    imgui.set_next_window_pos(ImVec2(vp.work_pos.x + vp.work_size.x * 0.5, vp.work_pos.y + 40),
+                              imgui.Cond_.always, ImVec2(0.5, 0.0))
+    imgui.set_next_window_size_constraints(ImVec2(300, 0), ImVec2(vp.work_size.x * 0.8, 400))
+    flags = imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_docking
+    opened, keep = imgui.begin("Error", True, flags)
+    if opened:
+        imgui.push_style_color(imgui.Col_.text, ImVec4(1.0, 0.45, 0.4, 1.0))
+        imgui.text_wrapped(state.error)
+        imgui.pop_style_color()
+        imgui.text_colored(DIM, "the viewer keeps showing the last good model")
+        if imgui.button("Dismiss"):
+            keep = False
+    imgui.end()
+    if not keep:
+        state.clear_error()
+
+
+def view_overlay(state: AppState) -> None:
+    """Labels and the split divider over the 3D view (imgui background draw list, no GL)."""
+    x, y, w, h = state.view_rect
+    if w <= 0 or h <= 0:
+        return
+    dl = imgui.get_background_draw_list()
+    white = imgui.get_color_u32(ImVec4(1, 1, 1, 0.9))
+    shadow = imgui.get_color_u32(ImVec4(0, 0, 0, 0.7))
+
+    def label(px: float, text: str) -> None:
+        dl.add_text(ImVec2(px + 9, y + 9), shadow, text)
+        dl.add_text(ImVec2(px + 8, y + 8), white, text)
+
+    if not state.loaded:
+        job = state.open_job
+        label(x, f"opening {Path(job.path).name}: {job.message}" if job and not job.done else "nothing open")
+        return
+    shown = state.mode
+    if state.mode == "split":
+        sx = x + state.split * w
+        col = imgui.get_color_u32(ImVec4(1.0, 0.85, 0.2, 1.0 if state.dragging_split else 0.8))
+        dl.add_line(ImVec2(sx, y), ImVec2(sx, y + h), col, 3.0 if state.dragging_split else 2.0)
+        dl.add_circle_filled(ImVec2(sx, y + h * 0.5), 7.0, col)
+        label(x, "Mesh")
+        label(sx, "IAT")
+    else:
+        label(x, MODE_LABELS.get(shown, shown) + (f"  x{state.diff_gain:.0f}" if shown == "diff" else ""))
+    if state.recorder is not None:
+        dl.add_text(ImVec2(x + w - 60, y + 8), imgui.get_color_u32(RED), "REC")
+    if state.player is not None:
+        dl.add_text(ImVec2(x + w - 60, y + 8), white, "PLAY")

@@ -1,0 +1,557 @@
+"""The viewer's state: one plain object that panels read and change; no GL here.
+
+:class:`AppState` holds what is open (scene, solution, the bake on screen), the
+tuning values, the view mode, the camera, camera paths, statistics and messages.
+Panels change its fields; the app (``viewer/app.py``) notices the changes
+(a new bake policy, a request to open a file, ...) and acts, touching GL only
+through :class:`iat.render.Renderer`.
+
+Long work runs off the UI thread:
+
+- :class:`OpenJob` loads a model or solution, solves a model that has none
+  (progress, ETA, cancel; solutions are cached under :func:`cache_dir`), builds
+  the :class:`~iat.bake.Baker` and makes the first bake;
+- :class:`BakeWorker` re-bakes the latest requested :class:`~iat.bake.BakePolicy`
+  on one worker thread (pure numpy); the UI thread picks the result up with
+  :meth:`BakeWorker.poll` and uploads it. Requests made while a bake runs are
+  coalesced: only the newest is baked next.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import logging
+import os
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from iat.bake import BakePolicy, Baker
+from iat.camera import Camera
+from iat.errors import Cancelled, IATError, LoadError
+from iat.radiosity import SolveOptions
+
+from .navigation import CameraPath, Navigator, PathPlayer, PathRecorder
+
+log = logging.getLogger(__name__)
+
+MODES = ("mesh", "iat", "split", "diff")
+MODE_LABELS = {"mesh": "Mesh", "iat": "IAT", "split": "Split", "diff": "Difference"}
+METHODS = ("bilinear", "scan", "bicubic")
+FRAME_HISTORY = 240  # frames kept for the frame-time plot
+
+
+def default_model() -> Path:
+    """The default sample scene: ``sample_models/cornell_box.glb`` of the repository."""
+    return Path(__file__).resolve().parent.parent / "sample_models" / "cornell_box.glb"
+
+
+def cache_dir() -> Path:
+    """Where solved models are cached: ``$IAT_CACHE_DIR``, else ``~/.cache/iat/solutions``."""
+    env = os.environ.get("IAT_CACHE_DIR")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "iat" / "solutions"
+
+
+def solution_cache_path(model: str | os.PathLike, options: SolveOptions) -> Path:
+    """Cache file of ``model`` solved with ``options``: keyed by the file's bytes and the options."""
+    h = hashlib.sha256()
+    h.update(Path(model).read_bytes())
+    h.update(json.dumps(options.to_dict(), sort_keys=True).encode())
+    return cache_dir() / f"{Path(model).stem}-{h.hexdigest()[:16]}.npz"
+
+
+def error_text(e: BaseException) -> str:
+    """One line for the user: an IATError's own message, else the type and the message."""
+    if isinstance(e, IATError):
+        return str(e)
+    return f"{type(e).__name__}: {e}"
+
+
+# -- tuning ---------------------------------------------------------------------------------------
+@dataclass
+class Tuning:
+    """What the tuning panel sets; :meth:`policy` turns it into a :class:`~iat.bake.BakePolicy`.
+
+    threshold : patches with tree depth >= threshold are textured (0 .. deepest + 1)
+    scale : texture side factor (0.125 .. 2)
+    method : "bilinear" | "scan" | "bicubic"
+    scale_mode : "clamped" | "naive"
+    budget_on, budget_mb : texture budget in MiB; when on, threshold and scale are chosen by the baker
+    detail : detail textures combined with incoming light (report §3.7)
+    exposure : display multiplier on radiance before the tone map
+    """
+
+    threshold: int = 2
+    scale: float = 1.0
+    method: str = "bilinear"
+    scale_mode: str = "clamped"
+    budget_on: bool = False
+    budget_mb: float = 4.0
+    detail: bool = True
+    exposure: float = 1.0
+
+    def policy(self) -> BakePolicy:
+        return BakePolicy(
+            threshold=int(self.threshold),
+            scale=float(self.scale),
+            method=self.method,
+            scale_mode=self.scale_mode,
+            budget_mb=float(self.budget_mb) if self.budget_on else None,
+            detail=bool(self.detail),
+        )
+
+
+# -- background work --------------------------------------------------------------------------------
+@dataclass
+class BakeResult:
+    """What a bake request came to: ``baked`` or ``error`` (one line), and how long it took."""
+
+    policy: BakePolicy
+    baked: Any = None
+    error: str | None = None
+    seconds: float = 0.0
+
+
+class BakeWorker:
+    """Bakes on one worker thread; :meth:`submit` never blocks, :meth:`poll` returns the newest result.
+
+    baker : the :class:`~iat.bake.Baker` (used by this thread only: a Baker is not thread-safe)
+    """
+
+    def __init__(self, baker: Baker, name: str = "iat-bake"):
+        self.baker = baker
+        self._cv = threading.Condition()
+        self._pending: BakePolicy | None = None
+        self._result: BakeResult | None = None
+        self._running = False
+        self._stop = False
+        self.bakes = 0
+        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
+        self._thread.start()
+
+    def submit(self, policy: BakePolicy) -> None:
+        """Ask for a bake of ``policy``; replaces a request not started yet."""
+        with self._cv:
+            self._pending = policy
+            self._cv.notify()
+
+    def poll(self) -> BakeResult | None:
+        """The newest finished result not yet returned, or None."""
+        with self._cv:
+            r, self._result = self._result, None
+            return r
+
+    @property
+    def busy(self) -> bool:
+        """A bake is running or waiting to run."""
+        with self._cv:
+            return self._running or self._pending is not None
+
+    def wait(self, timeout: float = 30.0) -> bool:
+        """Block until idle (tests and the benchmark); True when idle."""
+        end = time.monotonic() + timeout
+        with self._cv:
+            while self._running or self._pending is not None:
+                left = end - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cv.wait(left)
+        return True
+
+    def close(self, timeout: float = 10.0) -> None:
+        """Stop the thread (after the bake in progress, if any)."""
+        with self._cv:
+            self._stop = True
+            self._pending = None
+            self._cv.notify_all()
+        self._thread.join(timeout)
+
+    def _loop(self) -> None:
+        while True:
+            with self._cv:
+                while self._pending is None and not self._stop:
+                    self._cv.wait()
+                if self._stop:
+                    return
+                policy, self._pending = self._pending, None
+                self._running = True
+            t0 = time.perf_counter()
+            try:
+                r = BakeResult(policy, baked=self.baker.bake(policy))
+            except Exception as e:  # shown in the window; the viewer keeps the last good bake
+                log.debug("bake failed", exc_info=True)
+                r = BakeResult(policy, error=error_text(e))
+            r.seconds = time.perf_counter() - t0
+            with self._cv:
+                self._result = r
+                self._running = False
+                self.bakes += 1
+                self._cv.notify_all()
+
+
+@dataclass
+class Opened:
+    """A model or solution ready to show (made by :class:`OpenJob`)."""
+
+    path: str
+    scene: Any
+    solution: Any
+    baker: Baker
+    baked: Any
+    policy: BakePolicy
+    solve_seconds: float = 0.0
+    from_cache: str = ""
+    bake_seconds: float = 0.0
+    bake_error: str | None = None
+
+
+class OpenJob:
+    """Open ``path`` (model or ``.npz`` solution) on a worker thread.
+
+    A model is solved with ``options`` unless a cached solution of the same file and options
+    exists (``use_cache``); the solve reports progress (``fraction``, ``message``, :attr:`eta`)
+    and stops when :meth:`cancel` is called. Then the Baker is built and ``policy`` baked.
+    When done, ``result`` (an :class:`Opened`) or ``error`` (one line) is set.
+    """
+
+    def __init__(self, path: str | os.PathLike, options: SolveOptions, policy: BakePolicy, use_cache=True):
+        self.path = str(path)
+        self.options = options
+        self.policy = policy
+        self.use_cache = use_cache
+        self.fraction = 0.0
+        self.message = "starting"
+        self.started = time.perf_counter()
+        self.solve_started: float | None = None
+        self.result: Opened | None = None
+        self.error: str | None = None
+        self._cancel = threading.Event()
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="iat-open", daemon=True)
+        self._thread.start()
+
+    # -- UI side -------------------------------------------------------------------------
+    def cancel(self) -> None:
+        self._cancel.set()
+
+    @property
+    def cancelled(self) -> bool:
+        return self._cancel.is_set()
+
+    @property
+    def done(self) -> bool:
+        return self._done.is_set()
+
+    def join(self, timeout: float | None = None) -> bool:
+        return self._done.wait(timeout)
+
+    @property
+    def solving(self) -> bool:
+        return self.solve_started is not None and not self.done
+
+    @property
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.started
+
+    @property
+    def eta(self) -> float | None:
+        """Seconds left for the solve, from its progress so far (None until it is measurable)."""
+        if self.solve_started is None or self.fraction < 0.02:
+            return None
+        spent = time.perf_counter() - self.solve_started
+        return spent * (1.0 - self.fraction) / self.fraction
+
+    # -- worker side -----------------------------------------------------------------------
+    def _progress(self, fraction: float, message: str) -> bool:
+        self.fraction = float(min(max(fraction, 0.0), 1.0))
+        self.message = str(message)
+        return not self._cancel.is_set()
+
+    def _run(self) -> None:
+        try:
+            self.result = self._open()
+        except Cancelled:
+            self.error = f"{self.path}: cancelled"
+        except Exception as e:
+            log.debug("open failed:\n%s", traceback.format_exc())
+            self.error = error_text(e)
+            if not isinstance(e, IATError) and self.path not in self.error:
+                self.error = f"{self.path}: {self.error}"
+        finally:
+            self._done.set()
+
+    def _open(self) -> Opened:
+        from iat.inputs import is_solution_path, open_solution
+        from iat.radiosity import Solution, solve
+        from iat.scene import load_scene
+
+        p = Path(self.path)
+        if not p.exists():
+            raise LoadError("no such file", p)
+        solve_seconds, cached = 0.0, ""
+        if is_solution_path(p):
+            self.message = "loading solution"
+            scene, solution = open_solution(p)
+            solve_seconds = float(solution.stats.get("time", 0.0) or 0.0)
+        else:
+            self.message = "loading model"
+            scene = load_scene(p, max_edge=self.options.max_edge)
+            solution = None
+            cpath = solution_cache_path(p, self.options) if self.use_cache else None
+            if cpath is not None and cpath.exists():
+                try:
+                    solution = Solution.load(cpath)
+                    if len(solution.patch_is_quad) != scene.n_patches:
+                        solution = None
+                    else:
+                        cached = str(cpath)
+                        solve_seconds = float(solution.stats.get("time", 0.0) or 0.0)
+                except IATError:
+                    solution = None
+            if solution is None:
+                self.message = "solving"
+                self.solve_started = time.perf_counter()
+                t0 = time.perf_counter()
+                solution = solve(scene, self.options, progress=self._progress)
+                solve_seconds = time.perf_counter() - t0
+                if solution.stats.get("cancelled") or self._cancel.is_set():
+                    raise Cancelled("solve cancelled")
+                solution.model_path = solution.model_path or str(p)
+                if cpath is not None:
+                    try:
+                        solution.save(cpath)
+                    except OSError as e:  # a cache that cannot be written is no error
+                        log.info("cannot cache the solution at %s: %s", cpath, e)
+        if self._cancel.is_set():
+            raise Cancelled("cancelled")
+        self.message = "baking"
+        self.fraction = 1.0
+        baker = Baker(solution, scene)
+        t0 = time.perf_counter()
+        baked, bake_error = None, None
+        try:
+            baked = baker.bake(self.policy)
+        except Exception as e:  # the model opens anyway; mesh mode works without a bake
+            bake_error = error_text(e)
+        return Opened(
+            path=self.path,
+            scene=scene,
+            solution=solution,
+            baker=baker,
+            baked=baked,
+            policy=self.policy,
+            solve_seconds=solve_seconds,
+            from_cache=cached,
+            bake_seconds=time.perf_counter() - t0,
+            bake_error=bake_error,
+        )
+
+
+# -- the state ---------------------------------------------------------------------------------------
+@dataclass
+class AppState:
+    """Everything the viewer shows and the panels change (see the module docstring).
+
+    Requests (``request_*``) are set by panels and consumed by the app on its next frame.
+    ``view_rect`` is the 3D view's rectangle in window pixels (x, y from the top left, w, h),
+    updated every frame from the central dock node.
+    """
+
+    # what is open
+    model_path: str = ""
+    scene: Any = None
+    solution: Any = None
+    baker: Baker | None = None
+    baked: Any = None  # the bake on screen (the last good one)
+    solve_options: SolveOptions = field(default_factory=lambda: SolveOptions())
+    use_cache: bool = True
+    tuning: Tuning = field(default_factory=Tuning)
+    # view
+    mode: str = "iat"
+    split: float = 0.5
+    diff_gain: float = 8.0
+    tonemap: bool = True
+    dragging_split: bool = False
+    looking: bool = False
+    nav: Navigator | None = None
+    camera: Camera | None = None
+    camera_index: int = 0
+    # camera paths
+    paths: dict[str, CameraPath] = field(default_factory=dict)
+    path_name: str = ""
+    recorder: PathRecorder | None = None
+    record_started: float = 0.0
+    player: PathPlayer | None = None
+    play_started: float = 0.0
+    playback_frames: int = 0  # 0: real time; N: exactly N frames (benchmark)
+    play_frame_ms: list[float] = field(default_factory=list)
+    # background work
+    open_job: OpenJob | None = None
+    bake_worker: BakeWorker | None = None
+    requested_policy: BakePolicy | None = None
+    bake_seconds: float = 0.0
+    solve_seconds: float = 0.0
+    solution_from_cache: str = ""
+    rebakes: int = 0
+    uploads: int = 0
+    # messages
+    error: str = ""  # shown until dismissed
+    errors: list[str] = field(default_factory=list)
+    status: str = ""
+    last_screenshot: str = ""
+    # statistics
+    frame_ms: np.ndarray = field(default_factory=lambda: np.zeros(FRAME_HISTORY, np.float32))
+    frames: int = 0
+    render_stats: dict = field(default_factory=dict)
+    view_rect: tuple[int, int, int, int] = (0, 0, 0, 0)
+    framebuffer_scale: tuple[float, float] = (1.0, 1.0)
+    # requests from panels
+    request_open: str | None = None
+    request_export: str | None = None
+    request_screenshot: str | None = None
+    request_save_paths: bool = False
+    request_save_solution: str | None = None
+    request_quit: bool = False
+    # file dialogs in flight (portable_file_dialogs objects)
+    dialogs: dict = field(default_factory=dict)
+
+    # -- derived ---------------------------------------------------------------------------
+    def policy(self) -> BakePolicy:
+        return self.tuning.policy()
+
+    @property
+    def loaded(self) -> bool:
+        return self.solution is not None
+
+    @property
+    def deepest(self) -> int:
+        """Deepest patch tree of the solution (the threshold slider's top is one more)."""
+        if self.solution is None:
+            return 0
+        d = getattr(self, "_deepest_cache", None)
+        if d is None or d[0] is not self.solution:
+            depth = np.asarray(self.solution.patch_depth())
+            d = (self.solution, int(depth.max()) if depth.size else 0)
+            self._deepest_cache = d
+        return d[1]
+
+    @property
+    def memory(self) -> dict:
+        """The shown bake's :class:`~iat.bake.MemoryReport` as a dict ({} when none)."""
+        return self.baked.memory.to_dict() if self.baked is not None else {}
+
+    @property
+    def mesh_triangles(self) -> int:
+        return 0 if self.solution is None else int(len(self.solution.tri_vertices))
+
+    @property
+    def iat_triangles(self) -> int:
+        m = self.memory
+        return int(m.get("triangles_mesh_part", 0) + m.get("triangles_textured_part", 0))
+
+    @property
+    def rebaking(self) -> bool:
+        return self.bake_worker is not None and self.bake_worker.busy
+
+    @property
+    def opening(self) -> bool:
+        return self.open_job is not None and not self.open_job.done
+
+    @property
+    def cameras(self) -> list[Camera]:
+        return list(self.scene.cameras) if self.scene is not None else []
+
+    # -- messages --------------------------------------------------------------------------
+    def set_error(self, message: str) -> None:
+        log.warning("%s", message)
+        self.error = message
+        self.errors.append(message)
+        del self.errors[:-50]
+
+    def clear_error(self) -> None:
+        self.error = ""
+
+    def set_status(self, message: str) -> None:
+        log.info("%s", message)
+        self.status = message
+
+    # -- frames ----------------------------------------------------------------------------
+    def add_frame_time(self, ms: float) -> None:
+        self.frame_ms[self.frames % FRAME_HISTORY] = ms
+        self.frames += 1
+
+    def frame_history(self) -> np.ndarray:
+        """(n,) float32 frame times in ms, oldest first (n <= FRAME_HISTORY)."""
+        n = min(self.frames, FRAME_HISTORY)
+        if self.frames <= FRAME_HISTORY:
+            return self.frame_ms[:n].copy()
+        k = self.frames % FRAME_HISTORY
+        return np.concatenate([self.frame_ms[k:], self.frame_ms[:k]])
+
+    @property
+    def fps(self) -> float:
+        h = self.frame_history()[-60:]
+        m = float(np.mean(h)) if h.size else 0.0
+        return 1000.0 / m if m > 0 else 0.0
+
+    # -- paths -----------------------------------------------------------------------------
+    def start_recording(self, name: str | None = None) -> None:
+        self.player = None
+        n = 1
+        while name is None or name in self.paths:
+            name, n = f"recorded {n}", n + 1
+        self.recorder = PathRecorder(name)
+        self.record_started = time.perf_counter()
+
+    def stop_recording(self) -> CameraPath | None:
+        rec, self.recorder = self.recorder, None
+        if rec is None or not rec.cameras:
+            return None
+        path = rec.path()
+        self.paths[path.name] = path
+        self.path_name = path.name
+        self.set_status(f"recorded path {path.name!r}: {len(path)} poses, {path.duration():.1f} s")
+        return path
+
+    def start_playback(self, name: str | None = None, frames: int | None = None) -> None:
+        name = name or self.path_name
+        if name not in self.paths:
+            self.set_error(f"no camera path named {name!r}")
+            return
+        self.recorder = None
+        frames = self.playback_frames if frames is None else frames
+        self.player = PathPlayer(self.paths[name], frames=frames or None)
+        self.play_started = time.perf_counter()
+        self.play_frame_ms = []
+        self.path_name = name
+
+    def stop_playback(self) -> None:
+        p, self.player = self.player, None
+        if p is not None and self.play_frame_ms:
+            f = np.asarray(self.play_frame_ms)
+            self.set_status(
+                f"played {p.path.name!r}: {len(f)} frames, mean {f.mean():.1f} ms, "
+                f"max {f.max():.1f} ms ({1000.0 / max(f.mean(), 1e-9):.0f} fps)"
+            )
+
+    def policy_summary(self) -> str:
+        b = self.baked
+        if b is None:
+            return ""
+        p = b.policy
+        return f"threshold {p.threshold}, scale {p.scale:.3g}, {p.method}"
+
+
+def replace_tuning(state: AppState, **kw) -> None:
+    """Set tuning fields by name (tests and scripts): ``replace_tuning(state, threshold=3)``."""
+    state.tuning = dataclasses.replace(state.tuning, **kw)
