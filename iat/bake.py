@@ -53,6 +53,8 @@ __all__ = [
     "bake",
     "choose_policy",
     "cost_model",
+    "quantise_rgb9e5",
+    "quantise_rgba8",
     "seam_error",
 ]
 
@@ -520,6 +522,8 @@ class Baker:
             np.ascontiguousarray(idx.radiance[vm]),
             remap[idx.tri[tm]].astype(np.uint32).reshape(-1, 3),
         )
+        for a in part:
+            a.flags.writeable = False  # shared by every Baked with this textured set
         return self._mesh.put(key, part)
 
     def _textured_part(self, ps, sides, packing: atlas.Packing, dmask):
@@ -554,7 +558,7 @@ class Baker:
         progress : ``progress(fraction, message) -> bool`` called between stages; returning
           False raises :class:`~iat.errors.Cancelled` (caches stay valid).
         One bake at a time per Baker (it is not thread-safe); the returned Baked is independent
-        of later bakes (its pages are shared with the cache and read-only).
+        of later bakes (its pages and mesh part are shared with the cache and read-only).
         """
         t_start = time.perf_counter()
         tm: dict[str, float] = {}

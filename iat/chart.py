@@ -37,6 +37,7 @@ from .bench import (
     _texture_bytes,
     cached_solve,
     default_models,
+    limit_flip_threads,
     interpolate_path,
     machine_info,
     path_poses,
@@ -139,6 +140,7 @@ def chart_model(
             progress(min(max(f, 0.0), 1.0), m)
 
     model = resolve_model(model)
+    limit_flip_threads()
     base = SolveOptions() if solve_options is None else solve_options
     tols = sorted({float(t) for t in tolerances}) or [float(base.tolerance)]
     full = [(int(t), float(s), str(m)) for t in thresholds for s in scales for m in methods]

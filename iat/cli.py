@@ -140,14 +140,11 @@ def cmd_solve(args) -> int:
 
 
 def cmd_bake(args) -> int:
-    from .bake import Baker, choose_policy
+    from .bake import Baker
     from .export import export_glb
 
     scene, sol = _open(args, "bake")
-    policy = _bake_policy(args)
-    if policy.budget_mb is not None:
-        policy = choose_policy(sol, policy.budget_mb, policy)
-    baked = Baker(sol, scene).bake(policy)
+    baked = Baker(sol, scene).bake(_bake_policy(args))
     export_glb(baked, args.output, scene=scene, layered=args.layered)
     report = {"output": str(args.output), "policy": _policy_dict(baked.policy), **baked.memory.to_dict()}
     report["timings"] = getattr(baked, "timings", {})

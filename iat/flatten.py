@@ -529,12 +529,15 @@ class TileCache:
 
     ``get`` flattens (and scales) only the patches it has not seen with that key.
     Counters: ``flatten_calls`` (calls of :func:`flatten`), ``tiles_flattened``,
-    ``scale_calls``, ``tiles_scaled``. Scale 1 is stored once, whatever the mode.
+    ``scale_calls``, ``tiles_scaled``. Scale 1 is stored once, whatever the mode, and kept
+    for good; of the scaled sets (a scale slider makes one per position) only the
+    ``max_scaled_sets`` most recently used are kept. Cached tiles are read-only.
     """
 
-    def __init__(self, solution, index: SolutionIndex | None = None):
+    def __init__(self, solution, index: SolutionIndex | None = None, max_scaled_sets: int = 8):
         self.solution = solution
         self.index = index if index is not None else SolutionIndex(solution)
+        self.max_scaled_sets = int(max_scaled_sets)
         self._store: dict[tuple, dict[int, np.ndarray]] = {}
         self.flatten_calls = 0
         self.tiles_flattened = 0
@@ -560,13 +563,22 @@ class TileCache:
             raise OptionError(f"scale must be > 0, got {scale}")
         patches = np.asarray(patches, dtype=np.int64).reshape(-1)
         key = self.key(method, scale, mode)
-        store = self._store.setdefault(key, {})
+        store = self._store.pop(key, None)
+        if store is None:
+            store = {}
+        self._store[key] = store  # most recently used last
+        scaled = [k for k in self._store if k[1] != 1.0]
+        for k in scaled[: max(0, len(scaled) - self.max_scaled_sets)]:
+            del self._store[k]
         missing = [p for p in patches.tolist() if p not in store]
         if missing:
             if key[1] == 1.0:
                 self.flatten_calls += 1
                 self.tiles_flattened += len(missing)
-                store.update(flatten(self.solution, missing, method, index=self.index))
+                new = flatten(self.solution, missing, method, index=self.index)
+                for t in new.values():
+                    t.flags.writeable = False
+                store.update(new)
             else:
                 base = self.get(missing, method, 1.0)
                 sides = np.array([t.shape[0] for t in base])
@@ -581,5 +593,6 @@ class TileCache:
                             continue
                         stack = np.stack([base[q] for q in g])
                         out = scale_tiles(stack, key[1], key[2], method, triangle=is_tri)
+                        out.flags.writeable = False
                         store.update(zip(miss[g].tolist(), out, strict=True))
         return [store[p] for p in patches.tolist()]

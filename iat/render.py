@@ -363,8 +363,10 @@ class Renderer:
             cur[int(m)] = self._texture2d(cur.get(int(m)), img)
 
     def _set_pages(
-        self, pages: np.ndarray, pixel_format: str, mipmaps: bool, page_scale: float | None
+        self, pages: np.ndarray, pixel_format: str, mipmaps: bool, page_scale: float | None, mip_levels: int | None = None
     ) -> None:
+        """Upload atlas pages; with mipmaps, only the ``mip_levels`` the atlas gutters allow are built,
+        so coarse levels never blend neighbouring tiles (None: the full chain)."""
         mgl = self._moderngl
         pages = np.asarray(pages, dtype=np.float32)
         if pages.ndim != 4 or pages.shape[3] < 3:
@@ -390,8 +392,8 @@ class Renderer:
             self._pages = self._reg.add(self.ctx.texture_array((w, h, n), 4, data.tobytes(), dtype=dtype))
             self._pages.repeat_x = self._pages.repeat_y = False
             self._pages_key = key
-        if mipmaps:
-            self._pages.build_mipmaps()
+        if mipmaps and (mip_levels is None or mip_levels > 1):
+            self._pages.build_mipmaps(0, 1000 if mip_levels is None else mip_levels - 1)
             self._pages.filter = (mgl.LINEAR_MIPMAP_LINEAR, mgl.LINEAR)
         else:
             self._pages.filter = (mgl.LINEAR, mgl.LINEAR)
@@ -519,7 +521,9 @@ class Renderer:
                 raise RenderError(f"baked has textured triangles but its pages have shape {pages.shape}")
             if tlayer.size and (tlayer.min() < 0 or tlayer.max() > pages.shape[0] - 1):
                 raise RenderError(f"baked tex_layer refers to page {int(tlayer.max())} of {pages.shape[0]}")
-            self._set_pages(pages, pixel_format, mipmaps, getattr(baked, "page_scale", None))
+            self._set_pages(
+                pages, pixel_format, mipmaps, getattr(baked, "page_scale", None), getattr(baked, "mip_levels", None)
+            )
         self._set_details("iat", {int(m): v for m, v in details.items()})
         self._baked_mesh.upload(self.ctx, self._reg, {"position": mpos, "color": mrad}, midx)
         self._baked_tex.upload(

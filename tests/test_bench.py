@@ -186,7 +186,7 @@ def chart_result(tmp_path_factory, cache):
         d / "chart.png",
         size=(64, 48),
         frames=3,
-        thresholds=(0, 2, 5),
+        thresholds=(0, 5),
         scales=(1.0, 0.5),
         methods=("bilinear", "scan"),
         tolerances=(0.05, 0.2),
@@ -210,7 +210,7 @@ def test_chart_files_and_panels(chart_result):
     for m in data["models"]:
         pts = m["points"]
         # full sweep at the tightest tolerance, scan only at the others, one mesh per tolerance
-        assert len(pts) == 3 * 2 * 2 + 3 * 2 * 1 + 2
+        assert len(pts) == 2 * 2 * 2 + 2 * 2 * 1 + 2
         assert sum(p["kind"] == "mesh" for p in pts) == 2
         finest = [p for p in pts if p["kind"] == "iat" and p["tolerance"] == 0.05 and p["threshold"] == 0
                   and p["scale"] == 1.0 and p["method"] == "scan"]
@@ -249,20 +249,25 @@ def test_chart_pareto_points_are_non_dominated(chart_result):
     assert checked > 0
 
 
-def test_bench_cli_json(tmp_path):
+def test_bench_main_json_and_markdown(tmp_path, monkeypatch, capsys):
+    """The CLI wrapper: flags reach run_bench, stdout is JSON with --json, Markdown without."""
     _need_egl()
-    r = subprocess.run(
-        [sys.executable, "-m", "iat.cli", "bench", "cornell_box", "--json", "--frames", "2", "--size", "48x32"],
-        capture_output=True,
-        text=True,
-        cwd=tmp_path,  # the solution cache goes to tmp_path/out/bench
-        timeout=300,
-    )
-    assert r.returncode == 0, r.stderr
-    data = json.loads(r.stdout)
+    import argparse
+    import functools
+
+    monkeypatch.chdir(tmp_path)  # the default solution cache is ./out/bench
+    monkeypatch.setattr(bench, "run_bench", functools.partial(bench.run_bench, solve_options=SMALL, repeats=1))
+    args = argparse.Namespace(models=["cornell_box"], json=True, frames=2, size="48x32")
+    assert bench.main(args) == 0
+    data = json.loads(capsys.readouterr().out)
     assert data["settings"]["frames"] == 2 and data["settings"]["size"] == [48, 32]
     assert data["models"][0]["triangles_iat"] < data["models"][0]["triangles_mesh"]
+    assert data["models"][0]["solve_cached"] is False
     assert list((tmp_path / "out" / "bench").glob("cornell_box-*.npz"))
+    args.json = False
+    assert bench.main(args) == 0
+    out = capsys.readouterr().out
+    assert "| cornell_box (IAT) |" in out and "fps 48x32" in out and "(cached)" in out
 
 
 def test_bench_cli_unknown_model(tmp_path):

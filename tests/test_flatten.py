@@ -394,3 +394,16 @@ def test_tile_cache_reuses_tiles(lin_sol):
     assert cache.scale_calls == 2
     cache.get([0], "scan")
     assert cache.flatten_calls == 3
+
+
+def test_tile_cache_keeps_few_scaled_sets_and_read_only_tiles(lin_sol):
+    cache = TileCache(lin_sol, max_scaled_sets=2)
+    base = cache.get([0, 1], "scan")
+    assert not base[0].flags.writeable
+    for s in (0.3, 0.4, 0.5):
+        cache.get([0, 1], "scan", s)
+    assert cache.scale_calls == 3
+    cache.get([0, 1], "scan", 0.5)  # kept
+    cache.get([0, 1], "scan", 0.3)  # evicted: scaled again from the kept scale-1 tiles
+    assert cache.scale_calls == 4 and cache.flatten_calls == 1
+    assert len(cache) == 2 + 2 * 2

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import importlib
 import json
+import os
+import shutil
 import struct
 import subprocess
 import sys
@@ -181,3 +183,26 @@ def test_seen_from_the_path_the_model_is_closed_and_faces_the_viewer(name, scene
     assert np.all(prim >= 0), f"{name}: {int(np.sum(prim < 0))} rays escape the model"
     facing = np.einsum("ij,ij->i", scene.patch_normal[owner[prim]], d)
     assert np.all(facing < 0), f"{name}: {int(np.sum(facing >= 0))} rays hit the back of a face"
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_khronos_validator_finds_no_issue(name):
+    node = shutil.which("node")
+    if node is None:
+        pytest.skip("node is not installed (the Khronos glTF validator runs on Node.js)")
+    dirs = [os.environ.get("IAT_GLTF_VALIDATOR_NODE_PATH", ""), str(ROOT / ".node" / "node_modules")]
+    env = dict(os.environ, NODE_PATH=os.pathsep.join(d for d in dirs if d))
+    if subprocess.run(
+        [node, "-e", "require.resolve('gltf-validator')"], env=env, capture_output=True
+    ).returncode:
+        pytest.skip("npm package gltf-validator not found in .node/node_modules (make setup installs it)")
+    r = subprocess.run(
+        [node, str(ROOT / "tests" / "gltf_validate.js"), str(SAMPLES / f"{name}.glb")],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode in (0, 1), r.stderr
+    issues = json.loads(r.stdout)["issues"]
+    assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]

@@ -1,4 +1,9 @@
-"""``python -m viewer [SOL|MODEL] [--size WxH] [--max-depth N] [--bench]``: the IAT viewer."""
+"""``python -m viewer [SOL|MODEL]``: the IAT viewer (``iat view`` does the same).
+
+Options: ``--size WxH``, ``--max-depth N`` (solve depth for a model without a
+solution), ``--bench`` (frame times while re-baking, JSON), ``--screenshots DIR``
+(the README's pictures).
+"""
 
 from __future__ import annotations
 
@@ -19,34 +24,33 @@ def cli(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m viewer", description="IAT walkthrough viewer and tuning tool")
     p.add_argument("path", nargs="?", help="model or solution (.npz); default: the Cornell box")
     p.add_argument("--size", type=_size, default=(1280, 800), metavar="WxH", help="window size")
-    p.add_argument("--max-depth", type=int, default=None, help="solve depth for models without a solution")
-    p.add_argument("--bench", action="store_true", help="measure frame times while re-baking, print JSON")
+    p.add_argument("--max-depth", type=int, default=None, help="solve depth for a model without a solution")
+    p.add_argument("--bench", action="store_true", help="frame times while re-baking; prints JSON")
+    p.add_argument("--screenshots", metavar="DIR", help="write the README's screenshots to DIR and exit")
     args = p.parse_args(argv)
-    if args.bench:
-        from .app import benchmark_rebake_frames
 
-        try:
-            res = benchmark_rebake_frames(args.path, size=args.size, max_depth=args.max_depth or 4)
-        except RuntimeError as e:
-            print(f"python -m viewer --bench: {e}", file=sys.stderr)
-            return 2
-        print(json.dumps(res, indent=1))
-        return 0 if res["ok"] else 1
-    from .app import main
-
-    if args.max_depth is None:
-        return main(args.path, size=args.size)
     from iat.radiosity import SolveOptions
 
-    from .app import ViewerApp, default_model
-
-    app = ViewerApp(args.path or default_model(), size=args.size, solve_options=SolveOptions(max_depth=args.max_depth))
+    opts = None if args.max_depth is None else SolveOptions(max_depth=args.max_depth)
     try:
-        app.run()
+        if args.bench:
+            from .app import benchmark_rebake_frames
+
+            res = benchmark_rebake_frames(args.path, size=args.size, max_depth=args.max_depth or 4)
+            print(json.dumps(res, indent=1))
+            return 0 if res["ok"] else 1
+        if args.screenshots:
+            from .app import capture_screenshots
+
+            for f in capture_screenshots(args.screenshots, args.path, size=args.size, solve_options=opts):
+                print(f)
+            return 0
     except RuntimeError as e:
-        print(f"python -m viewer: cannot open a window ({e})", file=sys.stderr)
+        print(f"python -m viewer: {e}", file=sys.stderr)
         return 2
-    return 0
+    from .app import main
+
+    return main(args.path, size=args.size, solve_options=opts)
 
 
 if __name__ == "__main__":

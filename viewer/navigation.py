@@ -59,7 +59,7 @@ __all__ = [
     "save_paths",
 ]
 
-#: gamepad axis order (GLFW): left x, left y (up = -1), right x, right y (up = -1), left trigger, right trigger
+#: gamepad axes in GLFW order: left x, left y (up = -1), right x, right y (up = -1), triggers
 AXES = ("left_x", "left_y", "right_x", "right_y", "left_trigger", "right_trigger")
 WORLD_UP = np.array([0.0, 1.0, 0.0])
 

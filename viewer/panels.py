@@ -7,7 +7,7 @@ Windows (docked by the app around the 3D view): **Tuning** (threshold, scale,
 method, budget, detail textures, exposure), **View** (mode, divider, cameras,
 speed, camera paths), **Stats** (frame rate and frame-time plot, triangles and
 draw calls, texture memory against the budget, atlas utilisation, patches,
-solve and re-bake times, solve progress with ETA and cancel), **File** (open,
+solve and re-bake times, solve progress with ETA and cancel), **Model** (open,
 solve options, export, save). Plus the menus, the error window and the overlay
 drawn over the 3D view (split divider, labels).
 """
@@ -93,15 +93,18 @@ def tuning_panel(state: AppState) -> None:
     changed, t.budget_on = imgui.checkbox("Budget", t.budget_on)
     _help("When on, threshold and scale are chosen to fit the texture memory budget.")
     imgui.begin_disabled(not t.budget_on)
-    changed, v = imgui.slider_float("Budget (MB)", float(t.budget_mb), 0.0, 256.0, "%.2f MB",
-                                    imgui.SliderFlags_.logarithmic)
+    changed, v = imgui.slider_float(
+        "Budget (MB)", float(t.budget_mb), 0.0, 256.0, "%.2f MB", imgui.SliderFlags_.logarithmic
+    )
     if changed:
         t.budget_mb = max(float(v), 0.0)
     imgui.end_disabled()
 
     changed, t.detail = imgui.checkbox("Detail textures", t.detail)
     _help("Store incoming light where a material has a detail texture; the shader multiplies both.")
-    changed, v = imgui.slider_float("Exposure", float(t.exposure), 0.05, 20.0, "%.2f", imgui.SliderFlags_.logarithmic)
+    changed, v = imgui.slider_float(
+        "Exposure", float(t.exposure), 0.05, 20.0, "%.2f", imgui.SliderFlags_.logarithmic
+    )
     if changed:
         t.exposure = float(v)
     changed, state.tonemap = imgui.checkbox("sRGB tone map", state.tonemap)
@@ -126,8 +129,9 @@ def view_panel(state: AppState) -> None:
             state.split = float(v)
         imgui.text_colored(DIM, "mesh left, IAT right; drag the line in the view")
     if state.mode == "diff":
-        changed, v = imgui.slider_float("Diff gain", float(state.diff_gain), 1.0, 256.0, "x%.0f",
-                                        imgui.SliderFlags_.logarithmic)
+        changed, v = imgui.slider_float(
+            "Diff gain", float(state.diff_gain), 1.0, 256.0, "x%.0f", imgui.SliderFlags_.logarithmic
+        )
         if changed:
             state.diff_gain = float(v)
         imgui.text_colored(DIM, "|mesh - IAT| x gain")
@@ -208,9 +212,13 @@ def stats_panel(state: AppState) -> None:
     h = state.frame_history()
     recent = h[-60:]
     mean = float(recent.mean()) if recent.size else 0.0
-    imgui.text(f"{state.fps:5.1f} fps   {mean:5.1f} ms/frame   max {float(recent.max()) if recent.size else 0:5.1f} ms")
-    if h.size and implot.begin_plot("##frametimes", ImVec2(-1, hello_imgui.em_size(7.0)),
-                                    implot.Flags_.no_legend | implot.Flags_.no_mouse_text):
+    worst = float(recent.max()) if recent.size else 0.0
+    imgui.text(f"{state.fps:5.1f} fps   {mean:5.1f} ms/frame   max {worst:5.1f} ms")
+    if h.size and implot.begin_plot(
+        "##frametimes",
+        ImVec2(-1, hello_imgui.em_size(7.0)),
+        implot.Flags_.no_legend | implot.Flags_.no_mouse_text,
+    ):
         implot.setup_axes("", "ms", implot.AxisFlags_.no_tick_labels, 0)
         top = max(50.0, float(h.max()) * 1.1)
         implot.setup_axes_limits(0, max(len(h) - 1, 1), 0, top, implot.Cond_.always)
@@ -221,7 +229,9 @@ def stats_panel(state: AppState) -> None:
         implot.end_plot()
 
     mem = state.memory
-    if imgui.begin_table("counts", 3, imgui.TableFlags_.borders_inner_h | imgui.TableFlags_.sizing_stretch_prop):
+    if imgui.begin_table(
+        "counts", 3, imgui.TableFlags_.borders_inner_h | imgui.TableFlags_.sizing_stretch_prop
+    ):
         imgui.table_setup_column("")
         imgui.table_setup_column("triangles")
         imgui.table_setup_column("draw calls")
@@ -229,9 +239,16 @@ def stats_panel(state: AppState) -> None:
         rows = [("Mesh", state.mesh_triangles, 1 if state.loaded else 0)]
         if mem:
             rows.append(("IAT", state.iat_triangles, mem.get("draw_calls", 0)))
-            rows.append(("  mesh part", mem.get("triangles_mesh_part", 0), int(mem.get("triangles_mesh_part", 0) > 0)))
-            rows.append(("  textured", mem.get("triangles_textured_part", 0),
-                         mem.get("draw_calls", 0) - int(mem.get("triangles_mesh_part", 0) > 0)))
+            rows.append(
+                ("  mesh part", mem.get("triangles_mesh_part", 0), int(mem.get("triangles_mesh_part", 0) > 0))
+            )
+            rows.append(
+                (
+                    "  textured",
+                    mem.get("triangles_textured_part", 0),
+                    mem.get("draw_calls", 0) - int(mem.get("triangles_mesh_part", 0) > 0),
+                )
+            )
         for name, tris, calls in rows:
             imgui.table_next_row()
             imgui.table_next_column()
@@ -245,7 +262,9 @@ def stats_panel(state: AppState) -> None:
         imgui.text(f"IAT / mesh triangles: {state.iat_triangles / state.mesh_triangles:.3f}")
     rs = state.render_stats
     if rs:
-        imgui.text_colored(DIM, f"last frame drew {rs.get('triangles', 0):,} triangles in {rs.get('draw_calls', 0)} calls")
+        imgui.text_colored(
+            DIM, f"last frame drew {rs.get('triangles', 0):,} triangles in {rs.get('draw_calls', 0)} calls"
+        )
 
     imgui.separator()
     used = float(mem.get("texture_bytes", 0)) if mem else 0.0
@@ -256,12 +275,15 @@ def stats_panel(state: AppState) -> None:
     imgui.text("Texture memory")
     _bar(frac, label, RED if (over or (budget <= 0 and used > 0 and state.tuning.budget_on)) else None)
     if mem:
-        imgui.text(f"Atlas utilisation   {mem.get('pages', 0)} page(s) {mem.get('page_width', 0)}x{mem.get('page_height', 0)}")
+        pages = f"{mem.get('pages', 0)} page(s) {mem.get('page_width', 0)}x{mem.get('page_height', 0)}"
+        imgui.text(f"Atlas utilisation   {pages}")
         _bar(float(mem.get("utilisation", 0.0)), f"{100 * float(mem.get('utilisation', 0.0)):.0f} %")
         pt, pm = int(mem.get("patches_textured", 0)), int(mem.get("patches_meshed", 0))
         imgui.text(f"Patches textured {pt:,}   meshed {pm:,}")
         _bar(pt / max(pt + pm, 1), f"{pt} / {pt + pm}", GREEN)
-        imgui.text_colored(DIM, f"vertex + index bytes {_mb(mem.get('vertex_bytes', 0) + mem.get('index_bytes', 0))}")
+        imgui.text_colored(
+            DIM, f"vertex + index bytes {_mb(mem.get('vertex_bytes', 0) + mem.get('index_bytes', 0))}"
+        )
 
     imgui.separator()
     solve = _seconds(state.solve_seconds) if state.loaded else "-"
@@ -290,13 +312,20 @@ def stats_panel(state: AppState) -> None:
 _file_fields = {"open": "", "export": "", "solution": ""}
 
 
+def _path_input(label: str, key: str) -> None:
+    imgui.set_next_item_width(-hello_imgui.em_size(6.0))
+    _, _file_fields[key] = imgui.input_text(label, _file_fields[key])
+
+
 def file_panel(state: AppState) -> None:
     imgui.text_wrapped(f"Open: {state.model_path or '(nothing)'}")
     if not _file_fields["open"]:
         _file_fields["open"] = state.model_path
-    _, _file_fields["open"] = imgui.input_text("Model or solution", _file_fields["open"])
+    _path_input("File to open", "open")
+    imgui.begin_disabled(state.opening)
     if imgui.button("Open") and _file_fields["open"].strip():
         state.request_open = _file_fields["open"].strip()
+    imgui.end_disabled()
     if has_native_dialogs():
         imgui.same_line()
         if imgui.button("Browse..."):
@@ -306,22 +335,27 @@ def file_panel(state: AppState) -> None:
     if changed:
         o.max_depth = int(v)
     _help("max_depth of the radiosity solve for models opened from now on")
-    changed, v = imgui.slider_float("Tolerance", float(o.tolerance), 0.005, 0.5, "%.3f", imgui.SliderFlags_.logarithmic)
+    changed, v = imgui.slider_float(
+        "Tolerance", float(o.tolerance), 0.005, 0.5, "%.3f", imgui.SliderFlags_.logarithmic
+    )
     if changed:
         o.tolerance = float(v)
     changed, state.use_cache = imgui.checkbox("Use solution cache", state.use_cache)
+    _help("Solved models are kept (by file content and options) so they reopen at once.")
 
     imgui.separator()
     if not _file_fields["export"] and state.model_path:
-        _file_fields["export"] = str(Path(state.model_path).with_name(Path(state.model_path).stem + "-iat.glb"))
-    _, _file_fields["export"] = imgui.input_text("GLB file", _file_fields["export"])
+        _file_fields["export"] = str(
+            Path(state.model_path).with_name(Path(state.model_path).stem + "-iat.glb")
+        )
+    _path_input("GLB file", "export")
     imgui.begin_disabled(state.baked is None)
     if imgui.button("Export GLB") and _file_fields["export"].strip():
         state.request_export = _file_fields["export"].strip()
     imgui.end_disabled()
     if not _file_fields["solution"] and state.model_path:
         _file_fields["solution"] = str(Path(state.model_path).with_suffix(".npz"))
-    _, _file_fields["solution"] = imgui.input_text("Solution file", _file_fields["solution"])
+    _path_input("Solution file", "solution")
     imgui.begin_disabled(state.solution is None)
     if imgui.button("Save solution") and _file_fields["solution"].strip():
         state.request_save_solution = _file_fields["solution"].strip()
@@ -365,8 +399,10 @@ def menus(state: AppState) -> None:
             if native:
                 open_dialog(state)
             else:
-                _focus("File")
-                state.set_status("no native file dialog here (install zenity): type the path in the File panel")
+                _focus("Model")
+                state.set_status(
+                    "no native file dialog here (install zenity): type the path in the Model panel"
+                )
         if imgui.menu_item_simple("Open the Cornell box"):
             from .state import default_model
 
@@ -375,7 +411,7 @@ def menus(state: AppState) -> None:
             if native:
                 export_dialog(state)
             else:
-                _focus("File")
+                _focus("Model")
         if imgui.menu_item_simple("Save camera paths", enabled=bool(state.model_path and state.paths)):
             state.request_save_paths = True
         if imgui.menu_item_simple("Screenshot", "F12"):
@@ -410,10 +446,13 @@ def error_window(state: AppState) -> None:
     if not state.error:
         return
     vp = imgui.get_main_viewport()
-    imgui.set_next_window_pos(ImVec2(vp.work_pos.x + vp.work_size.x * 0.5, vp.work_pos.y + 40),
-                              imgui.Cond_.always, ImVec2(0.5, 0.0))
+    imgui.set_next_window_pos(
+        ImVec2(vp.work_pos.x + vp.work_size.x * 0.5, vp.work_pos.y + 40), imgui.Cond_.always, ImVec2(0.5, 0.0)
+    )
     imgui.set_next_window_size_constraints(ImVec2(300, 0), ImVec2(vp.work_size.x * 0.8, 400))
-    flags = imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_docking
+    flags = (
+        imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_collapse | imgui.WindowFlags_.no_docking
+    )
     opened, keep = imgui.begin("Error", True, flags)
     if opened:
         imgui.push_style_color(imgui.Col_.text, ImVec4(1.0, 0.45, 0.4, 1.0))

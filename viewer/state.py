@@ -536,7 +536,10 @@ class AppState:
         self.path_name = name
 
     def stop_playback(self) -> None:
+        """Stop playing; walking goes on from the last pose shown."""
         p, self.player = self.player, None
+        if p is not None and self.nav is not None and self.camera is not None:
+            self.nav.set_camera(self.camera)
         if p is not None and self.play_frame_ms:
             f = np.asarray(self.play_frame_ms)
             self.set_status(

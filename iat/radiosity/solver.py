@@ -451,7 +451,7 @@ class _Shooter:
     def inside(self, pts: np.ndarray) -> np.ndarray:
         """(...) bool: points (..., 3) on the plane inside the convex polygon."""
         ok = np.ones(pts.shape[:-1], dtype=bool)
-        for o, en in zip(self.edge_o, self.edge_n):
+        for o, en in zip(self.edge_o, self.edge_n, strict=True):
             ok &= (pts - o) @ en <= self.tol * np.linalg.norm(en)
         return ok
 
@@ -472,7 +472,7 @@ class _Shooter:
                 disc = np.sqrt(np.clip(k1 * k1 - 4 * k0 * k2, 0.0, None))
                 v1, v2 = (-k1 - disc) / (2 * k2), (-k1 + disc) / (2 * k2)
                 v = np.where((v1 >= -1e-9) & (v1 <= 1 + 1e-9), v1, v2)
-            den = e[None] + v[..., None] * g if np.ndim(v) else e + v * g
+            den = e + v[..., None] * g
             u = np.einsum("...c,...c->...", h - v[..., None] * f, den) / np.maximum(
                 np.einsum("...c,...c->...", den, den), 1e-300
             )
