@@ -30,9 +30,9 @@ import math
 import os
 import platform
 import time
+from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -63,6 +63,7 @@ REPORT_FIGURE3 = {
     "pool": ("pool", 84384, 8.6, 39865, 15.0, 2.76),
 }
 _REPORT_BY_MODEL = {v[0]: k for k, v in REPORT_FIGURE3.items()}
+_REPORT_FIELDS = ("model", "triangles_mesh", "fps_mesh", "triangles_iat", "fps_iat", "texture_mb")
 
 
 # -- models and solutions ----------------------------------------------------------------------
@@ -101,7 +102,7 @@ def cached_solve(model: str | Path, options=None, cache_dir: str | Path = DEFAUL
     info : ``{"load_s", "solve_s", "cached", "cache_file"}``; ``solve_s`` is the time the
     solve took when it ran (read from the solution's stats when cached).
     """
-    from .radiosity import SolveOptions, Solution, solve
+    from .radiosity import Solution, SolveOptions, solve
     from .scene import load_scene
 
     options = SolveOptions() if options is None else options
@@ -226,7 +227,12 @@ class FrameTimer:
 
 
 def frame_rates(
-    renderer, cameras: list[Camera], size: tuple[int, int], modes=("mesh", "iat"), repeats: int = 2, warmup: int = 2
+    renderer,
+    cameras: list[Camera],
+    size: tuple[int, int],
+    modes=("mesh", "iat"),
+    repeats: int = 2,
+    warmup: int = 2,
 ) -> dict:
     """Frames per second per mode: ``len(cameras) / best round time``, rounds interleaved across modes.
 
@@ -420,7 +426,7 @@ def bench_model(
     progress: Progress | None = None,
 ) -> dict:
     """One model's row of the benchmark (see :func:`run_bench` for the fields)."""
-    from .bake import Baker, BakePolicy
+    from .bake import BakePolicy, Baker
     from .render import Renderer
 
     def step(frac: float, msg: str) -> None:
@@ -646,8 +652,7 @@ def run_bench(
             "models": rows,
             "skipped": skipped,
             "report_figure3": {
-                k: dict(zip(("model", "triangles_mesh", "fps_mesh", "triangles_iat", "fps_iat", "texture_mb"), v))
-                for k, v in REPORT_FIGURE3.items()
+                k: dict(zip(_REPORT_FIELDS, v, strict=True)) for k, v in REPORT_FIGURE3.items()
             },
         }
     )
@@ -704,7 +709,11 @@ def format_table(result: dict) -> str:
     shown = {row["report"]["name"] for row in result["models"] if row.get("report")}
     rest = [k for k in REPORT_FIGURE3 if k not in shown]
     if rest:
-        lines += ["", "The report's Figure 3 (SGI Onyx Reality Engine 2, Performer), models not run here:", ""]
+        lines += [
+            "",
+            "The report's Figure 3 (SGI Onyx Reality Engine 2, Performer), models not run here:",
+            "",
+        ]
         lines += ["| name | triangles | fps | texture MB |", "|---|---|---|---|"]
         for k in rest:
             _, tm, fm, ti, fi, mb = REPORT_FIGURE3[k]
@@ -721,7 +730,17 @@ def format_table(result: dict) -> str:
         f"speed-up {big}",
     ]
     head2 += [f"speed-up {tiny}"] if tiny else []
-    head2 += ["PSNR dB (worst)", "FLIP (max)", "seam max", "solve", "bake", "re-bake", "load scene", "upload mesh", "upload IAT"]
+    head2 += [
+        "PSNR dB (worst)",
+        "FLIP (max)",
+        "seam max",
+        "solve",
+        "bake",
+        "re-bake",
+        "load scene",
+        "upload mesh",
+        "upload IAT",
+    ]
     lines += ["| " + " | ".join(head2) + " |", "|" + "|".join(["---"] * len(head2)) + "|"]
     for row in result["models"]:
         fr = row["frame_rate"]

@@ -4,13 +4,14 @@ For every model, every solver tolerance and every ``threshold x scale x method``
 bake of that solution (plus the plain mesh of each solution), one point:
 
 - error: mean FLIP over a few camera-path frames against the *finest bake*
-  (threshold 0, scale 1, method scan, of the tightest-tolerance solution); also
-  against that solution's mesh, and against a Mitsuba path-traced reference
-  where one is made (the Cornell box by default);
+  (threshold 0, scale 1, method scan, of the tightest-tolerance solution), and
+  against a Mitsuba path-traced reference where one is made (the Cornell box by
+  default); PSNR against the finest bake and against that solution's mesh;
 - GPU memory: texture bytes (the bake's memory report: atlas pages, mip chain and
   waste included) plus vertex and index bytes as the renderer uploads them
   (texture memory alone would put the all-mesh points at zero);
-- frame time: the mean over the camera path drawn offscreen, ``ctx.finish()`` after each frame.
+- frame time: the mean over the camera path drawn offscreen, ``ctx.finish()`` after each
+  frame (best of two rounds).
 
 The Pareto front (points that no other point beats on both error and cost) is
 marked, per cost axis. One row of panels per model; the same data as JSON next
@@ -22,9 +23,9 @@ from __future__ import annotations
 import json
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -37,8 +38,8 @@ from .bench import (
     _texture_bytes,
     cached_solve,
     default_models,
-    limit_flip_threads,
     interpolate_path,
+    limit_flip_threads,
     machine_info,
     path_poses,
     pick,
@@ -105,7 +106,10 @@ def _psnr(images, refs, exposures) -> float:
     """PSNR over all frames, peak = each frame's display white (1 / exposure); capped at 200 dB."""
     from .bench import _psnr_from
 
-    v = [float(np.mean((a.astype(np.float64) - b) ** 2)) * e * e for a, b, e in zip(images, refs, exposures, strict=True)]
+    v = [
+        float(np.mean((a.astype(np.float64) - b) ** 2)) * e * e
+        for a, b, e in zip(images, refs, exposures, strict=True)
+    ]
     return _psnr_from(float(np.mean(v)))
 
 
@@ -150,7 +154,7 @@ def chart_model(
 
     # solutions (cached), tightest tolerance first: its finest bake is the common reference
     sols = []
-    for k, tol in enumerate(tols):
+    for tol in tols:
         step(done / n_steps, f"solve tolerance {tol:g}")
         scene, sol, info = cached_solve(model, replace(base, tolerance=tol), cache_dir)
         sols.append((tol, scene, sol, info))
@@ -168,7 +172,7 @@ def chart_model(
 
         def frame_ms(mode: str) -> float:
             timer.run(cams[:1], mode)  # warm-up
-            return 1000.0 * timer.run(cams, mode) / len(cams)
+            return 1000.0 * min(timer.run(cams, mode) for _ in range(2)) / len(cams)
 
         try:
             # the finest bake of the tightest solution, its mesh, and the path-traced reference
@@ -289,8 +293,13 @@ def _references(scene, cams, size, spp: int, cache_dir) -> tuple[list | None, di
     try:
         t0 = time.perf_counter()
         imgs = [render_reference_cached(scene, c, size, spp, Path(cache_dir) / "refs") for c in cams]
-        return imgs, {"renderer": "mitsuba3", "variant": mitsuba_variant(), "spp": spp,
-                      "frames": len(cams), "time_s": time.perf_counter() - t0}
+        return imgs, {
+            "renderer": "mitsuba3",
+            "variant": mitsuba_variant(),
+            "spp": spp,
+            "frames": len(cams),
+            "time_s": time.perf_counter() - t0,
+        }
     except ImportError as e:
         log.warning("no path-traced reference: %s", e)
         return None, None
@@ -391,6 +400,7 @@ def _write_json(path: Path, data: dict) -> None:
     tmp.replace(path)
 
 
+_GPU_LABEL = "GPU memory, MB (textures + geometry)"
 _METHOD_COLOURS = {"bilinear": "tab:blue", "scan": "tab:orange", "bicubic": "tab:green"}
 _TOL_MARKERS = ["o", "s", "^", "D", "v", "P"]
 
@@ -402,16 +412,18 @@ def plot(result: dict, out: str | Path) -> Path:
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
+    from matplotlib.ticker import NullFormatter
 
     rows = result["models"]
     n = max(len(rows), 1)
-    fig, axes = plt.subplots(n, 3, figsize=(15, 3.6 * n), squeeze=False)
+    row_h, head_h = 3.4, 0.75  # inches
+    fig, axes = plt.subplots(n, 3, figsize=(16, row_h * n + head_h), squeeze=False)
     tols = sorted({p["tolerance"] for row in rows for p in row["points"]})
     marker = {t: _TOL_MARKERS[i % len(_TOL_MARKERS)] for i, t in enumerate(tols)}
     panels = [
-        ("gpu_mb", "flip_vs_finest", "GPU memory, MB (textures + geometry)", "FLIP vs finest bake"),
+        ("gpu_mb", "flip_vs_finest", _GPU_LABEL, "FLIP vs finest bake"),
         ("frame_ms", "flip_vs_finest", "frame time, ms", "FLIP vs finest bake"),
-        ("gpu_mb", "flip_vs_reference", "GPU memory, MB (textures + geometry)", "FLIP vs path-traced reference"),
+        ("gpu_mb", "flip_vs_reference", _GPU_LABEL, "FLIP vs path-traced reference"),
     ]
     size = result["settings"]["size"]
     for r, row in enumerate(rows):
@@ -420,25 +432,65 @@ def plot(result: dict, out: str | Path) -> Path:
             ax = axes[r][c]
             have = [p for p in pts if p.get(yk) is not None]
             if not have:
-                ax.text(0.5, 0.5, "no path-traced reference for this model", ha="center", va="center",
-                        transform=ax.transAxes, color="0.4")
+                ax.text(
+                    0.5,
+                    0.5,
+                    "no path-traced reference for this model",
+                    ha="center",
+                    va="center",
+                    transform=ax.transAxes,
+                    color="0.4",
+                )
                 ax.set_title(f"{row['model']}: {yl}", fontsize=9)
                 ax.set_xticks([])
                 ax.set_yticks([])
                 continue
             for p in have:
                 if p["kind"] == "mesh":
-                    ax.scatter(p[xk], p[yk], marker=marker[p["tolerance"]], facecolor="none",
-                               edgecolor="black", s=60, linewidths=1.4, zorder=3)
+                    ax.scatter(
+                        p[xk],
+                        p[yk],
+                        marker=marker[p["tolerance"]],
+                        facecolor="none",
+                        edgecolor="black",
+                        s=60,
+                        linewidths=1.4,
+                        zorder=3,
+                    )
                 else:
-                    ax.scatter(p[xk], p[yk], marker=marker[p["tolerance"]], color=_METHOD_COLOURS.get(p["method"], "0.5"),
-                               s=14 + 26 * p["scale"], alpha=0.75, linewidths=0, zorder=2)
+                    ax.scatter(
+                        p[xk],
+                        p[yk],
+                        marker=marker[p["tolerance"]],
+                        color=_METHOD_COLOURS.get(p["method"], "0.5"),
+                        s=14 + 26 * p["scale"],
+                        alpha=0.75,
+                        linewidths=0,
+                        zorder=2,
+                    )
             front = sorted((pts[i] for i in row["pareto"].get(f"{yk}/{xk}", [])), key=lambda p: p[xk])
             if front:
-                ax.step([p[xk] for p in front], [p[yk] for p in front], where="post", color="crimson", lw=1.2, zorder=4)
-                ax.scatter([p[xk] for p in front], [p[yk] for p in front], s=70, facecolor="none",
-                           edgecolor="crimson", lw=1.2, zorder=5)
-            ax.set_xscale("log")
+                ax.step(
+                    [p[xk] for p in front],
+                    [p[yk] for p in front],
+                    where="post",
+                    color="crimson",
+                    lw=1.2,
+                    zorder=4,
+                )
+                ax.scatter(
+                    [p[xk] for p in front],
+                    [p[yk] for p in front],
+                    s=70,
+                    facecolor="none",
+                    edgecolor="crimson",
+                    lw=1.2,
+                    zorder=5,
+                )
+            xs = [p[xk] for p in have]
+            if min(xs) > 0 and max(xs) / min(xs) > 20:
+                ax.set_xscale("log")
+                ax.xaxis.set_minor_formatter(NullFormatter())
             ax.set_xlabel(xl, fontsize=8)
             ax.set_ylabel(yl, fontsize=8)
             ax.set_title(f"{row['model']}: {yl} against {xl.split(',')[0]}", fontsize=9)
@@ -447,17 +499,33 @@ def plot(result: dict, out: str | Path) -> Path:
     handles = [Line2D([], [], marker="o", ls="", color=col, label=m) for m, col in _METHOD_COLOURS.items()]
     handles += [Line2D([], [], marker=marker[t], ls="", color="0.3", label=f"tolerance {t:g}") for t in tols]
     handles += [
-        Line2D([], [], marker="o", ls="", markerfacecolor="none", markeredgecolor="black", label="mesh (no texture)"),
+        Line2D(
+            [],
+            [],
+            marker="o",
+            ls="",
+            markerfacecolor="none",
+            markeredgecolor="black",
+            label="mesh (no texture)",
+        ),
         Line2D([], [], color="crimson", marker="o", markerfacecolor="none", label="Pareto front"),
     ]
-    fig.legend(handles=handles, loc="upper center", ncol=len(handles), fontsize=8, frameon=False)
+    top = 1.0 - head_h / (row_h * n + head_h)
     fig.suptitle(
-        f"IAT speed against accuracy ({size[0]}x{size[1]}, {result['machine'].get('gl_renderer', '')}); "
-        "marker size = texture scale",
+        f"IAT speed against accuracy: {size[0]}x{size[1]}, {result['machine'].get('gl_renderer', '')}; "
+        "colour = method, marker = solver tolerance, marker size = texture scale",
         fontsize=10,
-        y=0.999,
+        y=1.0 - 0.15 / (row_h * n + head_h),
     )
-    fig.tight_layout(rect=(0, 0, 1, 1 - 0.35 / (3.6 * n)))
+    fig.legend(
+        handles=handles,
+        loc="upper center",
+        ncol=len(handles),
+        fontsize=8,
+        frameon=False,
+        bbox_to_anchor=(0.5, 1.0 - 0.4 / (row_h * n + head_h)),
+    )
+    fig.tight_layout(rect=(0, 0, 1, top))
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=90)
@@ -476,8 +544,9 @@ def main(args) -> int:
         raise OptionError(f"--frames must be >= 1, got {frames}")
     bar = ProgressBar("chart")
     try:
-        result = run_chart(list(getattr(args, "models", []) or []), args.output, size=size, frames=frames,
-                           progress=bar)
+        result = run_chart(
+            list(getattr(args, "models", []) or []), args.output, size=size, frames=frames, progress=bar
+        )
     finally:
         bar.close()
     print(f"wrote {result['png']} and {result['json']}")

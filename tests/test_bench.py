@@ -212,8 +212,15 @@ def test_chart_files_and_panels(chart_result):
         # full sweep at the tightest tolerance, scan only at the others, one mesh per tolerance
         assert len(pts) == 2 * 2 * 2 + 2 * 2 * 1 + 2
         assert sum(p["kind"] == "mesh" for p in pts) == 2
-        finest = [p for p in pts if p["kind"] == "iat" and p["tolerance"] == 0.05 and p["threshold"] == 0
-                  and p["scale"] == 1.0 and p["method"] == "scan"]
+        finest = [
+            p
+            for p in pts
+            if p["kind"] == "iat"
+            and p["tolerance"] == 0.05
+            and p["threshold"] == 0
+            and p["scale"] == 1.0
+            and p["method"] == "scan"
+        ]
         assert finest and finest[0]["flip_vs_finest"] == pytest.approx(0.0, abs=1e-6)
         for p in pts:
             assert p["gpu_mb"] > 0 and p["frame_ms"] > 0 and p["triangles"] > 0
@@ -222,10 +229,19 @@ def test_chart_files_and_panels(chart_result):
         has_ref = m["model"] == "cornell_box"
         assert all((p["flip_vs_reference"] is not None) == has_ref for p in pts)
         assert (m["reference"] is not None) == has_ref
+
         # halving the texture scale shrinks texture memory
-        def tex(s, t=0):
-            return next(p["texture_mb"] for p in pts if p["kind"] == "iat" and p["tolerance"] == 0.05
-                        and p["threshold"] == t and p["scale"] == s and p["method"] == "scan")
+        def tex(s, t=0, pts=pts):
+            return next(
+                p["texture_mb"]
+                for p in pts
+                if p["kind"] == "iat"
+                and p["tolerance"] == 0.05
+                and p["threshold"] == t
+                and p["scale"] == s
+                and p["method"] == "scan"
+            )
+
         assert tex(0.5) < tex(1.0)
 
 
@@ -238,7 +254,7 @@ def test_chart_pareto_points_are_non_dominated(chart_result):
             err, cost = key.split("/")
             valid = [i for i, p in enumerate(pts) if p[err] is not None]
 
-            def dominates(j, i, err=err, cost=cost):
+            def dominates(j, i, err=err, cost=cost, pts=pts):
                 a, b = pts[j], pts[i]
                 return a[cost] <= b[cost] and a[err] <= b[err] and (a[cost] < b[cost] or a[err] < b[err])
 
@@ -256,7 +272,9 @@ def test_bench_main_json_and_markdown(tmp_path, monkeypatch, capsys):
     import functools
 
     monkeypatch.chdir(tmp_path)  # the default solution cache is ./out/bench
-    monkeypatch.setattr(bench, "run_bench", functools.partial(bench.run_bench, solve_options=SMALL, repeats=1))
+    monkeypatch.setattr(
+        bench, "run_bench", functools.partial(bench.run_bench, solve_options=SMALL, repeats=1)
+    )
     args = argparse.Namespace(models=["cornell_box"], json=True, frames=2, size="48x32")
     assert bench.main(args) == 0
     data = json.loads(capsys.readouterr().out)

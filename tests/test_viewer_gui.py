@@ -55,6 +55,7 @@ def relaxed_watchdog() -> None:
 
 @pytest.mark.gui
 @needs_display
+@pytest.mark.filterwarnings("ignore:Ignoring chunk:UserWarning")  # pygltflib on the broken file
 def test_viewer_end_to_end(tmp_path, monkeypatch):
     from imgui_bundle import ImVec2, imgui
     from imgui_bundle.immapp import testing
@@ -165,8 +166,13 @@ def test_viewer_end_to_end(tmp_path, monkeypatch):
         settle(ctx)
         got["budget_off"] = s.memory["texture_bytes"]
 
-        # a broken file: typed into the Model panel and opened
+        # export the bake on screen as GLB (written on a background thread)
         ctx.window_focus("//Model")
+        ctx.item_input_value("//**/GLB file", str(tmp_path / "export.glb"))
+        ctx.item_click("//**/Export GLB")
+        wait_until(ctx, lambda: "exported" in s.status or s.error, 60, "the export")
+        got["export_status"] = s.status
+        # a broken file: typed into the Model panel and opened
         ctx.item_input_value("//**/File to open", str(broken))
         ctx.item_click("//**/Open")
         wait_until(ctx, lambda: bool(s.error), 30, "the error")
@@ -222,6 +228,10 @@ def test_viewer_end_to_end(tmp_path, monkeypatch):
     on, budget_mb, tex, too_small, tris = got["budget"]
     assert on and budget_mb == pytest.approx(0.01) and tex == 0 and too_small and tris == mesh_tris
     assert got["budget_off"] > 0
+
+    assert "exported" in got["export_status"]
+    glb = (tmp_path / "export.glb").read_bytes()
+    assert glb[:4] == b"glTF" and len(glb) > 1000
 
     # the broken file: named in the error, shown in a window; the last good model stays and renders
     assert "broken.glb" in got["error"]

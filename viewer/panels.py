@@ -63,7 +63,7 @@ def tuning_panel(state: AppState) -> None:
     auto = t.budget_on
     resolved = state.baked.policy if state.baked is not None else None
 
-    imgui.begin_disabled(auto)
+    imgui.begin_disabled(auto or not state.loaded)
     top = state.deepest + 1
     shown = resolved.threshold if (auto and resolved is not None) else t.threshold
     changed, v = imgui.slider_int("Threshold", int(shown), 0, max(top, 1))
@@ -259,7 +259,8 @@ def stats_panel(state: AppState) -> None:
             imgui.text(f"{calls}")
         imgui.end_table()
     if state.mesh_triangles and mem:
-        imgui.text(f"IAT / mesh triangles: {state.iat_triangles / state.mesh_triangles:.3f}")
+        fewer = state.mesh_triangles / max(state.iat_triangles, 1)
+        imgui.text(f"IAT draws {fewer:,.0f}x fewer triangles than the mesh")
     rs = state.render_stats
     if rs:
         imgui.text_colored(
@@ -309,22 +310,19 @@ def stats_panel(state: AppState) -> None:
 
 
 # -- File -------------------------------------------------------------------------------------------
-_file_fields = {"open": "", "export": "", "solution": ""}
-
-
-def _path_input(label: str, key: str) -> None:
+def _path_input(state: AppState, label: str, key: str) -> None:
     imgui.set_next_item_width(-hello_imgui.em_size(6.0))
-    _, _file_fields[key] = imgui.input_text(label, _file_fields[key])
+    _, state.file_fields[key] = imgui.input_text(label, state.file_fields[key])
 
 
 def file_panel(state: AppState) -> None:
     imgui.text_wrapped(f"Open: {state.model_path or '(nothing)'}")
-    if not _file_fields["open"]:
-        _file_fields["open"] = state.model_path
-    _path_input("File to open", "open")
+    if not state.file_fields["open"]:
+        state.file_fields["open"] = state.model_path
+    _path_input(state, "File to open", "open")
     imgui.begin_disabled(state.opening)
-    if imgui.button("Open") and _file_fields["open"].strip():
-        state.request_open = _file_fields["open"].strip()
+    if imgui.button("Open") and state.file_fields["open"].strip():
+        state.request_open = state.file_fields["open"].strip()
     imgui.end_disabled()
     if has_native_dialogs():
         imgui.same_line()
@@ -344,21 +342,21 @@ def file_panel(state: AppState) -> None:
     _help("Solved models are kept (by file content and options) so they reopen at once.")
 
     imgui.separator()
-    if not _file_fields["export"] and state.model_path:
-        _file_fields["export"] = str(
+    if not state.file_fields["export"] and state.model_path:
+        state.file_fields["export"] = str(
             Path(state.model_path).with_name(Path(state.model_path).stem + "-iat.glb")
         )
-    _path_input("GLB file", "export")
+    _path_input(state, "GLB file", "export")
     imgui.begin_disabled(state.baked is None)
-    if imgui.button("Export GLB") and _file_fields["export"].strip():
-        state.request_export = _file_fields["export"].strip()
+    if imgui.button("Export GLB") and state.file_fields["export"].strip():
+        state.request_export = state.file_fields["export"].strip()
     imgui.end_disabled()
-    if not _file_fields["solution"] and state.model_path:
-        _file_fields["solution"] = str(Path(state.model_path).with_suffix(".npz"))
-    _path_input("Solution file", "solution")
+    if not state.file_fields["solution"] and state.model_path:
+        state.file_fields["solution"] = str(Path(state.model_path).with_suffix(".npz"))
+    _path_input(state, "Solution file", "solution")
     imgui.begin_disabled(state.solution is None)
-    if imgui.button("Save solution") and _file_fields["solution"].strip():
-        state.request_save_solution = _file_fields["solution"].strip()
+    if imgui.button("Save solution") and state.file_fields["solution"].strip():
+        state.request_save_solution = state.file_fields["solution"].strip()
     imgui.end_disabled()
 
 
@@ -386,7 +384,7 @@ def poll_dialogs(state: AppState) -> None:
         res = d.result()
         if kind == "open" and res:
             state.request_open = res[0]
-            _file_fields["open"] = res[0]
+            state.file_fields["open"] = res[0]
         elif kind == "export" and res:
             state.request_export = res if res.lower().endswith(".glb") else res + ".glb"
 

@@ -422,8 +422,9 @@ class AppState:
     request_save_paths: bool = False
     request_save_solution: str | None = None
     request_quit: bool = False
-    # file dialogs in flight (portable_file_dialogs objects)
+    # file dialogs in flight (portable_file_dialogs objects) and the Model panel's path fields
     dialogs: dict = field(default_factory=dict)
+    file_fields: dict = field(default_factory=lambda: {"open": "", "export": "", "solution": ""})
 
     # -- derived ---------------------------------------------------------------------------
     def policy(self) -> BakePolicy:

@@ -53,7 +53,7 @@ RAY_EPS = 1e-4
 #: in-plane nudge of form-factor points off shared edges, fraction of the scene diagonal
 FF_EPS = 1e-6
 #: receivers per vectorised gather block (bounds the (n, samples, 3) temporaries)
-GATHER_BLOCK = 16384
+GATHER_BLOCK = 4096
 
 Progress = Callable[[float, str], "bool | None"]
 
@@ -225,30 +225,11 @@ class _Context:
         a, b = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
         return np.stack([(a.ravel() + rng.random(m * m)) / m, (b.ravel() + rng.random(m * m)) / m], axis=1)
 
-    def points(self, s: int, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Points at (u, v) in [0, 1)^2 of patch s (area-uniform warp on triangles).
-
-        Returns (..., 3) points on the surface, (..., 3) ray targets offset off its
-        front side and towards its centre, and their lattice parameters u, v (...,).
-        """
-        if not self.is_quad[s]:  # area-uniform square -> triangle warp, in lattice parameters
-            su = np.sqrt(u)
-            u, v = su * (1 - v), su * v
-        pts = qt.lattice_to_world(
-            self.corners, self.is_quad, np.full(u.size, s), u.ravel(), v.ravel(), 1
-        ).reshape(u.shape + (3,))
-        return pts, self.targets(s, pts), u, v
-
-    def targets(self, s: int, pts: np.ndarray) -> np.ndarray:
-        """(..., 3) ray targets for points on patch s: off its front side and towards its centre."""
-        toward = self.centre[s] - pts
-        tl = np.linalg.norm(toward, axis=-1, keepdims=True)
-        target = pts + np.minimum(self.eps_ray, 0.5 * tl) * toward / np.maximum(tl, 1e-300)
-        return target + self.eps_ray * self.normal[s]
-
     def shooter(self, s: int) -> "_Shooter":
         if s not in self._shooters:
-            self._shooters[s] = _Shooter(self.corners[s], bool(self.is_quad[s]), self.normal[s], float(self.area[s]))
+            self._shooters[s] = _Shooter(
+                self.corners[s], bool(self.is_quad[s]), self.normal[s], float(self.area[s]), self.eps_ray
+            )
         return self._shooters[s]
 
     # -- kernels --------------------------------------------------------------
@@ -262,18 +243,29 @@ class _Context:
         front = np.einsum("nc,c->n", geo.ff - self.centre[s], self.normal[s]) > 0.1 * self.eps_ff
         return np.flatnonzero(front & sees[geo.patch])
 
-    def gather(self, s: int, geo: _Geo, m: int, shot: int = 0, field: np.ndarray | None = None) -> np.ndarray:
+    def gather(
+        self,
+        s: int,
+        geo: _Geo,
+        m: int,
+        shot: int = 0,
+        field: np.ndarray | None = None,
+        field_mean: np.ndarray | None = None,
+    ) -> np.ndarray:
         """Form factor x visible fraction from every vertex of ``geo`` to patch s.
 
         m : the sample patterns are m x m; shot : index of this patch's shot (0 for the
         direct pass), which fixes the jitter (a vertex re-evaluated later gets the same value).
         field : None for a uniform shooter, returning (n,) ``F * vis``; or the shooter's
-        radiance on its lattice, (N+1, N+1, 3), returning (n, 3) ``F * <vis * L>``: a
-        shooter need not be uniform.
+        radiance on its lattice, (N+1, N+1, 3), with its area mean ``field_mean`` (3,),
+        returning (n, 3) the radiance-weighted form factor: a shooter need not be uniform.
 
-        ``F`` is the analytic form factor; ``<vis * L>`` is a ratio of two estimates of
-        the kernel integral (with and without ``vis * L``) from the same samples, so it is
-        exact for an unoccluded uniform shooter. The samples combine two strategies with
+        ``F`` is the analytic form factor and ``vis`` the ratio of two estimates of the
+        kernel integral (with and without visibility) from the same samples, so it is
+        exact for an unoccluded shooter. A field is split into its mean, weighted by
+        ``F * vis``, and the rest, whose kernel integral is estimated directly (not as a
+        ratio: a ratio of correlated estimates loses energy when the field is bright where
+        the kernel is large). The samples combine two strategies with
         the balance heuristic: m x m stratified points on the shooter's area (good when the
         shooter is far and small) and m x m cosine-distributed directions from the receiver
         that hit the shooter (good when it is near and large: the kernel is then too peaked
@@ -289,61 +281,61 @@ class _Context:
         idx, f = idx[keep], f[keep]
         sh = self.shooter(s)
         pat = self.pattern(s, m, shot)
-        n_a = n_d = len(pat)
+        n_s = len(pat)
         salt = (int(self.opts.seed) * 1_000_003 + int(s)) * 1_000_003 + int(shot)
+        flat = None if field is None else field.reshape(-1, 3)
         for a in range(0, len(idx), GATHER_BLOCK):
             ii = idx[a : a + GATHER_BLOCK]
-            x, nr, o = geo.ff[ii], geo.normal[ii], geo.origin[ii]
+            b = len(ii)
+            x, nr = geo.ff[ii], geo.normal[ii]
             rot = _hash_uniform(geo.key[ii], salt, 4)
-            # area samples
-            uv = (pat[None, :, :] + rot[:, None, :2]) % 1.0
-            ya, yra, ua, va = self.points(s, uv[..., 0], uv[..., 1])  # (b, S, ...)
+            # area samples: stratified (u, v), rotated per receiver
+            ua = (pat[None, :, 0] + rot[:, :1]) % 1.0
+            va = (pat[None, :, 1] + rot[:, 1:2]) % 1.0
+            if not sh.is_quad:  # area-uniform square -> triangle warp
+                su = np.sqrt(ua)
+                ua, va = su * (1 - va), su * va
+            ya = sh.point(ua, va)  # (b, S, 3)
             da = ya - x[:, None, :]
             r2 = np.einsum("bsc,bsc->bs", da, da)
-            ka = (
-                np.clip(np.einsum("bsc,bc->bs", da, nr), 0, None)
-                * np.clip(-(da @ sh.normal), 0, None)
-                / (np.pi * np.maximum(r2, 1e-300) ** 2)
-            )
+            ka = np.maximum(np.einsum("bsc,bc->bs", da, nr), 0.0) * np.maximum(-(da @ sh.normal), 0.0)
+            ka /= np.pi * np.maximum(r2 * r2, 1e-300)
             pa = 1.0 / sh.jacobian(ua, va)
-            wa = ka / (n_a * pa + n_d * ka)
-            # direction samples (cosine-weighted about the receiver normal)
-            dv = (pat[None, :, :] + rot[:, None, 2:]) % 1.0
-            t1, t2 = self.tangent[geo.patch[ii]].transpose(1, 0, 2)  # (b, 3) each
-            dx, dy = _concentric(dv[..., 0], dv[..., 1])
-            dz = np.sqrt(np.clip(1.0 - dx * dx - dy * dy, 0.0, None))
+            wa = ka / (n_s * pa + n_s * ka + 1e-300)
+            # direction samples: cosine-distributed about the receiver normal, kept where they hit
+            t1, t2 = self.tangent[geo.patch[ii], 0], self.tangent[geo.patch[ii], 1]
+            dx, dy = _concentric((pat[None, :, 0] + rot[:, 2:3]) % 1.0, (pat[None, :, 1] + rot[:, 3:4]) % 1.0)
+            dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
             w = dx[..., None] * t1[:, None, :] + dy[..., None] * t2[:, None, :] + dz[..., None] * nr[:, None, :]
             den = w @ sh.normal  # < 0: towards the front of the shooter
-            t = np.einsum("bc,c->b", sh.origin - x, sh.normal)[:, None] / np.where(den < 0, den, -1.0)
+            t = ((sh.origin - x) @ sh.normal)[:, None] / np.where(den < 0, den, -1.0)
             yd = x[:, None, :] + t[..., None] * w
             hit = (den < -1e-12) & (t > 0) & sh.inside(yd)
             ud, vd = sh.uv(yd)
             kd = np.where(hit, dz * -den / (np.pi * np.maximum(t * t, 1e-300)), 0.0)
-            pd = 1.0 / sh.jacobian(ud, vd)
-            wd = np.where(hit, kd / (n_a * pd + n_d * kd + 1e-300), 0.0)
-            ydr = self.targets(s, yd)
-            # visibility of both sets of samples
-            y_all = np.concatenate([yra, ydr], axis=1)
-            wt = np.concatenate([wa, wd], axis=1)
-            need = wt > 0
-            vis = np.zeros(need.shape, dtype=bool)
-            if need.any():
-                dr = y_all - o[:, None, :]
-                r = np.linalg.norm(dr, axis=2)
-                ob = np.broadcast_to(o[:, None, :], dr.shape)
-                rn = r[need]
-                vis[need] = ~self.vis.occluded(
-                    ob[need], dr[need] / np.maximum(rn, 1e-300)[:, None], np.maximum(rn - 0.5 * self.eps_ray, 0.0)
-                )
+            wd = np.where(hit, kd / (n_s / sh.jacobian(ud, vd) + n_s * kd + 1e-300), 0.0)
+            # visibility of the samples that count
+            wt = np.concatenate([wa, wd], axis=1)  # (b, 2S)
             wsum = wt.sum(axis=1)
-            wv = wt * vis / np.where(wsum > 0, wsum, 1.0)[:, None]  # (b, 2S), rows sum to the visible fraction
-            fb = f[a : a + GATHER_BLOCK]
+            bi, si = np.nonzero(wt > 0)
+            if len(bi) == 0:
+                continue
+            pts = np.concatenate([ya, yd], axis=1)[bi, si]
+            o = geo.origin[ii][bi]
+            dr = sh.target(pts) - o
+            r = np.sqrt(np.einsum("kc,kc->k", dr, dr))
+            vis = ~self.vis.occluded(o, dr / np.maximum(r, 1e-300)[:, None], np.maximum(r - 0.5 * self.eps_ray, 0.0))
+            wraw = wt[bi, si] * vis  # MIS estimate of the visible kernel integral, per sample
+            frac = np.bincount(bi, weights=wraw, minlength=b) / np.where(wsum > 0, wsum, 1.0)
+            fv = f[a : a + GATHER_BLOCK] * frac  # analytic F x visible fraction
             if field is None:
-                out[ii] = fb * wv.sum(axis=1)
+                out[ii] = fv
             else:
-                lu = np.concatenate([ua, ud], axis=1)
-                lv = np.concatenate([va, vd], axis=1)
-                out[ii] = fb[:, None] * np.einsum("bs,bsc->bc", wv, _sample_lattice(field, lu, lv))
+                lu = np.concatenate([ua, ud], axis=1)[bi, si]
+                lv = np.concatenate([va, vd], axis=1)[bi, si]
+                rest = (_sample_lattice(flat, field.shape[0] - 1, lu, lv) - field_mean) * wraw[:, None]
+                res = np.stack([np.bincount(bi, weights=rest[:, c], minlength=b) for c in range(3)], axis=1)
+                out[ii] = np.maximum(fv[:, None] * field_mean + res, 0.0)
         return out
 
     def light_irradiance(self, light, geo: _Geo) -> np.ndarray:
@@ -432,7 +424,7 @@ class _Shooter:
     Quads: ``p(u, v) = c0 + u e1 + v e2 + u v e3`` (bilinear); triangles: ``c0 + u e1 + v e2``.
     """
 
-    def __init__(self, corners: np.ndarray, is_quad: bool, normal: np.ndarray, area: float):
+    def __init__(self, corners: np.ndarray, is_quad: bool, normal: np.ndarray, area: float, eps: float):
         self.is_quad = is_quad
         self.normal = normal
         self.area = area
@@ -442,6 +434,11 @@ class _Shooter:
         self.e1 = corners[1] - corners[0]
         self.e2 = (corners[3] if is_quad else corners[2]) - corners[0]
         self.e3 = corners[0] - corners[1] + corners[2] - corners[3] if is_quad else np.zeros(3)
+        scale = max(np.linalg.norm(self.e1), np.linalg.norm(self.e2))
+        self.parallelogram = not is_quad or np.linalg.norm(self.e3) <= 1e-12 * scale
+        self.centre = c.mean(axis=0)
+        self.eps = eps
+        self.shrink = eps / max(float(np.linalg.norm(c - self.centre, axis=1).max()), 1e-300)
         t1 = self.e1 / max(np.linalg.norm(self.e1), 1e-300)
         self.frame = np.stack([t1, np.cross(normal, t1)])  # (2, 3) in-plane axes
         self.edge_n = np.cross(np.roll(c, -1, axis=0) - c, normal)  # (k, 3) outward edge normals
@@ -483,31 +480,48 @@ class _Shooter:
             u, v = u / tot, v / tot
         return u, v
 
+    def point(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(..., 3) points at lattice parameters (u, v)."""
+        u, v = np.asarray(u)[..., None], np.asarray(v)[..., None]
+        p = self.origin + u * self.e1 + v * self.e2
+        return p if self.parallelogram else p + (u * v) * self.e3
+
+    def target(self, pts: np.ndarray) -> np.ndarray:
+        """(..., 3) ray targets for points on the patch: ``eps`` off its front, and pulled
+        towards its centre by at most ``eps`` (so a target at a corner is not inside a
+        neighbouring wall)."""
+        return pts + self.eps * self.normal + self.shrink * (self.centre - pts)
+
     def jacobian(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Area per unit (u, v) of the area samples at lattice parameters (u, v)."""
-        if not self.is_quad:  # the square -> triangle warp is area-uniform
+        if self.parallelogram:  # constant; the square -> triangle warp is area-uniform too
             return np.full(np.shape(u), self.area)
         du = self.e1 + np.asarray(v)[..., None] * self.e3
         dv = self.e2 + np.asarray(u)[..., None] * self.e3
         return np.maximum(np.linalg.norm(np.cross(du, dv), axis=-1), 1e-300)
 
 
-def _sample_lattice(grid: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(..., 3) piecewise-linear interpolation of a lattice grid (N+1, N+1, 3) at lattice parameters u, v.
+def _sample_lattice(flat: np.ndarray, n: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(k, 3) piecewise-linear interpolation at lattice parameters u, v (k,) of a lattice
+    grid given flat, ((N+1)**2, 3).
 
     Each lattice cell is split along its anti-diagonal, so triangle patches (points with
     ``u + v <= 1``) only ever read lattice points inside the triangle.
     """
-    n = grid.shape[0] - 1
-    x, y = np.asarray(u) * n, np.asarray(v) * n
-    a = np.clip(np.floor(x), 0, n - 1).astype(np.int64)
-    b = np.clip(np.floor(y), 0, n - 1).astype(np.int64)
-    fx, fy = (x - a)[..., None], (y - b)[..., None]
+    x, y = u * n, v * n
+    a = np.minimum(x.astype(np.int64), n - 1)
+    b = np.minimum(y.astype(np.int64), n - 1)
+    fx, fy = x - a, y - b
+    i00 = a * (n + 1) + b
     lower = fx + fy <= 1.0
-    g00, g10, g01, g11 = grid[a, b], grid[a + 1, b], grid[a, b + 1], grid[a + 1, b + 1]
-    lo = g00 * (1 - fx - fy) + g10 * fx + g01 * fy
-    hi = g11 * (fx + fy - 1) + g01 * (1 - fx) + g10 * (1 - fy)
-    return np.where(lower, lo, hi)
+    # lower: g00 (1-fx-fy) + g10 fx + g01 fy ; upper: g11 (fx+fy-1) + g01 (1-fx) + g10 (1-fy)
+    w_base = np.where(lower, 1.0 - fx - fy, fx + fy - 1.0)
+    i_base = np.where(lower, i00, i00 + n + 2)
+    w10 = np.where(lower, fx, 1.0 - fy)
+    w01 = np.where(lower, fy, 1.0 - fx)
+    return (
+        flat[i_base] * w_base[:, None] + flat[i00 + n + 1] * w10[:, None] + flat[i00 + 1] * w01[:, None]
+    )
 
 
 class _Lattice:
@@ -835,6 +849,8 @@ def _solve(scene, opts: SolveOptions, progress, vis: Visibility, t_start: float)
     set_mesh(forest, keys)
     u_start = max(float(patch_power(unshot_v).sum()), 1e-300)
 
+    p_first = [None]  # power of the first (strongest) shot
+
     def shoot(span):
         """Shoot until converged or max_shots, updating ``reflected`` and ``unshot_v`` in place."""
         nonlocal shots, reflected, unshot_v
@@ -853,7 +869,12 @@ def _solve(scene, opts: SolveOptions, progress, vis: Visibility, t_start: float)
             s = int(np.argmax(power))
             a, b = mesh["start"][s], mesh["start"][s + 1]
             field = mesh["lattice"].grid(s, unshot_v)
-            g = ctx.gather(s, mesh["geo"], m_side, int(shot_index[s]), field)
+            field_mean = mesh["M"][s] @ unshot_v
+            # fewer samples for faint shots: their noise matters less (sqrt keeps power / m flat-ish)
+            if p_first[0] is None:
+                p_first[0] = float(power[s])
+            m = max(2, min(m_side, round(m_side * math.sqrt(float(power[s]) / p_first[0]))))
+            g = ctx.gather(s, mesh["geo"], m, int(shot_index[s]), field, np.ravel(field_mean))
             shot_index[s] += 1
             shots += 1
             unshot_v[a:b] = 0.0
@@ -880,6 +901,7 @@ def _solve(scene, opts: SolveOptions, progress, vis: Visibility, t_start: float)
         lattice_b = mesh["lattice"]
         sources = [p for p in range(P) if shot_index[p] > 1]
         grids = {p: lattice_b.grid(p, shot_field) for p in sources}
+        means = mesh["M"] @ shot_field
 
         def evaluate_total(new: np.ndarray) -> np.ndarray:
             out = direct_cache.get(new)
@@ -890,7 +912,7 @@ def _solve(scene, opts: SolveOptions, progress, vis: Visibility, t_start: float)
                 geo = ctx.geometry(new)
                 rho = ctx.albedo[geo.patch]
                 for p in sources:
-                    out += rho * ctx.gather(p, geo, m_side, int(shot_index[p]), grids[p])
+                    out += rho * ctx.gather(p, geo, m_side, int(shot_index[p]), grids[p], means[p])
                     check()
             return out
 
