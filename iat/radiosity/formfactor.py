@@ -61,7 +61,7 @@ def point_polygon(points: np.ndarray, normals: np.ndarray, polygon: np.ndarray) 
 
 
 def _point_polygon_block(x: np.ndarray, nrm: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    n, k = len(x), len(poly)
+    n = len(x)
     if n == 0:
         return np.zeros(0)
     r = poly[None, :, :] - x[:, None, :]  # (n, k, 3)

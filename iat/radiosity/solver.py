@@ -2,38 +2,51 @@
 
 The classic substructured scheme: *receivers* are the mesh vertices (one
 radiance value per lattice vertex, the values the baker turns into texels),
-*shooters* are the root patches (each with one unshot radiance ``dL``).
+*shooters* are the root patches, each shooting the radiance field its vertices
+have received and not yet shot (``unshot``, interpolated over its leaves).
 
-1. **Meshing by direct light.** The direct radiance at every vertex (emission,
+A. **Meshing by direct light.** The direct radiance at every vertex (emission,
    plus light reflected from emissive patches and from point / spot lights, with
    ray-traced visibility) is evaluated *exactly* at each vertex. Elements whose
    corner and probe values (edge midpoints and centre, which become the
    children's corners) vary by more than ``tolerance`` are split, the forest is
-   2:1 balanced, and only the new vertices are evaluated (cached by key). This
+   2:1 balanced, and only the new points are evaluated (cached by key). This
    repeats until nothing splits. No vertex is ever interpolated from its
-   parent, so the mesh carries no bias; the bias that interpolation *would*
-   have caused is measured and reported (``stats['interpolation_bias']``).
-2. **Progressive refinement on the settled mesh.** Each patch's unshot radiance
-   starts as the area-weighted mean of its reflected direct radiance (the
-   emitters' emission was shot in step 1). The patch with the most unshot power
-   shoots: every vertex in front of it receives ``rho * dL * F * vis`` with
-   ``F`` the analytic point-to-polygon form factor and ``vis`` the
-   cosine-weighted visible fraction of jittered, stratified points on the
-   shooter. Receiving patches gain the area-weighted mean of what their
-   vertices received as new unshot radiance. Stop when the unshot power falls
-   below ``convergence`` times the emitted power, or after ``max_shots``.
+   parent; the bias that interpolation *would* have caused is measured and
+   reported (``stats['interpolation_bias']``: sum |parent-interpolated - exact|
+   over sum exact, luminance of reflected direct light, over the vertices made
+   after the first pass).
+B. **Progressive refinement on the settled mesh.** Each vertex's unshot
+   radiance starts as its reflected direct radiance (the emitters' emission was
+   shot in A). The patch with the most unshot power (pi x area x area-weighted
+   mean, from a sparse (P, V) averaging matrix) shoots: every vertex in front of
+   it receives ``rho * <F * vis * L>`` -- the analytic point-to-polygon form
+   factor (:mod:`.formfactor`) times the visible fraction and the shooter's
+   radiance, estimated from stratified samples on the shooter's area and
+   cosine-distributed directions from the vertex (multiple importance sampling,
+   see :meth:`_Context.gather`), with embreex shadow rays (:mod:`.visibility`).
+   Faint shots use fewer samples.
+C. **Refinement on the total radiance** (``refine_indirect``), once after the
+   first bounces (unshot below sqrt(convergence)) and once at convergence: the
+   same split test on direct + indirect radiance, so that surfaces lit only
+   indirectly get elements too. A new vertex gets its direct light and a gather
+   of everything each patch has shot so far (shots add linearly, so one gather
+   of their sum equals replaying them all): exact, never interpolated. Its
+   unshot radiance is what it received minus what its patch already shot from
+   there, so light a coarse element could not hold is shot again, not lost.
+   Shooting then continues to ``convergence`` (unshot power over emitted power).
 
-Because the mesh is settled before any shooting, every vertex receives every
-shot: the final values are unbiased with respect to the mesh (no late vertex
-misses early shots, the trap the design warns of).
+Because every vertex, early or late, receives every shot, the final values are
+unbiased with respect to the mesh: no late vertex misses early shots, the trap
+the design warns of.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from typing import Callable
 
 import numpy as np
 from scipy import sparse
@@ -65,17 +78,21 @@ class SolveOptions:
     max_depth : int, 0..12, typical 6. Deepest quad-tree level; the lattice has
         ``2**max_depth + 1`` points per patch side. Deeper resolves sharper shadows
         at up to 4x the elements (and texels) per level.
-    tolerance : float > 0, typical 0.05. Relative radiance variation (max - min over
-        an element's corners and probes, over their mean plus a small absolute floor)
-        that splits an element. Smaller means more elements and smoother gradients.
+    tolerance : float > 0, typical 0.05. Relative radiance variation that splits an
+        element (see ``criterion``), relative to the mean of its corners and probes plus
+        a small absolute floor (2 % of the scene's mean reflected radiance, so dark
+        corners do not split forever). Smaller: more elements, smoother gradients.
     min_element_size : float >= 0, default 0 (no limit). An element is not split
         when its children's longest edge would be shorter than this.
     convergence : float in (0, 1], typical 0.01. Stop shooting when the unshot
-        power is below this fraction of the emitted power (patches and lights).
-        Smaller costs more shots for the last, faint bounces.
-    samples : int 1..1024, typical 16. Jittered points (a square stratified grid,
-        rounded up to ``k*k``) on the shooter per receiver for visibility. More
-        samples give smoother penumbrae at proportionally more rays.
+        power is below this fraction of the emitted power (patches and lights); the
+        light left unshot is missing from the result (about that fraction, amplified
+        by interreflection). Smaller costs more shots for the last, faint bounces.
+    samples : int 1..1024, typical 16. Per receiver and shot: that many stratified
+        points on the shooter's area and as many cosine-distributed directions (both
+        rounded up to ``k*k``), rotated per vertex. More samples: less noise on dim,
+        indirectly lit surfaces and smoother penumbrae, at proportionally more rays
+        (64 takes about twice the time of 16 on the Cornell box).
     max_shots : int >= 0, default 20000. Hard cap on progressive shots (0: direct
         light only).
     max_edge : float > 0 or None. Recorded for the loader's pre-split of long
@@ -84,16 +101,16 @@ class SolveOptions:
     seed : int, default 0. Seed of the sample jitter; a solve is deterministic.
     criterion : "variation" (default) or "interpolation". What ``tolerance`` bounds:
         "variation" splits on max - min over the element's corners and probes (the
-        classic test; smooth gradients refine too, so meshes are dense and safe);
-        "interpolation" splits on the largest gap between a probe and the value the
-        corners interpolate there (linear gradients stay coarse; about half the
-        elements for the same mean error on the Cornell box, but features that
-        fall between the probes can be missed).
-    refine_indirect : bool, default True. After shooting, refine once more on the
-        total (direct + indirect) radiance, so that surfaces lit only indirectly (a
-        ceiling) get elements too; every new vertex gets its direct light and every
-        shot made so far replayed exactly (never interpolated). Costs one gather per
-        shot over the new vertices.
+        classic test; smooth gradients refine too, so lit surfaces go deep: 56 k
+        elements on the Cornell box at depth 6); "interpolation" splits on the
+        largest gap between a probe and the value the corners interpolate there
+        (linear gradients stay coarse, shadows still go deep; fewer elements for the
+        same error, but a feature that falls between the probes can be missed).
+    refine_indirect : bool, default True. Refine on the total (direct + indirect)
+        radiance after the first bounces and at convergence, so that surfaces lit
+        only indirectly (a ceiling) get elements too; new vertices gather everything
+        shot so far (exact, never interpolated). Without it such surfaces keep their
+        direct-light mesh and their light is under-counted (5-10 % darker rooms).
     """
 
     max_depth: int = 6
@@ -107,7 +124,7 @@ class SolveOptions:
     criterion: str = "variation"
     refine_indirect: bool = True
 
-    def validate(self) -> "SolveOptions":
+    def validate(self) -> SolveOptions:
         """Raise :class:`iat.errors.OptionError` on an out-of-range option; return self."""
 
         def bad(name, why):
@@ -169,8 +186,10 @@ class _Geo:
     ff: np.ndarray  # (n, 3) form-factor point, nudged into its own patch
     origin: np.ndarray  # (n, 3) ray origin, off the surface
 
-    def take(self, idx) -> "_Geo":
-        return _Geo(self.key[idx], self.patch[idx], self.pos[idx], self.normal[idx], self.ff[idx], self.origin[idx])
+    def take(self, idx) -> _Geo:
+        return _Geo(
+            self.key[idx], self.patch[idx], self.pos[idx], self.normal[idx], self.ff[idx], self.origin[idx]
+        )
 
 
 class _Context:
@@ -225,7 +244,7 @@ class _Context:
         a, b = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
         return np.stack([(a.ravel() + rng.random(m * m)) / m, (b.ravel() + rng.random(m * m)) / m], axis=1)
 
-    def shooter(self, s: int) -> "_Shooter":
+    def shooter(self, s: int) -> _Shooter:
         if s not in self._shooters:
             self._shooters[s] = _Shooter(
                 self.corners[s], bool(self.is_quad[s]), self.normal[s], float(self.area[s]), self.eps_ray
@@ -262,10 +281,12 @@ class _Context:
 
         ``F`` is the analytic form factor and ``vis`` the ratio of two estimates of the
         kernel integral (with and without visibility) from the same samples, so it is
-        exact for an unoccluded shooter. A field is split into its mean, weighted by
-        ``F * vis``, and the rest, whose kernel integral is estimated directly (not as a
-        ratio: a ratio of correlated estimates loses energy when the field is bright where
-        the kernel is large). The samples combine two strategies with
+        exact for an unoccluded shooter. A field is split into a constant ``c`` (a control
+        variate: the field at the receiver's foot on the shooter for near receivers, the
+        shooter's mean for far ones), weighted by ``F * vis``, and the rest, whose kernel
+        integral is estimated directly (not as a ratio: a ratio of correlated estimates
+        loses energy when the field is bright where the kernel is large). The samples
+        combine two strategies with
         the balance heuristic: m x m stratified points on the shooter's area (good when the
         shooter is far and small) and m x m cosine-distributed directions from the receiver
         that hit the shooter (good when it is near and large: the kernel is then too peaked
@@ -306,7 +327,11 @@ class _Context:
             t1, t2 = self.tangent[geo.patch[ii], 0], self.tangent[geo.patch[ii], 1]
             dx, dy = _concentric((pat[None, :, 0] + rot[:, 2:3]) % 1.0, (pat[None, :, 1] + rot[:, 3:4]) % 1.0)
             dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
-            w = dx[..., None] * t1[:, None, :] + dy[..., None] * t2[:, None, :] + dz[..., None] * nr[:, None, :]
+            w = (
+                dx[..., None] * t1[:, None, :]
+                + dy[..., None] * t2[:, None, :]
+                + dz[..., None] * nr[:, None, :]
+            )
             den = w @ sh.normal  # < 0: towards the front of the shooter
             t = ((sh.origin - x) @ sh.normal)[:, None] / np.where(den < 0, den, -1.0)
             yd = x[:, None, :] + t[..., None] * w
@@ -324,18 +349,27 @@ class _Context:
             o = geo.origin[ii][bi]
             dr = sh.target(pts) - o
             r = np.sqrt(np.einsum("kc,kc->k", dr, dr))
-            vis = ~self.vis.occluded(o, dr / np.maximum(r, 1e-300)[:, None], np.maximum(r - 0.5 * self.eps_ray, 0.0))
+            vis = ~self.vis.occluded(
+                o, dr / np.maximum(r, 1e-300)[:, None], np.maximum(r - 0.5 * self.eps_ray, 0.0)
+            )
             wraw = wt[bi, si] * vis  # MIS estimate of the visible kernel integral, per sample
             frac = np.bincount(bi, weights=wraw, minlength=b) / np.where(wsum > 0, wsum, 1.0)
             fv = f[a : a + GATHER_BLOCK] * frac  # analytic F x visible fraction
             if field is None:
                 out[ii] = fv
             else:
+                nl = field.shape[0] - 1
+                # control variate: the field where the receiver's kernel peaks (its foot on the
+                # shooter) for near receivers, the shooter's mean for far ones
+                foot = x - ((x - sh.origin) @ sh.normal)[:, None] * sh.normal
+                fu, fw = sh.uv(foot)
+                near = np.minimum(1.0, 2.0 * f[a : a + GATHER_BLOCK])[:, None]
+                cv = near * _sample_lattice(flat, nl, fu, fw) + (1.0 - near) * field_mean  # (b, 3)
                 lu = np.concatenate([ua, ud], axis=1)[bi, si]
                 lv = np.concatenate([va, vd], axis=1)[bi, si]
-                rest = (_sample_lattice(flat, field.shape[0] - 1, lu, lv) - field_mean) * wraw[:, None]
+                rest = (_sample_lattice(flat, nl, lu, lv) - cv[bi]) * wraw[:, None]
                 res = np.stack([np.bincount(bi, weights=rest[:, c], minlength=b) for c in range(3)], axis=1)
-                out[ii] = np.maximum(fv[:, None] * field_mean + res, 0.0)
+                out[ii] = np.maximum(fv[:, None] * cv + res, 0.0)
         return out
 
     def light_irradiance(self, light, geo: _Geo) -> np.ndarray:
@@ -519,9 +553,7 @@ def _sample_lattice(flat: np.ndarray, n: int, u: np.ndarray, v: np.ndarray) -> n
     i_base = np.where(lower, i00, i00 + n + 2)
     w10 = np.where(lower, fx, 1.0 - fy)
     w01 = np.where(lower, fy, 1.0 - fx)
-    return (
-        flat[i_base] * w_base[:, None] + flat[i00 + n + 1] * w10[:, None] + flat[i00 + 1] * w01[:, None]
-    )
+    return flat[i_base] * w_base[:, None] + flat[i00 + n + 1] * w10[:, None] + flat[i00 + 1] * w01[:, None]
 
 
 class _Lattice:
@@ -550,7 +582,7 @@ class _Lattice:
         return self._offsets[level]
 
     def grid(self, p: int, values: np.ndarray) -> np.ndarray:
-        """(N+1, N+1, 3) values of patch p on its lattice, interpolated in its leaves from ``values`` (V, 3)."""
+        """(N+1, N+1, 3) values of patch p on its lattice, interpolated in its leaves from ``values``."""
         n, fo = self.n, self.forest
         g = np.zeros((n + 1, n + 1, 3))
         leaves = self.order[self.starts[p] : self.starts[p + 1]]
@@ -623,7 +655,12 @@ def _leaf_longest_edge(forest: qt.Forest, corners: np.ndarray) -> np.ndarray:
     """(L,) float64 longest world edge of each leaf."""
     c = qt.leaf_corner_lattice(forest)
     w = qt.lattice_to_world(
-        corners, forest.patch_is_quad, np.repeat(forest.leaf_patch, 4), c[..., 0].ravel(), c[..., 1].ravel(), forest.n
+        corners,
+        forest.patch_is_quad,
+        np.repeat(forest.leaf_patch, 4),
+        c[..., 0].ravel(),
+        c[..., 1].ravel(),
+        forest.n,
     ).reshape(-1, 4, 3)
     e = np.linalg.norm(np.roll(w, -1, axis=1) - w, axis=2)
     tri = ~forest.leaf_is_quad
@@ -762,7 +799,11 @@ def _refine(ctx: _Context, forest: qt.Forest, cache: _Cache, evaluate, report, l
             else:
                 slots = _probe_interp(sub)
                 ck = vy[:, :4]
-                interp = np.take_along_axis(ck, slots.reshape(len(ck), -1), axis=1).reshape(slots.shape).mean(axis=2)
+                interp = (
+                    np.take_along_axis(ck, slots.reshape(len(ck), -1), axis=1)
+                    .reshape(slots.shape)
+                    .mean(axis=2)
+                )
                 score = np.where(pvalid, np.abs(vy[:, 4:] - interp), 0.0).max(axis=1)
             split = score > opts.tolerance * (mean + eps_abs)
             if not split.any():
@@ -775,7 +816,9 @@ def _refine(ctx: _Context, forest: qt.Forest, cache: _Cache, evaluate, report, l
     return forest, passes, False
 
 
-def _interpolation_bias(keys: np.ndarray, old_keys: np.ndarray, cache: _Cache, ctx: _Context) -> tuple[float, int]:
+def _interpolation_bias(
+    keys: np.ndarray, old_keys: np.ndarray, cache: _Cache, ctx: _Context
+) -> tuple[float, int]:
     """Mean relative error (sum |interpolated - exact| / sum exact, luminance of reflected radiance)
     that parent interpolation would have given the vertices of ``keys`` not in ``old_keys``."""
     late = keys[qt.lookup(old_keys, keys) < 0]
@@ -851,12 +894,12 @@ def _solve(scene, opts: SolveOptions, progress, vis: Visibility, t_start: float)
 
     p_first = [None]  # power of the first (strongest) shot
 
-    def shoot(span):
-        """Shoot until converged or max_shots, updating ``reflected`` and ``unshot_v`` in place."""
+    def shoot(span, target):
+        """Shoot until the unshot power is below ``target`` or max_shots."""
         nonlocal shots, reflected, unshot_v
         if power0 <= 0 or len(mesh["keys"]) == 0:
             return
-        span_log = math.log(u_start / target) if u_start > target else 1.0
+        span_log = math.log(u_start / target) if u_start > target else 1.0  # progress on a log scale
         while shots < opts.max_shots:
             power = patch_power(unshot_v)
             total = float(power.sum())
@@ -882,26 +925,19 @@ def _solve(scene, opts: SolveOptions, progress, vis: Visibility, t_start: float)
             reflected += dv
             unshot_v += dv
 
-    t0 = time.perf_counter()
-    if not state["cancelled"]:
-        try:
-            shoot((0.2, 0.8))
-        except _Cancel:
-            pass
-    timings["shooting_s"] = time.perf_counter() - t0
-
-    # ---- C. refinement on the total radiance: new vertices gather everything shot so far ----
-    passes_c = 0
-    t0 = time.perf_counter()
-    if opts.refine_indirect and shots and not state["cancelled"]:
-        total_cache = _Cache(keys, reflected.copy())
-        # what each patch has shot so far (a sum of shots is linear: gathering it once equals
-        # replaying every shot, up to the sample jitter)
-        shot_field = np.maximum(reflected - unshot_v, 0.0)
+    def refine_total(label: str, span) -> None:
+        """Phase C: refine on the total radiance. New vertices get their direct light and a
+        gather of everything each patch has shot so far (exact: shots are linear, so one
+        gather of their sum equals replaying them all), never an interpolated value. Their
+        unshot radiance is what they received minus what their patch already shot from
+        there, so energy the coarser mesh could not hold is shot again, not lost."""
+        nonlocal forest, keys, reflected, unshot_v
+        shot_field = reflected - unshot_v
         lattice_b = mesh["lattice"]
         sources = [p for p in range(P) if shot_index[p] > 1]
         grids = {p: lattice_b.grid(p, shot_field) for p in sources}
         means = mesh["M"] @ shot_field
+        total_cache = _Cache(keys, reflected.copy())
 
         def evaluate_total(new: np.ndarray) -> np.ndarray:
             out = direct_cache.get(new)
@@ -912,34 +948,58 @@ def _solve(scene, opts: SolveOptions, progress, vis: Visibility, t_start: float)
                 geo = ctx.geometry(new)
                 rho = ctx.albedo[geo.patch]
                 for p in sources:
-                    out += rho * ctx.gather(p, geo, m_side, int(shot_index[p]), grids[p], means[p])
+                    jitter = int(shot_index[p]) + 1_000_000 * (1 + stats["refine_passes"])
+                    out += rho * ctx.gather(p, geo, m_side, jitter, grids[p], means[p])
                     check()
             return out
 
         old_keys = keys
-        forest, passes_c, _ = _refine(ctx, forest, total_cache, evaluate_total, report, "refining", (0.8, 0.95))
+        forest, passes, _ = _refine(ctx, forest, total_cache, evaluate_total, report, label, span)
+        stats["refine_passes"] += passes
         keys = qt.vertex_keys(forest)
-        reflected = total_cache.get(keys)
+        if len(keys) == len(old_keys):
+            return
         b, bn = _interpolation_bias(keys, old_keys, total_cache, ctx)
-        stats["interpolation_bias_total"], stats["interpolation_bias_total_vertices"] = b, bn
-        # carry the (small) unshot remainder over to the refined mesh
-        p_new, i_new, j_new = qt.decode_key(keys, ctx.n)
+        n_old = stats["interpolation_bias_total_vertices"]
+        if bn:  # vertex-weighted mean over the refinement stages
+            stats["interpolation_bias_total"] = (stats["interpolation_bias_total"] * n_old + b * bn) / (
+                n_old + bn
+            )
+        stats["interpolation_bias_total_vertices"] = n_old + bn
         old_idx = qt.lookup(old_keys, keys)
         new_unshot = np.zeros((len(keys), 3))
         new_unshot[old_idx >= 0] = unshot_v[old_idx[old_idx >= 0]]
+        reflected = total_cache.get(keys)
+        p_new, i_new, j_new = qt.decode_key(keys, ctx.n)
         for p in np.unique(p_new[old_idx < 0]):
             sel = np.flatnonzero((old_idx < 0) & (p_new == p))
-            new_unshot[sel] = lattice_b.grid(int(p), unshot_v)[i_new[sel], j_new[sel]]
+            shot_here = grids[p][i_new[sel], j_new[sel]] if p in grids else 0.0
+            new_unshot[sel] = np.maximum(reflected[sel] - shot_here, 0.0)
         unshot_v = new_unshot
         set_mesh(forest, keys)
-        if not state["cancelled"]:
-            try:  # normally nothing left: B converged; further shots reach the refined mesh
-                shoot((0.95, 1.0))
-            except _Cancel:
-                pass
-    timings["refining_s"] = time.perf_counter() - t0
-    unshot_power = patch_power(unshot_v)
 
+    # stages: shoot the first bounces, refine, shoot to convergence, refine, finish
+    t_shoot = t_refine = 0.0
+    stats["refine_passes"] = 0
+    first_target = max(target, math.sqrt(opts.convergence) * power0)
+    plan = [("shoot", first_target, (0.2, 0.6)), ("refine", "refining", (0.6, 0.7))]
+    plan += [("shoot", target, (0.7, 0.85)), ("refine", "refining again", (0.85, 0.95))]
+    plan += [("shoot", target, (0.95, 1.0))]
+    try:
+        for kind, arg, span in plan:
+            if state["cancelled"]:
+                break
+            t0 = time.perf_counter()
+            if kind == "shoot":
+                shoot(span, arg)
+                t_shoot += time.perf_counter() - t0
+            elif opts.refine_indirect and shots:
+                refine_total(arg, span)
+                t_refine += time.perf_counter() - t0
+    except _Cancel:
+        pass
+    timings["shooting_s"], timings["refining_s"] = t_shoot, t_refine
+    unshot_power = patch_power(unshot_v)
 
     # ---- result ------------------------------------------------------------------
     vpatch = qt.decode_key(keys, ctx.n)[0]
@@ -974,7 +1034,6 @@ def _solve(scene, opts: SolveOptions, progress, vis: Visibility, t_start: float)
         "time_s": float(elapsed),
         **{k: float(v) for k, v in timings.items()},
         "mesh_passes": int(passes_a),
-        "refine_passes": int(passes_c),
         "unshot_fraction": unshot_fraction,
         "interpolation_bias": bias,
         "interpolation_bias_vertices": bias_n,
@@ -1000,7 +1059,7 @@ def _area_mean(forest: qt.Forest, keys: np.ndarray, kidx: np.ndarray, y: np.ndar
     return float((leaf_mean * la).sum() / max(la.sum(), 1e-300))
 
 
-def evaluate_direct(scene, positions_keys: np.ndarray, options: SolveOptions | None = None) -> np.ndarray:
+def evaluate_direct(scene, keys: np.ndarray, options: SolveOptions | None = None) -> np.ndarray:
     """(n, 3) reflected direct radiance at vertex keys, as the solver's meshing pass computes it.
 
     Exposed for tests and diagnostics (re-evaluating a solution's vertices exactly).
@@ -1008,4 +1067,4 @@ def evaluate_direct(scene, positions_keys: np.ndarray, options: SolveOptions | N
     opts = (SolveOptions() if options is None else options).validate()
     with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
         ctx = _Context(scene, opts, vis)
-        return ctx.direct(np.asarray(positions_keys, dtype=np.int64), lambda: None)
+        return ctx.direct(np.asarray(keys, dtype=np.int64), lambda: None)

@@ -98,7 +98,9 @@ class Visibility:
             for a in bounds:
                 out[a : a + c] = self._run(o[a : a + c], d[a : a + c], t[a : a + c]) == 0
         else:
-            futs = [(a, self._pool.submit(self._run, o[a : a + c], d[a : a + c], t[a : a + c])) for a in bounds]
+            futs = [
+                (a, self._pool.submit(self._run, o[a : a + c], d[a : a + c], t[a : a + c])) for a in bounds
+            ]
             for a, f in futs:
                 out[a : a + c] = f.result() == 0
         with self._lock:

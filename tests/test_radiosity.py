@@ -1,0 +1,370 @@
+"""The radiosity solver (iat.radiosity.solver) against physics, and its contracts."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from iat import quadtree as qt
+from iat.errors import OptionError, SolutionFileError
+from iat.radiosity import Solution, SolveOptions, solve
+from iat.radiosity.solver import LUMINANCE, _averaging_matrix, evaluate_direct
+from iat.scene import Light, Material, Scene
+
+
+# -- scenes built in memory ------------------------------------------------------------
+def _box_quads(lo, hi, k, inward):
+    """Faces of an axis-aligned box split into k x k quads: [(axis, side, i, j, (4, 3) corners)]."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    centre = (lo + hi) / 2
+    out = []
+    for axis in range(3):
+        a, b = [x for x in range(3) if x != axis]
+        ga, gb = np.linspace(lo[a], hi[a], k + 1), np.linspace(lo[b], hi[b], k + 1)
+        for side in (lo[axis], hi[axis]):
+            for i in range(k):
+                for j in range(k):
+                    q = np.zeros((4, 3))
+                    q[:, axis] = side
+                    q[:, a] = ga[[i, i + 1, i + 1, i]]
+                    q[:, b] = gb[[j, j, j + 1, j + 1]]
+                    normal = np.cross(q[2] - q[0], q[3] - q[1])
+                    if (normal @ (centre - q.mean(axis=0)) > 0) != inward:
+                        q = q[[0, 3, 2, 1]]
+                    out.append((axis, side, i, j, q))
+    return out
+
+
+def _scene(polys, material_ids, materials, lights=()):
+    verts, corners = [], []
+    for q in polys:
+        idx = list(range(len(verts), len(verts) + len(q)))
+        verts.extend(q)
+        corners.append(idx + [-1] * (4 - len(q)))
+    return Scene(np.array(verts), np.array(corners), np.array(material_ids), materials, lights=list(lights))
+
+
+def furnace_box(albedo, emission=1.0, k=2):
+    """A closed unit box, 6 k x k inward quads, all emitting and reflecting."""
+    quads = [q for *_, q in _box_quads([0, 0, 0], [1, 1, 1], k, True)]
+    mat = Material("grey", albedo=np.full(3, albedo), emission=np.full(3, emission))
+    return _scene(quads, [0] * len(quads), [mat])
+
+
+def lit_box(albedo=0.5):
+    """A closed unit box (3 x 3 quads a face) lit by its centre ceiling quad, with a block on the floor."""
+    polys, mats = [], []
+    for axis, side, i, j, q in _box_quads([0, 0, 0], [1, 1, 1], 3, True):
+        polys.append(q)
+        mats.append(1 if (axis == 1 and side == 1.0 and i == 1 and j == 1) else 0)
+    for axis, side, _, _, q in _box_quads([0.3, 0, 0.3], [0.6, 0.4, 0.6], 1, False):
+        if not (axis == 1 and side == 0.0):  # the block stands on the floor: no bottom
+            polys.append(q)
+            mats.append(0)
+    materials = [
+        Material("grey", albedo=np.full(3, albedo)),
+        Material("light", albedo=np.full(3, albedo), emission=np.full(3, 10.0)),
+    ]
+    return _scene(polys, mats, materials)
+
+
+def floor_scene(occluder: bool, light_height: float):
+    """A 2 x 2 floor (4 quads) under a point light, optionally with a square occluder halfway."""
+    polys = []
+    for i in range(2):
+        for j in range(2):
+            x0, z0 = i - 1.0, j - 1.0
+            polys.append(np.array([[x0, 0, z0], [x0, 0, z0 + 1], [x0 + 1, 0, z0 + 1], [x0 + 1, 0, z0]]))
+    if occluder:  # 0.5 x 0.5 at half the light's height, facing up
+        h = light_height / 2
+        polys.append(np.array([[-0.25, h, -0.25], [-0.25, h, 0.25], [0.25, h, 0.25], [0.25, h, -0.25]]))
+    light = Light(kind="point", position=[0.1, light_height, 0.05], intensity=light_height**2)
+    return _scene(polys, [0] * len(polys), [Material("white", albedo=np.full(3, 0.6))], [light])
+
+
+def triangle_box(albedo):
+    """A closed regular tetrahedron, inward triangles, all emitting (furnace with triangle patches)."""
+    v = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], dtype=float)
+    polys = []
+    for f in ([0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]):
+        t = v[f]
+        if np.cross(t[1] - t[0], t[2] - t[0]) @ (-t.mean(axis=0)) < 0:
+            t = t[[0, 2, 1]]
+        polys.append(t)
+    mat = Material("grey", albedo=np.full(3, albedo), emission=np.ones(3))
+    return _scene(polys, [0] * 4, [mat])
+
+
+def _reflected_power(sol: Solution, scene: Scene) -> np.ndarray:
+    """(3,) power reflected by all patches: pi x area x (area-weighted mean reflected radiance)."""
+    m = _averaging_matrix(sol.forest, sol.vert_key, sol.patch_corners, scene.patch_area)
+    patch = qt.decode_key(sol.vert_key, sol.n)[0]
+    refl = sol.vert_radiance.astype(np.float64) - scene.patch_emission[patch]
+    return (np.pi * (m @ refl) * scene.patch_area[:, None]).sum(axis=0)
+
+
+# -- physics --------------------------------------------------------------------------
+@pytest.mark.parametrize("albedo", [0.5, 0.8])
+def test_white_furnace(albedo):
+    sol = solve(furnace_box(albedo), SolveOptions(max_depth=2, convergence=1e-4))
+    expected = 1.0 / (1.0 - albedo)
+    assert np.allclose(sol.vert_radiance, expected, rtol=0.01)
+    assert sol.stats["unshot_fraction"] < 1e-4
+    assert sol.stats["elements"] == 24  # uniform light: nothing to split
+
+
+def test_white_furnace_with_triangles():
+    sol = solve(triangle_box(0.6), SolveOptions(max_depth=2, convergence=1e-4))
+    assert np.allclose(sol.vert_radiance, 1.0 / 0.4, rtol=0.01)
+
+
+def test_energy_balance_in_a_closed_lit_box():
+    """All light stays in the box: reflected power = rho / (1 - rho) x emitted, whatever the shadows."""
+    scene = lit_box(0.5)
+    sol = solve(scene, SolveOptions(max_depth=3, convergence=1e-3))
+    emitted = (np.pi * scene.patch_emission * scene.patch_area[:, None]).sum(axis=0)
+    ratio = _reflected_power(sol, scene) / (0.5 / 0.5 * emitted)
+    assert np.allclose(ratio, 1.0, atol=0.02), ratio
+    assert (sol.vert_radiance >= 0).all() and np.isfinite(sol.vert_radiance).all()
+
+
+@pytest.fixture(scope="module")
+def cornell():
+    from sample_models import cornell_box
+
+    polys, mats = [], []
+    for _, slot, faces in cornell_box.quads():
+        polys.extend(faces)
+        mats.extend([slot] * len(faces))
+    materials = [
+        Material("white", albedo=cornell_box.WHITE),
+        Material("red", albedo=cornell_box.RED),
+        Material("green", albedo=cornell_box.GREEN),
+        Material("light", albedo=cornell_box.LIGHT_ALBEDO, emission=cornell_box.LIGHT_RADIANCE),
+    ]
+    scene = _scene(polys, mats, materials)
+    return scene, solve(scene, SolveOptions(max_depth=4))
+
+
+def test_cornell_box_is_sane(cornell):
+    scene, sol = cornell
+    r = sol.vert_radiance
+    assert np.isfinite(r).all() and (r >= 0).all()
+    assert sol.stats["unshot_fraction"] <= 0.01
+    assert not sol.stats["cancelled"]
+    # energy: an open box reflects less than a closed one of the brightest albedo would
+    emitted = (np.pi * scene.patch_emission * scene.patch_area[:, None]).sum(axis=0)
+    rho = scene.patch_albedo.max(axis=0)
+    reflected = _reflected_power(sol, scene)
+    assert (reflected > 0).all() and (reflected <= rho / (1 - rho) * emitted).all()
+    # every patch reflects at most its albedo times what could reach it: the red wall stays red
+    red = np.flatnonzero(scene.patch_material == 1)
+    red_v = np.isin(qt.decode_key(sol.vert_key, sol.n)[0], red)
+    assert (r[red_v, 0] > 3 * r[red_v, 2]).all()
+    # consistent arrays, as the baker reads them
+    assert sol.vert_radiance.shape == (len(sol.vert_key), 3)
+    assert np.all(np.diff(sol.vert_key) > 0)
+    assert sol.tri_vertices.max() < len(sol.vert_key)
+    for key in (
+        "elements",
+        "vertices",
+        "triangles",
+        "shots",
+        "rays",
+        "rays_per_s",
+        "time_s",
+        "unshot_fraction",
+        "interpolation_bias",
+        "max_depth_reached",
+        "options",
+    ):
+        assert key in sol.stats
+    assert sol.stats["elements"] == len(sol.leaf_patch) and sol.stats["vertices"] == len(sol.vert_key)
+    json.dumps(sol.stats)
+
+
+# -- adaptivity and bias -----------------------------------------------------------------
+def _shadow_square(light, height, half):
+    """Half-width of the occluder's shadow on the floor (square centred under the light's x, z)."""
+    return half * light[1] / (light[1] - height)
+
+
+@pytest.mark.parametrize("criterion, margin", [("variation", 0.8), ("interpolation", 2.5)])
+def test_refines_most_at_the_shadow_edge(criterion, margin):
+    scene = floor_scene(occluder=True, light_height=2.0)
+    sol = solve(scene, SolveOptions(max_depth=6, max_shots=0, criterion=criterion))
+    f = sol.forest
+    floor = f.leaf_patch < 4
+    corners = qt.leaf_corner_lattice(f)[floor]
+    world = qt.lattice_to_world(
+        sol.patch_corners,
+        f.patch_is_quad,
+        np.repeat(f.leaf_patch[floor], 4),
+        corners[..., 0].ravel(),
+        corners[..., 1].ravel(),
+        f.n,
+    ).reshape(-1, 4, 3)
+    centre = world.mean(axis=1)
+    size = np.linalg.norm(world[:, 2] - world[:, 0], axis=1)
+    # the shadow of the occluder [-0.25, 0.25]^2 at h = 1 from the light at (0.1, 2, 0.05)
+    lx, lz = 0.1, 0.05
+    half = _shadow_square((lx, 2.0), 1.0, 0.25)
+    sx, sz = lx + (0 - lx) * 2, lz + (0 - lz) * 2  # shadow centre: projection of the occluder centre
+    d = np.maximum(np.abs(centre[:, 0] - sx), np.abs(centre[:, 2] - sz)) - half  # Chebyshev distance to edge
+    level = f.leaf_level[floor]
+    near = np.abs(d) < 0.5 * size
+    far = np.abs(d) > 0.4
+    assert near.any() and far.any()
+    assert level[near].min() >= 5
+    assert level[near].mean() > level[far].mean() + margin
+    assert sol.stats["max_depth_reached"] == 6
+    # the bias a naive solver would have had, interpolating new vertices from their parents
+    assert sol.stats["interpolation_bias"] > 0.01
+
+
+def test_uniformly_lit_floor_stays_shallow():
+    sol = solve(floor_scene(occluder=False, light_height=30.0), SolveOptions(max_depth=6, max_shots=0))
+    assert sol.stats["max_depth_reached"] == 0
+    assert sol.stats["elements"] == 4
+
+
+def test_vertex_values_are_exact_not_interpolated():
+    """Every vertex, however late it was created, holds its own direct evaluation."""
+    scene = floor_scene(occluder=True, light_height=2.0)
+    opts = SolveOptions(max_depth=5, max_shots=0)
+    sol = solve(scene, opts)
+    assert sol.stats["interpolation_bias"] > 0.01
+    direct = evaluate_direct(scene, sol.vert_key, opts)
+    emission = scene.patch_emission[qt.decode_key(sol.vert_key, sol.n)[0]]
+    assert np.allclose(sol.vert_radiance, (emission + direct).astype(np.float32), rtol=1e-6, atol=1e-7)
+    # and the values differ from what parent interpolation would have given (there is a shadow)
+    assert sol.stats["interpolation_bias_vertices"] > 100
+
+
+def test_point_light_matches_the_inverse_square_law():
+    scene = floor_scene(occluder=False, light_height=2.0)
+    sol = solve(scene, SolveOptions(max_depth=3, max_shots=0, tolerance=10.0))
+    pos = sol.vert_position
+    light = scene.lights[0]
+    d = light.position - pos
+    r2 = (d * d).sum(axis=1)
+    expected = 0.6 / np.pi * light.intensity * d[:, 1] / np.sqrt(r2) / r2
+    assert np.allclose(sol.vert_radiance[:, 0], expected, rtol=1e-5)
+
+
+def test_deterministic():
+    a = solve(lit_box(), SolveOptions(max_depth=2, seed=3))
+    b = solve(lit_box(), SolveOptions(max_depth=2, seed=3))
+    assert np.array_equal(a.vert_key, b.vert_key) and np.array_equal(a.vert_radiance, b.vert_radiance)
+
+
+# -- contracts: options, progress, cancel, files --------------------------------------------
+@pytest.mark.parametrize(
+    "kw, word",
+    [
+        ({"max_depth": -1}, "max_depth"),
+        ({"max_depth": 2.5}, "max_depth"),
+        ({"tolerance": 0}, "tolerance"),
+        ({"convergence": 1.5}, "convergence"),
+        ({"samples": 0}, "samples"),
+        ({"max_shots": -1}, "max_shots"),
+        ({"min_element_size": -0.1}, "min_element_size"),
+        ({"max_edge": 0}, "max_edge"),
+        ({"criterion": "magic"}, "criterion"),
+        ({"tolerance": float("nan")}, "tolerance"),
+    ],
+)
+def test_bad_options_raise(kw, word):
+    with pytest.raises(OptionError, match=word):
+        solve(furnace_box(0.5), SolveOptions(**kw))
+
+
+def test_options_to_dict_round_trip():
+    o = SolveOptions(max_depth=4, tolerance=0.1, seed=7)
+    d = o.to_dict()
+    assert SolveOptions(**json.loads(json.dumps(d))) == o
+
+
+def test_min_element_size_limits_splitting():
+    scene = floor_scene(occluder=True, light_height=2.0)
+    sol = solve(scene, SolveOptions(max_depth=6, max_shots=0, min_element_size=0.1))
+    # floor patches are 1 m: children of level-3 leaves would be 1/16 m < 0.1 m
+    assert sol.stats["max_depth_reached"] <= 3
+
+
+def test_progress_reports_and_finishes():
+    calls = []
+    solve(lit_box(), SolveOptions(max_depth=2), progress=lambda f, m: calls.append((f, m)) or True)
+    fractions = [f for f, _ in calls]
+    assert all(0.0 <= f <= 1.0 for f in fractions)
+    assert fractions[-1] == 1.0 and calls[-1][1].startswith("done")
+    assert any(m.startswith("meshing") for _, m in calls) and any(m.startswith("shooting") for _, m in calls)
+
+
+@pytest.mark.parametrize("stop_after", [1, 3, 8])
+def test_cancel_returns_a_consistent_partial_solution(stop_after, tmp_path):
+    count = [0]
+
+    def progress(fraction, message):
+        count[0] += 1
+        return count[0] < stop_after
+
+    scene = lit_box()
+    sol = solve(scene, SolveOptions(max_depth=3), progress=progress)
+    assert sol.stats["cancelled"] is True
+    assert sol.vert_radiance.shape == (len(sol.vert_key), 3)
+    assert np.isfinite(sol.vert_radiance).all() and (sol.vert_radiance >= 0).all()
+    assert set(np.unique(qt.leaf_corner_keys(sol.forest))) <= set(sol.vert_key)
+    sol.save(tmp_path / "partial.npz")
+    back = Solution.load(tmp_path / "partial.npz")
+    assert back.stats["cancelled"] is True
+    assert np.array_equal(back.vert_radiance, sol.vert_radiance)
+
+
+def test_save_load_round_trip(tmp_path, cornell):
+    _, sol = cornell
+    path = tmp_path / "cornell.npz"
+    sol.save(path)
+    back = Solution.load(path)
+    for name in (
+        "patch_corners",
+        "leaf_patch",
+        "leaf_level",
+        "leaf_i",
+        "leaf_j",
+        "leaf_flip",
+        "vert_key",
+        "vert_radiance",
+        "tri_vertices",
+        "patch_albedo",
+    ):
+        assert np.array_equal(getattr(back, name), getattr(sol, name)), name
+    assert back.max_depth == sol.max_depth and back.stats == sol.stats and back.options == sol.options
+
+
+def test_load_rejects_another_version(tmp_path, cornell):
+    _, sol = cornell
+    path = tmp_path / "old.npz"
+    sol.save(path)
+    with np.load(path, allow_pickle=False) as z:
+        data = {k: z[k] for k in z.files}
+    data["version"] = np.array(99)
+    np.savez_compressed(path, **data)
+    with pytest.raises(SolutionFileError, match="version"):
+        Solution.load(path)
+
+
+def test_load_rejects_a_truncated_file(tmp_path, cornell):
+    _, sol = cornell
+    path = tmp_path / "cut.npz"
+    sol.save(path)
+    raw = path.read_bytes()
+    path.write_bytes(raw[: len(raw) // 2])
+    with pytest.raises(SolutionFileError, match="damaged"):
+        Solution.load(path)
+
+
+def test_luminance_weights_sum_to_one():
+    assert LUMINANCE.sum() == pytest.approx(1.0, abs=1e-4)
