@@ -32,7 +32,7 @@ run: setup
 	  $(BIN)/iat view $(SCENE); \
 	else \
 	  echo "no display: rendering $(SCENE) headless instead (for the window: 'xvfb-run make run' or a desktop)"; \
-	  $(BIN)/iat render $(SCENE) --mode iat -o out/default.png && echo "wrote out/default.png"; \
+	  $(BIN)/iat render $(SCENE) --mode iat -o out/default.png; \
 	fi
 
 test: setup

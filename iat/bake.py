@@ -48,6 +48,7 @@ __all__ = [
     "BYTES_PER_TEXEL",
     "BakePolicy",
     "Baked",
+    "BakedSet",
     "Baker",
     "MemoryReport",
     "bake",
@@ -164,6 +165,9 @@ class MemoryReport:
     detail_texture_bytes : the materials' detail textures (rgba8, full mip chain), not in the budget
     budget_mb, budget_fits, budget_too_small : the budget asked for (None if none), whether the
       texture bytes fit it, and whether it was smaller than any texture (then all mesh)
+    solutions : lighting states baked together (:class:`BakedSet`): the texture bytes hold one
+      page layer per state and page (``solutions`` x one state's bytes), the mesh part two
+      colour attributes (the neighbouring states the renderer mixes); 1 for a single bake
     """
 
     texture_bytes: int = 0
@@ -187,6 +191,7 @@ class MemoryReport:
     budget_mb: float | None = None
     budget_fits: bool | None = None
     budget_too_small: bool = False
+    solutions: int = 1
 
     @property
     def total_bytes(self) -> int:
@@ -247,6 +252,89 @@ class Baked:
     @property
     def n_pages(self) -> int:
         return int(self.memory.pages)
+
+
+@dataclass
+class BakedSet:
+    """Several solutions of one model (lighting states, e.g. times of day), solved on one mesh
+    and baked with one shared atlas layout (:meth:`Baker.bake_set`).
+
+    bakes : one :class:`Baked` per state, sharing the geometry arrays (same placements, uv,
+      layers, indices, mesh part positions and triangles); ``bakes[k].pages`` is state k's
+    pages : (n_states, n_pages, H, W, 3) float32, every state's pages
+    mesh_radiance : (n_states, M, 3) float32, every state's mesh-part colours
+    memory : :class:`MemoryReport` of the whole set (``solutions = n_states``; texture bytes are
+      ``n_states`` layers per page); policy : the policy baked (budget resolved for the set)
+    The shared geometry is reachable as attributes of the set too (``tex_uv``, ``mesh_indices``, ...).
+    """
+
+    bakes: list
+    pages: np.ndarray
+    mesh_radiance: np.ndarray
+    memory: MemoryReport
+    policy: BakePolicy
+    timings: dict = field(default_factory=dict)
+
+    _SHARED = (
+        "mesh_positions",
+        "mesh_indices",
+        "tex_positions",
+        "tex_uv",
+        "tex_layer",
+        "tex_detail_uv",
+        "tex_material",
+        "tex_indices",
+        "tex_detail",
+        "tex_patch",
+        "patch_textured",
+        "detail_textures",
+        "page_scale",
+        "mip_levels",
+    )
+
+    def __getattr__(self, name):
+        if name in BakedSet._SHARED:
+            return getattr(self.bakes[0], name)
+        raise AttributeError(name)
+
+    @property
+    def n_states(self) -> int:
+        return len(self.bakes)
+
+    @property
+    def n_pages(self) -> int:
+        return int(self.pages.shape[1])
+
+    def state(self, k: int) -> Baked:
+        """State k alone, as a :class:`Baked`."""
+        return self.bakes[int(k)]
+
+    def blend(self, a: int, b: int, w: float) -> Baked:
+        """A :class:`Baked` of ``(1 - w) state a + w state b`` (pages and mesh colours, linear
+        radiance, computed here on the CPU: for export); ``w = 0`` is state a itself."""
+        w = float(w)
+        if not 0.0 <= w <= 1.0:
+            raise OptionError(f"blend weight must be in [0, 1], got {w}")
+        base = self.bakes[int(a)]
+        if w == 0.0 or int(a) == int(b):
+            return base
+        other = self.bakes[int(b)]
+        pages = ((1.0 - w) * base.pages + w * other.pages).astype(np.float32)
+        fmt = self.policy.pixel_format
+        if fmt == "rgba8":
+            pages = quantise_rgba8(pages, self.page_scale)
+        elif fmt == "rgb9e5":
+            pages = quantise_rgb9e5(pages)
+        mesh = ((1.0 - w) * base.mesh_radiance + w * other.mesh_radiance).astype(np.float32)
+        return dataclasses.replace(base, pages=pages, mesh_radiance=mesh, timings={})
+
+    def at(self, t: float, times=None) -> Baked:
+        """The blend at time ``t`` between the neighbouring key times (default: evenly spaced
+        in [0, 1]); see :func:`iat.solution_set.blend_weights`."""
+        from .solution_set import blend_weights, even_times
+
+        times = even_times(self.n_states) if times is None else times
+        return self.blend(*blend_weights(times, t))
 
 
 # ---------------------------------------------------------------------------
@@ -451,6 +539,7 @@ class Baker:
         self._packs = _LRU(32)
         self._pages = _LRU(2)
         self._mesh = _LRU(4)
+        self._set_bakers = _LRU(16)  # (id(solution), rgba8 shared) -> Baker of a set member
         self.stats = {"bakes": 0, "pack_hits": 0, "pages_hits": 0, "mesh_hits": 0}
 
     # -- pieces ------------------------------------------------------------------
@@ -699,6 +788,105 @@ class Baker:
             mip_levels=levels,
             tex_patch=tpatch,
         )
+
+    # -- sets of solutions -----------------------------------------------------------------------
+    def _member(self, solution, shared: bool) -> Baker:
+        """The Baker of one state of a set: this one for its own solution, unless the set shares
+        an rgba8 scale (then a dedicated one, so this Baker's single bakes keep their own scale).
+        Members are cached, so a re-bake of the set reuses their tiles."""
+        if not shared and solution is self.solution:
+            return self
+        key = (id(solution), shared)
+        b = self._set_bakers.hit(key)
+        if b is None or b.solution is not solution:
+            b = self._set_bakers.put(key, Baker(solution, self.scene))
+        return b
+
+    def bake_set(self, solutions, policy: BakePolicy | None = None, progress=None) -> BakedSet:
+        """Bake several solutions of this model (lighting states) with one shared atlas layout.
+
+        solutions : solutions on the same mesh as this Baker's (same leaves and vertex keys:
+          ``solve(..., mesh=first)`` / ``resolve``), e.g. a :class:`~iat.solution_set.SolutionSet`
+        policy : as for :meth:`bake`; a budget covers the whole set: N states cost N texture
+          layers per page, so the budget search runs on ``budget_mb / N`` per state and picks a
+          coarser scale (or a higher threshold) for a larger set.
+        Returns a :class:`BakedSet`: pages ``(n_states, n_pages, H, W, 3)``, placements, uv and
+        geometry identical for every state (checked). rgba8 sets share one page scale.
+        """
+        from .solution_set import same_mesh
+
+        t_start = time.perf_counter()
+        solutions = list(getattr(solutions, "solutions", solutions))
+        if not solutions:
+            raise BakeError("bake_set needs at least one solution")
+        for k, sol in enumerate(solutions):
+            if sol is not self.solution and not same_mesh(sol, self.solution):
+                raise BakeError(
+                    f"solution {k} of the set is not on this model's mesh (solve it with "
+                    "solve(scene, mesh=first) or resolve(first, scene))"
+                )
+        policy = (policy or BakePolicy()).validate()
+        n = len(solutions)
+        budget_info = None
+        if policy.budget_mb is not None:
+            policy, budget_info = _choose(self.index.depth, policy.budget_mb / n, policy)
+            budget_info["budget_mb"] *= n
+        shared = policy.pixel_format == "rgba8"
+        members = [self._member(sol, shared) for sol in solutions]
+        if shared:  # one rgba8 page scale for the set: the largest of its states'
+            scale = max(_natural_rgba8_scale(b, policy.detail) for b in members)
+            for b in members:
+                if b._quant_scale.get(policy.detail) != scale:
+                    b._quant_scale[policy.detail] = scale
+                    b._boxes.clear()
+                    b._pages.clear()
+        bakes = []
+        for k, b in enumerate(members):
+            if progress is not None and progress(k / n, f"baking state {k + 1} of {n}") is False:
+                raise Cancelled("bake cancelled")
+            bakes.append(b.bake(policy))
+        first = bakes[0]
+        for k, b in enumerate(bakes[1:], 1):
+            for name in ("tex_uv", "tex_layer", "tex_indices", "mesh_indices", "tex_patch"):
+                if not np.array_equal(getattr(b, name), getattr(first, name)):
+                    raise BakeError(f"state {k} of the set got another atlas layout ({name} differs)")
+            b.tex_positions, b.tex_uv, b.tex_layer = first.tex_positions, first.tex_uv, first.tex_layer
+            b.mesh_positions, b.mesh_indices = first.mesh_positions, first.mesh_indices
+        pages = np.stack([b.pages for b in bakes])
+        mesh_radiance = np.stack([np.asarray(b.mesh_radiance, np.float32) for b in bakes])
+        mem = dataclasses.replace(first.memory)
+        mem.solutions = n
+        mem.texture_bytes = int(first.memory.texture_bytes * n)
+        if n > 1:  # two colour attributes per mesh vertex (the neighbouring states)
+            extra = first.memory.vertex_bytes_mesh // MESH_VERTEX_BYTES * 12
+            mem.vertex_bytes_mesh += int(extra)
+            mem.vertex_bytes += int(extra)
+        if budget_info is not None:
+            mem.budget_mb = budget_info["budget_mb"]
+            mem.budget_fits = bool(mem.texture_bytes <= budget_info["budget_mb"] * MIB)
+            mem.budget_too_small = bool(budget_info["too_small"])
+        if progress is not None and progress(1.0, "done") is False:
+            raise Cancelled("bake cancelled")
+        return BakedSet(
+            bakes=bakes,
+            pages=pages,
+            mesh_radiance=mesh_radiance,
+            memory=mem,
+            policy=first.policy,
+            timings={"total": time.perf_counter() - t_start, "states": [b.timings.get("total", 0.0) for b in bakes]},
+        )
+
+
+def _natural_rgba8_scale(baker: Baker, detail: bool) -> float:
+    """The rgba8 page scale ``baker`` would choose on its own (not cached)."""
+    keep = baker._quant_scale.pop(detail, None)
+    try:
+        return baker._rgba8_scale(detail)
+    finally:
+        if keep is not None:
+            baker._quant_scale[detail] = keep
+        else:
+            baker._quant_scale.pop(detail, None)
 
 
 def bake(solution, scene=None, policy: BakePolicy | None = None, progress=None) -> Baked:

@@ -31,7 +31,7 @@ import os
 import platform
 import time
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -51,8 +51,31 @@ SAMPLE_DIR = Path(__file__).resolve().parents[1] / "sample_models"
 DEFAULT_CACHE = Path("out") / "bench"
 #: the triangle-bound case: few pixels, so per-vertex work dominates the frame
 TINY_SIZE = (64, 48)
+#: Rec. 709 luminance of linear RGB
+_LUM = np.array([0.2126, 0.7152, 0.0722])
 #: bump when the JSON layout changes
 SCHEMA_VERSION = 1
+#: the benchmark's solve: the solver's defaults (depth 6, tolerance 0.05, 1 % unshot) mesh the
+#: house into ~725 k elements and take hours on 2 cores; depth 4 gives radiosity meshes of the
+#: report's size (tens of thousands of triangles per model) in a few minutes each
+BENCH_SOLVE = {
+    "max_depth": 4,
+    "tolerance": 0.1,
+    "convergence": 0.05,
+    "criterion": "interpolation",
+    "refine_indirect": False,
+}
+
+
+def bench_solve_options(**overrides):
+    """:class:`~iat.radiosity.SolveOptions` of :data:`BENCH_SOLVE` (fields the solver lacks are dropped)."""
+    from dataclasses import fields
+
+    from .radiosity import SolveOptions
+
+    known = {f.name for f in fields(SolveOptions)}
+    return SolveOptions(**{k: v for k, v in {**BENCH_SOLVE, **overrides}.items() if k in known})
+
 
 #: the report's Figure 3 (Silicon Graphics Onyx Reality Engine 2, 16 MB texture memory, Performer):
 #: name -> (our model, triangles polygon, fps polygon, triangles IAT, fps IAT, texture MB IAT)
@@ -343,28 +366,12 @@ def _psnr_from(normalised_mse: float) -> float:
     return min(PSNR_IDENTICAL, float(-10.0 * math.log10(normalised_mse)))
 
 
-def seam_errors(baked, solution=None, scene=None) -> dict | None:
-    """The baker's seam error of ``baked`` (see :func:`iat.bake.seam_error`), as a dict; None when absent."""
-    try:
-        from .bake import seam_error
-    except ImportError:
-        return None
-    import inspect
+def seam_errors(baked, solution) -> dict:
+    """Seam error (:func:`iat.bake.seam_error`, absolute radiance along shared coplanar edges)
+    of the IAT textures and of the solution's own mesh, for scale: ``{"iat": {...}, "mesh": {...}}``."""
+    from .bake import seam_error
 
-    params = inspect.signature(seam_error).parameters
-    kw = {}
-    if "solution" in params:
-        kw["solution"] = solution
-    if "scene" in params:
-        kw["scene"] = scene
-    res = seam_error(baked, **kw)
-    if hasattr(res, "to_dict"):
-        res = res.to_dict()
-    elif isinstance(res, tuple):
-        res = {"max": float(res[0]), "mean": float(res[1])}
-    elif not isinstance(res, dict):
-        res = {"value": float(res)}
-    return _jsonable(res)
+    return _jsonable({"iat": seam_error(baked, solution=solution), "mesh": seam_error(solution)})
 
 
 def _jsonable(o):
@@ -406,8 +413,6 @@ def _texture_bytes(mem: dict) -> int:
 
 def _rebake_policy(policy):
     """A policy one slider step away (threshold + 1), to time a re-bake."""
-    from dataclasses import replace
-
     return replace(policy, threshold=int(policy.threshold) + 1)
 
 
@@ -435,6 +440,7 @@ def bench_model(
 
     model = resolve_model(model)
     policy = BakePolicy() if policy is None else policy
+    solve_options = bench_solve_options() if solve_options is None else solve_options
 
     def solve_progress(f, m):
         if progress is not None:
@@ -457,7 +463,11 @@ def bench_model(
     baked = baker.bake(policy)
     rebake_cached_s = time.perf_counter() - t0
     mem = _memory(baked)
-    seam = seam_errors(baked, sol, scene)
+    seam = seam_errors(baked, sol)
+    # IAT against mesh compares illumination: detail textures (report §3.7) exist in IAT mode only,
+    # so the image error is measured on the same bake with radiance in every texel
+    n_detail = len(getattr(baked, "detail_textures", {}) or {})
+    err_baked = baker.bake(replace(policy, detail=False)) if n_detail else baked
 
     step(0.4, "upload")
     poses = path_poses(scene)
@@ -488,7 +498,10 @@ def bench_model(
             rates[_size_key(tiny_size)] = frame_rates(r, cams, tiny_size, repeats=repeats)
         step(0.75, "image error")
         esize = tuple(size) if error_size is None else tuple(error_size)
+        if err_baked is not baked:
+            r.set_baked(err_baked)
         err = image_errors(r, pick(cams, error_frames), esize, with_flip=with_flip)
+        err["detail_textures_off"] = err_baked is not baked
     finally:
         r.release()
     step(1.0, "done")
@@ -517,7 +530,12 @@ def bench_model(
         "error": err,
         "psnr_db": err["psnr_db"],
         "flip": err["flip_mean"],
-        "seam_error": seam,
+        "seam_error": seam["iat"],
+        "seam_error_mesh": seam["mesh"],
+        "radiance_p99": float(np.percentile(sol.vert_radiance.astype(np.float64) @ _LUM, 99))
+        if len(sol.vert_radiance)
+        else 0.0,
+        "detail_textures": n_detail,
         "solve_s": sinfo["solve_s"],
         "solve_cached": sinfo["cached"],
         "solve_stats": {k: v for k, v in sol.stats.items() if k != "options"},
@@ -564,7 +582,15 @@ def machine_info(gl_renderer: str = "") -> dict:
         "python": platform.python_version(),
         "gl_renderer": gl_renderer,
         "lp_num_threads": os.environ.get("LP_NUM_THREADS"),
+        "load_average": _loadavg(),
     }
+
+
+def _loadavg():
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except (AttributeError, OSError):  # pragma: no cover - not Unix
+        return None
 
 
 def run_bench(
@@ -585,8 +611,8 @@ def run_bench(
 
     frames : frames drawn per round over the camera path (interpolated to that many poses)
     size, tiny_size : (w, h) of the fill-bound and of the triangle-bound measurement
-    solve_options : :class:`iat.radiosity.SolveOptions` (None: defaults); policy : BakePolicy
-    (None: the default policy); error_frames : path frames compared mesh vs IAT, at
+    solve_options : :class:`iat.radiosity.SolveOptions` (None: :func:`bench_solve_options`);
+    policy : BakePolicy (None: the default policy); error_frames : path frames compared mesh vs IAT, at
     ``error_size`` (None: ``size``; at a tiny size the mip-mapped IAT image is filtered
     where the mesh aliases, so the comparison says little there).
     progress : ``progress(fraction, message)`` over the whole run.
@@ -599,9 +625,8 @@ def run_bench(
     Figure 3 numbers for the matching model, or None).
     """
     from .bake import BakePolicy
-    from .radiosity import SolveOptions
 
-    solve_options = SolveOptions() if solve_options is None else solve_options
+    solve_options = bench_solve_options() if solve_options is None else solve_options
     policy = BakePolicy() if policy is None else policy
     skipped: list[str] = []
     if models:
@@ -610,6 +635,7 @@ def run_bench(
         paths, skipped = default_models()
     rows = []
     n = max(len(paths), 1)
+    load_start = _loadavg()
     for k, p in enumerate(paths):
 
         def sub(f, m, k=k, p=p):
@@ -648,7 +674,7 @@ def run_bench(
                 "policy": _policy_dict(policy),
                 "cache_dir": str(cache_dir),
             },
-            "machine": machine_info(gl),
+            "machine": {**machine_info(gl), "load_average_start": load_start},
             "models": rows,
             "skipped": skipped,
             "report_figure3": {
@@ -733,7 +759,8 @@ def format_table(result: dict) -> str:
     head2 += [
         "PSNR dB (worst)",
         "FLIP (max)",
-        "seam max",
+        "seam max IAT (mesh)",
+        "radiance p99",
         "solve",
         "bake",
         "re-bake",
@@ -756,7 +783,8 @@ def format_table(result: dict) -> str:
         cells += [
             f"{_f(e['psnr_db'])} ({_f(e['psnr_db_min'])})",
             f"{_f(e['flip_mean'], '.4f')} ({_f(e['flip_max'], '.4f')})",
-            _f(_seam_value(seam), ".3g"),
+            f"{_f(_seam_value(seam), '.3g')} ({_f(_seam_value(row.get('seam_error_mesh') or {}), '.3g')})",
+            _f(row.get("radiance_p99"), ".3g"),
             _f(row["solve_s"], ".2f") + (" (cached)" if row["solve_cached"] else ""),
             _f(row["bake_s"], ".3f"),
             _f(row["rebake_s"], ".3f"),

@@ -85,5 +85,5 @@ class Camera:
         }
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Camera":
+    def from_dict(cls, d: dict) -> Camera:
         return cls(**{k: d[k] for k in ("eye", "target", "up", "yfov", "znear", "zfar", "name") if k in d})

@@ -36,6 +36,7 @@ from .bench import (
     _memory,
     _policy_dict,
     _texture_bytes,
+    bench_solve_options,
     cached_solve,
     default_models,
     interpolate_path,
@@ -51,10 +52,11 @@ log = logging.getLogger(__name__)
 Progress = Callable[[float, str], "bool | None"]
 
 #: the default sweep (small enough for all five sample models in a few minutes on 2 cores)
-DEFAULT_THRESHOLDS = (0, 2, 4, 6)
+#: thresholds: None means (0, D // 2, D - 1, D) for the solve's max depth D (all textured ... deepest only)
+DEFAULT_THRESHOLDS = None
 DEFAULT_SCALES = (1.0, 0.5, 0.25)
 DEFAULT_METHODS = ("bilinear", "scan", "bicubic")
-DEFAULT_TOLERANCES = (0.05, 0.1, 0.2)
+DEFAULT_TOLERANCES = (0.1, 0.3)  # the tightest is the benchmark's, so its solution is shared
 #: methods baked for the looser tolerances (the tightest gets every method)
 DEFAULT_TOLERANCE_METHODS = ("scan",)
 #: models compared with a Mitsuba path-traced reference as well
@@ -81,6 +83,12 @@ def pareto_mask(cost, error) -> np.ndarray:
     ci, ei = c[:, None], e[:, None]
     dominated = ((cj <= ci) & (ej <= ei) & ((cj < ci) | (ej < ei))).any(axis=1)
     return ok & ~dominated
+
+
+def default_thresholds(max_depth: int) -> tuple[int, ...]:
+    """``(0, D // 2, D - 1, D)`` without repeats: every patch textured ... only the deepest."""
+    d = int(max_depth)
+    return tuple(sorted({0, d // 2, max(d - 1, 0), d}))
 
 
 def _geometry_bytes_baked(baked) -> int:
@@ -136,7 +144,6 @@ def chart_model(
     """
     from .bake import BakePolicy, Baker
     from .imageio import auto_exposure
-    from .radiosity import SolveOptions
     from .render import Renderer
 
     def step(f, m):
@@ -145,8 +152,10 @@ def chart_model(
 
     model = resolve_model(model)
     limit_flip_threads()
-    base = SolveOptions() if solve_options is None else solve_options
+    base = bench_solve_options() if solve_options is None else solve_options
     tols = sorted({float(t) for t in tolerances}) or [float(base.tolerance)]
+    if thresholds is None:
+        thresholds = default_thresholds(base.max_depth)
     full = [(int(t), float(s), str(m)) for t in thresholds for s in scales for m in methods]
     lean = [(int(t), float(s), str(m)) for t in thresholds for s in scales for m in tolerance_methods]
     n_steps = len(full) + (len(tols) - 1) * len(lean) + len(tols) + 2
@@ -330,9 +339,8 @@ def run_chart(
     flip_vs_finest, psnr_vs_finest, psnr_vs_mesh, flip_vs_reference}], "pareto":
     {"<error>/<cost>": [point indices]}, ...}], "png", "json"}``.
     """
-    from .radiosity import SolveOptions
 
-    base = SolveOptions() if solve_options is None else solve_options
+    base = bench_solve_options() if solve_options is None else solve_options
     skipped: list[str] = []
     if models:
         paths = [resolve_model(m) for m in models]
@@ -372,7 +380,7 @@ def run_chart(
                 "size": [int(size[0]), int(size[1])],
                 "frames": int(frames),
                 "error_frames": int(error_frames),
-                "thresholds": list(thresholds),
+                "thresholds": list(default_thresholds(base.max_depth) if thresholds is None else thresholds),
                 "scales": list(scales),
                 "methods": list(methods),
                 "tolerances": list(tolerances),

@@ -120,12 +120,35 @@ def cmd_info(args) -> int:
     return 0
 
 
+def _set_output(out: Path, name: str) -> Path:
+    """``OUT.npz`` -> ``OUT-<name>.npz`` (a solution per lighting state)."""
+    return out.with_name(f"{out.stem}-{name}{out.suffix or '.npz'}")
+
+
 def cmd_solve(args) -> int:
     from .radiosity import solve
     from .scene import load_scene
 
     opts = _solve_options(args)
     scene = load_scene(args.input, max_edge=opts.max_edge)
+    if getattr(args, "states", False):
+        from .solution_set import solve_set
+
+        bar = ProgressBar(f"solve states of {Path(args.input).name}", enabled=not args.json)
+        try:
+            sset = solve_set(scene, None, opts, progress=bar, mesh=args.states_mesh)
+        finally:
+            bar.close()
+        out = Path(args.output)
+        written = []
+        for name, t, sol in zip(sset.names, sset.times, sset.solutions, strict=True):
+            sol.model_path = str(Path(args.input).resolve())
+            sol.stats = {**sol.stats, "lighting_state": name, "lighting_time": float(t)}
+            p = _set_output(out, name)
+            sol.save(p)
+            written.append({"state": name, "time": float(t), "output": str(p), "time_s": sol.stats.get("time_s")})
+        _emit(args, {"states": written, "vertices": int(len(sset.first.vert_key))})
+        return 0
     bar = ProgressBar(f"solve {Path(args.input).name}", enabled=not args.json)
     try:
         sol = solve(scene, opts, progress=bar)
@@ -139,10 +162,57 @@ def cmd_solve(args) -> int:
     return 0
 
 
+def _open_set(args):
+    """(scene, SolutionSet) of ``--set A.npz B.npz ...`` (times: ``--times``, the files, the model)."""
+    from .inputs import open_solution
+    from .solution_set import load_set
+
+    times = None
+    if args.times:
+        try:
+            times = [float(x) for x in args.times.split(",")]
+        except ValueError:
+            raise OptionError(f"--times must be comma-separated numbers, got {args.times!r}") from None
+    sset = load_set(args.set, times=times)
+    scene, _ = open_solution(args.set[0])
+    return scene, sset
+
+
+def _check_set_args(args) -> None:
+    if args.set is None:
+        if args.at is not None or args.times:
+            raise OptionError("--at and --times go with --set A.npz B.npz ...")
+        if args.input is None:
+            raise OptionError("give a model or solution, or --set A.npz B.npz ...")
+        return
+    if args.input is not None:
+        raise OptionError("give either an input or --set, not both")
+    if args.at is None:
+        args.at = 0.0
+
+
 def cmd_bake(args) -> int:
     from .bake import Baker
     from .export import export_glb
 
+    _check_set_args(args)
+    if args.set is not None:
+        scene, sset = _open_set(args)
+        bset = Baker(sset.first, scene).bake_set(sset, _bake_policy(args))
+        a, b, w = sset.weights(args.at)
+        baked = bset.blend(a, b, w)
+        export_glb(baked, args.output, scene=scene, layered=args.layered)
+        report = {"output": str(args.output), "policy": _policy_dict(bset.policy), **bset.memory.to_dict()}
+        report["set"] = {
+            "states": sset.names,
+            "times": [float(x) for x in sset.times],
+            "at": float(args.at),
+            "blend": {"a": sset.names[a], "b": sset.names[b], "w": w},
+            "texture_bytes_exported": int(baked.memory.texture_bytes),
+        }
+        report["timings"] = bset.timings
+        _emit(args, report)
+        return 0
     scene, sol = _open(args, "bake")
     baked = Baker(sol, scene).bake(_bake_policy(args))
     export_glb(baked, args.output, scene=scene, layered=args.layered)
@@ -167,12 +237,18 @@ def cmd_render(args) -> int:
     out = Path(args.output)
     if out.suffix.lower() not in (".png", ".npy"):
         raise OptionError(f"output must end in .png or .npy, got {out.name}")
-    src = Path(args.input)
+    _check_set_args(args)
     mode = args.mode
-    if src.suffix.lower() in (".glb", ".gltf") and mode == "preview":
+    sset = None
+    if args.set is not None:
+        if mode == "preview":
+            raise OptionError("--set renders solutions: use --mode mesh, iat, split or diff")
+        scene, sset = _open_set(args)
+        sol = sset.first
+    elif Path(args.input).suffix.lower() in (".glb", ".gltf") and mode == "preview":
         from .scene import load_scene
 
-        scene, sol = load_scene(src), None
+        scene, sol = load_scene(Path(args.input)), None
     else:
         scene, sol = _open(args, "render")
     if args.eye or args.target:
@@ -191,7 +267,14 @@ def cmd_render(args) -> int:
     r = Renderer()
     try:
         r.set_scene(scene)
-        if sol is not None:
+        if sset is not None:  # one moment of a solution set, blended on the GPU
+            r.set_solution_set(sset.solutions)
+            if mode in ("iat", "split", "diff"):
+                from .bake import Baker
+
+                r.set_baked_set(Baker(sset.first, scene).bake_set(sset, _bake_policy(args)))
+            r.set_blend(*sset.weights(args.at))
+        elif sol is not None:
             r.set_solution(sol)
             if mode in ("iat", "split", "diff"):
                 from .bake import Baker
@@ -206,7 +289,11 @@ def cmd_render(args) -> int:
         from .imageio import auto_exposure
 
         save_png(out, img, exposure=args.exposure if args.exposure else auto_exposure(img))
-    _emit(args, {"output": str(out), "mode": mode, "size": list(size)})
+    info = {"output": str(out), "mode": mode, "size": list(size)}
+    if sset is not None:
+        a, b, w = sset.weights(args.at)
+        info["set"] = {"states": sset.names, "at": float(args.at), "blend": [sset.names[a], sset.names[b], w]}
+    _emit(args, info)
     return 0
 
 
@@ -223,6 +310,16 @@ def cmd_chart(args) -> int:
 
 
 def cmd_view(args) -> int:
+    import os
+
+    from .errors import LoadError, RenderError
+
+    if args.input is not None:
+        path = Path(args.input)
+        if not path.is_file():
+            raise LoadError("file not found" if not path.exists() else "not a regular file", path)
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise RenderError("no display (DISPLAY is not set): run under xvfb-run or on a desktop, or use 'iat render'")
     from viewer.app import main as view_main
 
     return view_main(args.input)
@@ -258,6 +355,16 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--max-edge", type=float, dest="max_edge", help="pre-split patches longer than this")
         sp.add_argument("--samples", type=int, help="shooter samples for visibility")
 
+    def set_flags(sp):
+        sp.add_argument(
+            "--set",
+            nargs="+",
+            metavar="SOL.npz",
+            help="solutions of one model on one mesh (lighting states, e.g. times of day)",
+        )
+        sp.add_argument("--at", type=float, help="time in [0, 1] to blend the set at (default 0)")
+        sp.add_argument("--times", help="key times of the set, comma-separated (default: from the files or the model)")
+
     def bake_flags(sp):
         sp.add_argument("--threshold", type=int, help="tree depth from which a patch becomes a texture")
         sp.add_argument("--scale", type=float, help="texture scale factor (1 = a texel per mesh vertex)")
@@ -273,11 +380,24 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("input", metavar="MODEL")
     s.add_argument("-o", "--output", required=True, metavar="SOL.npz")
     solve_flags(s)
+    s.add_argument(
+        "--states",
+        action="store_true",
+        help="solve the model's lighting states (extras iat_lighting_states) on one mesh: SOL-<state>.npz each",
+    )
+    s.add_argument(
+        "--states-mesh",
+        dest="states_mesh",
+        choices=["union", "first"],
+        default="union",
+        help="mesh of the states: settled on all sources at once (default) or on the first state",
+    )
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_solve)
 
     s = sub.add_parser("bake", help="illumination as texture, exported as GLB")
-    s.add_argument("input", metavar="SOL|MODEL")
+    s.add_argument("input", nargs="?", metavar="SOL|MODEL")
+    set_flags(s)
     s.add_argument("-o", "--output", required=True, metavar="OUT.glb")
     bake_flags(s)
     solve_flags(s)
@@ -286,7 +406,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_bake)
 
     s = sub.add_parser("render", help="render a solution (mesh or IAT mode) or a model (preview)")
-    s.add_argument("input", metavar="SOL|MODEL|GLB")
+    s.add_argument("input", nargs="?", metavar="SOL|MODEL|GLB")
+    set_flags(s)
     s.add_argument("-o", "--output", required=True, metavar="OUT.png|OUT.npy")
     s.add_argument("--mode", choices=["mesh", "iat", "preview", "split", "diff"], default="iat")
     s.add_argument("--camera", type=int, help="use the file's K-th camera")

@@ -25,7 +25,7 @@ def open_solution(path: str | Path, options=None, progress=None):
     and detail textures); when that file is gone the scene is rebuilt from the
     solution's own patches, without detail textures.
     """
-    from .radiosity import SolveOptions, Solution, solve
+    from .radiosity import Solution, SolveOptions, solve
 
     path = Path(path)
     if is_solution_path(path):
@@ -45,7 +45,7 @@ def open_solution(path: str | Path, options=None, progress=None):
             scene = scene_from_solution(sol)
         return scene, sol
     if not path.exists():
-        raise LoadError("no such file", path)
+        raise LoadError("file not found", path)
     options = options or SolveOptions()
     scene = load_scene(path, max_edge=getattr(options, "max_edge", None))
     return scene, solve(scene, options, progress=progress)

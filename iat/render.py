@@ -12,6 +12,17 @@ Modes
 ``split``    mesh left of ``split x width``, IAT right of it (scissor)
 ``diff``     ``|mesh - iat| x diff_gain`` (both drawn to float targets, combined in a fullscreen pass)
 
+Solution sets (lighting states, e.g. times of day; :mod:`iat.solution_set`)
+---------------------------------------------------------------------------
+:meth:`Renderer.set_solution_set` (mesh mode) and :meth:`Renderer.set_baked_set`
+(IAT mode) take several aligned solutions / a :class:`~iat.bake.BakedSet`;
+:meth:`Renderer.set_blend` picks the two neighbouring states ``a``, ``b`` and the
+mix ``w``. IAT mode samples state a's and state b's page layers (all states sit in
+one texture array, state k's page p at layer ``k * n_pages + p``) and mixes them
+in one pass; mesh mode mixes two colour attributes per vertex. ``w = 0`` draws
+state a exactly (the second lookup is skipped), so a blend at a key time equals
+that solution's own image.
+
 :meth:`Renderer.render` returns linear radiance as ``(h, w, 3) float32`` read
 back from an RGBA32F framebuffer (exact, no tone map); :meth:`Renderer.draw`
 draws into the bound framebuffer with exposure and sRGB encoding in the shader.
@@ -75,7 +86,11 @@ except ImportError:  # pragma: no cover - depends on the order modules land in
 MODES = ("preview", "mesh", "iat", "split", "diff")
 #: constant standing in for lighting in preview mode: colour = emission + PREVIEW_AMBIENT x albedo
 PREVIEW_AMBIENT = 0.5
-PIXEL_FORMATS = {"rgba16f": "f2", "rgba32f": "f4", "rgba8": "f1"}
+#: baker pixel format -> GL upload dtype; rgb9e5 pages hold values already quantised to
+#: 9-bit mantissas with a shared exponent, which half floats represent exactly
+PIXEL_FORMATS = {"rgba16f": "f2", "rgba32f": "f4", "rgba8": "f1", "rgb9e5": "f2"}
+#: largest finite half float; brighter radiance is clamped to it, never turned into inf
+HALF_MAX = 65504.0
 _MIN_BUFFER = 64  # bytes; GL buffers are never created empty
 
 
@@ -277,8 +292,8 @@ class Renderer:
         # texture that is also the render target (a feedback loop in diff mode)
         self._white = self._reg.add(ctx.texture((1, 1), 4, np.ones(4, np.float32).tobytes(), dtype="f4"))
         mesh, iat, preview = self._programs["mesh"], self._programs["iat"], self._programs["preview"]
-        self._solution = _Geometry(mesh, [("position", 3), ("color", 3)])
-        self._baked_mesh = _Geometry(mesh, [("position", 3), ("color", 3)])
+        self._solution = _Geometry(mesh, [("position", 3), ("color", 3), ("color_b", 3)])
+        self._baked_mesh = _Geometry(mesh, [("position", 3), ("color", 3), ("color_b", 3)])
         self._baked_tex = _Geometry(
             iat, [("position", 3), ("uv", 2), ("layer", 1), ("detail_uv", 2), ("detail", 1)]
         )
@@ -287,6 +302,13 @@ class Renderer:
         self._pages = None  # texture array
         self._pages_key: tuple | None = None
         self._page_scale = 1.0
+        # solution sets: per-state vertex colours (CPU) of the solution mesh and of the baked mesh
+        # part, the (a, b) pair uploaded as color / color_b, the states and pages per state in IAT mode
+        self._colors: dict[str, list[np.ndarray]] = {"mesh": [], "iat": []}
+        self._colors_pair: dict[str, tuple[int, int]] = {"mesh": (0, 0), "iat": (0, 0)}
+        self._iat_states = 1
+        self._iat_pages = 1
+        self._blend: tuple[int, int, float] = (0, 0, 0.0)
         self._detail: dict[str, dict[int, Any]] = {"iat": {}, "preview": {}}
         self._targets: dict[str, _Target] = {}
         self._last: dict[str, Any] = {"mode": None, "triangles": 0, "draw_calls": 0, "modes": {}}
@@ -374,6 +396,13 @@ class Renderer:
         if pixel_format not in PIXEL_FORMATS:
             raise RenderError(f"unknown pixel format {pixel_format!r} (known: {', '.join(PIXEL_FORMATS)})")
         n, h, w = pages.shape[:3]
+        max_layers = int(self.ctx.info["GL_MAX_ARRAY_TEXTURE_LAYERS"])
+        max_size = int(self.ctx.info["GL_MAX_TEXTURE_SIZE"])
+        if n > max_layers or max(w, h) > max_size:
+            raise RenderError(
+                f"the atlas has {n} page(s) of {w}x{h}; this GL allows {max_layers} layers of at most"
+                f" {max_size}x{max_size}: lower the scale, raise the threshold or set a budget"
+            )
         dtype = PIXEL_FORMATS[pixel_format]
         if pixel_format == "rgba8":
             scale = float(page_scale) if page_scale else float(max(pages[..., :3].max(initial=0.0), 1e-30))
@@ -382,7 +411,7 @@ class Renderer:
             self._page_scale = scale
         else:
             data = np.ones((n, h, w, 4), dtype=np.float16 if dtype == "f2" else np.float32)
-            data[..., :3] = pages[..., :3]
+            data[..., :3] = np.minimum(pages[..., :3], HALF_MAX) if dtype == "f2" else pages[..., :3]
             self._page_scale = 1.0
         key = (w, h, n, dtype)
         if self._pages is not None and self._pages_key == key:
@@ -447,7 +476,17 @@ class Renderer:
         Uses ``max_depth, patch_corners (P,4,3), patch_is_quad (P,), vert_key (V,) int64,
         vert_radiance (V,3), tri_vertices (T,3)``; vertex positions come from the lattice keys.
         """
+        self.set_solution_set([solution])
+
+    def set_solution_set(self, solutions) -> None:
+        """Mesh-mode geometry of aligned solutions (same vertex keys and triangles: solved on one
+        mesh, :mod:`iat.solution_set`), one radiance per vertex and state; :meth:`set_blend` mixes
+        two of them. Positions and triangles come from the first."""
         self._alive()
+        solutions = list(solutions)
+        if not solutions:
+            raise RenderError("set_solution_set needs at least one solution")
+        solution = solutions[0]
         n = 2 ** int(solution.max_depth)
         key = np.asarray(solution.vert_key, dtype=np.int64).reshape(-1)
         m = n + 1
@@ -456,13 +495,64 @@ class Renderer:
         if key.size and (key.min() < 0 or patch.max() >= len(corners)):
             raise RenderError(f"solution vertex keys refer to patch {int(patch.max())} of {len(corners)}")
         pos = lattice_to_world(corners, np.asarray(solution.patch_is_quad, dtype=bool), patch, i, j, n)
-        rad = _vec(solution.vert_radiance, 3, "vert_radiance")
-        if len(rad) != len(key):
-            raise RenderError(f"solution has {len(key)} vertex keys but {len(rad)} radiance values")
         tris = np.asarray(solution.tri_vertices, dtype=np.int64).reshape(-1, 3)
         _check_indices(tris, len(key), "solution tri_vertices")
-        self._solution.upload(self.ctx, self._reg, {"position": pos, "color": rad}, tris)
+        colors = []
+        for k, sol in enumerate(solutions):
+            rad = _vec(sol.vert_radiance, 3, "vert_radiance")
+            if len(rad) != len(key):
+                raise RenderError(f"solution has {len(key)} vertex keys but {len(rad)} radiance values")
+            if k and (
+                not np.array_equal(np.asarray(sol.vert_key).reshape(-1), key)
+                or not np.array_equal(np.asarray(sol.tri_vertices).reshape(-1, 3), tris)
+            ):
+                raise RenderError(f"solution {k} of the set is not on the same mesh as solution 0")
+            colors.append(np.ascontiguousarray(rad))
+        self._colors["mesh"] = colors
+        a, b = self._pair("mesh")
+        self._solution.upload(
+            self.ctx, self._reg, {"position": pos, "color": colors[a], "color_b": colors[b]}, tris
+        )
+        self._colors_pair["mesh"] = (a, b)
         self._has["mesh"] = True
+
+    # -- blending -----------------------------------------------------------------------------
+    def set_blend(self, a: int, b: int | None = None, w: float = 0.0) -> None:
+        """Show state ``a`` mixed with state ``b`` by ``w`` in [0, 1] (linear radiance):
+        ``(1 - w) a + w b``; ``w = 0`` draws ``a`` exactly. Indices beyond a set's size are
+        clamped to its last state (a single solution is a set of one).
+        See :func:`iat.solution_set.blend_weights` for the pair and weight of a time."""
+        a = int(a)
+        b = a if b is None else int(b)
+        w = float(w)
+        if a < 0 or b < 0:
+            raise RenderError(f"blend states must be >= 0, got {a}, {b}")
+        if not (0.0 <= w <= 1.0):
+            raise RenderError(f"blend weight must be in [0, 1], got {w}")
+        self._blend = (a, b, w)
+        for which, geo in (("mesh", self._solution), ("iat", self._baked_mesh)):
+            pair = self._pair(which)
+            colors = self._colors[which]
+            if colors and geo.buffers and pair != self._colors_pair[which]:
+                geo.buffers["color"] = _upload(self.ctx, self._reg, geo.buffers["color"], colors[pair[0]])
+                geo.buffers["color_b"] = _upload(self.ctx, self._reg, geo.buffers["color_b"], colors[pair[1]])
+                self._colors_pair[which] = pair
+
+    @property
+    def blend(self) -> tuple[int, int, float]:
+        """(a, b, w) as last set by :meth:`set_blend`."""
+        return self._blend
+
+    def n_states(self, mode: str = "iat") -> int:
+        """States (solutions) uploaded for ``mode`` "mesh" or "iat" (1 for a single solution)."""
+        if mode == "iat":
+            return int(self._iat_states) if self._has["iat"] else 0
+        return len(self._colors["mesh"])
+
+    def _pair(self, which: str) -> tuple[int, int]:
+        n = max(len(self._colors[which]), 1) if which == "mesh" else max(self._iat_states, 1)
+        a, b, _ = self._blend
+        return min(a, n - 1), min(b, n - 1)
 
     def set_baked(self, baked) -> None:
         """IAT-mode data of a Baked: its vertex-coloured mesh part and its textured part.
@@ -473,16 +563,35 @@ class Renderer:
         field is absent). Pages go into one texture array, rewritten in place when the
         shape and ``policy.pixel_format`` are unchanged, mipmapped when ``policy.mipmaps``.
         """
+        self._set_baked(baked, [baked.mesh_radiance], np.asarray(baked.pages), 1)
+
+    def set_baked_set(self, baked_set) -> None:
+        """IAT-mode data of a :class:`~iat.bake.BakedSet`: the shared geometry once, every state's
+        pages in one texture array (state k's page p at layer ``k * n_pages + p``) and every
+        state's mesh-part colours; :meth:`set_blend` picks and mixes two states."""
+        pages = np.asarray(baked_set.pages)
+        if pages.ndim != 5:
+            raise RenderError(f"baked set pages have shape {pages.shape}, expected (n_states, n_pages, H, W, 3)")
+        n = int(pages.shape[0])
+        rad = np.asarray(baked_set.mesh_radiance)
+        if rad.ndim != 3 or rad.shape[0] != n:
+            raise RenderError(f"baked set mesh_radiance has shape {rad.shape}, expected ({n}, M, 3)")
+        self._set_baked(baked_set, list(rad), pages.reshape(-1, *pages.shape[2:]), n)
+
+    def _set_baked(self, baked, mesh_colors: list, all_pages: np.ndarray, n_states: int) -> None:
         self._alive()
         policy = getattr(baked, "policy", None)
         pixel_format = str(getattr(policy, "pixel_format", "rgba16f") or "rgba16f")
         mipmaps = bool(getattr(policy, "mipmaps", False))
 
         mpos = _vec(baked.mesh_positions, 3, "mesh_positions")
-        mrad = _vec(baked.mesh_radiance, 3, "mesh_radiance")
+        colors = [np.ascontiguousarray(_vec(c, 3, "mesh_radiance")) for c in mesh_colors]
         midx = np.asarray(baked.mesh_indices, dtype=np.int64).reshape(-1, 3)
-        if len(mpos) != len(mrad):
-            raise RenderError(f"baked mesh part has {len(mpos)} positions but {len(mrad)} radiance values")
+        for mrad in colors:
+            if len(mpos) != len(mrad):
+                raise RenderError(
+                    f"baked mesh part has {len(mpos)} positions but {len(mrad)} radiance values"
+                )
         _check_indices(midx, len(mpos), "baked mesh_indices")
 
         tpos = _vec(baked.tex_positions, 3, "tex_positions")
@@ -515,17 +624,24 @@ class Renderer:
             use = (tdetail[v0] > 0.5) & np.isin(tmat[v0], list(details))
             tri_key[use] = tmat[v0][use]
 
+        pages = all_pages
+        per_state = pages.shape[0] // max(n_states, 1) if pages.ndim == 4 else 0
         if len(tidx):
-            pages = np.asarray(baked.pages)
             if pages.ndim != 4 or pages.shape[0] == 0:
                 raise RenderError(f"baked has textured triangles but its pages have shape {pages.shape}")
-            if tlayer.size and (tlayer.min() < 0 or tlayer.max() > pages.shape[0] - 1):
-                raise RenderError(f"baked tex_layer refers to page {int(tlayer.max())} of {pages.shape[0]}")
+            if tlayer.size and (tlayer.min() < 0 or tlayer.max() > per_state - 1):
+                raise RenderError(f"baked tex_layer refers to page {int(tlayer.max())} of {per_state}")
             self._set_pages(
                 pages, pixel_format, mipmaps, getattr(baked, "page_scale", None), getattr(baked, "mip_levels", None)
             )
         self._set_details("iat", {int(m): v for m, v in details.items()})
-        self._baked_mesh.upload(self.ctx, self._reg, {"position": mpos, "color": mrad}, midx)
+        self._iat_states, self._iat_pages = int(n_states), max(int(per_state), 1)
+        self._colors["iat"] = colors
+        a, b = self._pair("iat")
+        self._baked_mesh.upload(
+            self.ctx, self._reg, {"position": mpos, "color": colors[a], "color_b": colors[b]}, midx
+        )
+        self._colors_pair["iat"] = (a, b)
         self._baked_tex.upload(
             self.ctx,
             self._reg,
@@ -575,18 +691,27 @@ class Renderer:
         """Draw one of preview / mesh / iat into the bound framebuffer, counting triangles and calls."""
         common = {"clip_from_world": clip, "exposure": float(exposure), "tonemap": bool(tonemap)}
         tris = calls = 0
+        w = float(self._blend[2])
         if mode == "mesh" or mode == "iat":
-            geos = [self._solution] if mode == "mesh" else [self._baked_mesh]
-            for g in geos:
-                if g.n_triangles:
-                    self._uniforms(g.program, common)
-                    for _, first, count in g.calls():
-                        g.render_range(first, count)
-                        tris, calls = tris + count // 3, calls + 1
+            g = self._solution if mode == "mesh" else self._baked_mesh
+            pa, pb = self._pair(mode)
+            if g.n_triangles:
+                self._uniforms(g.program, {**common, "blend": w if pa != pb else 0.0})
+                for _, first, count in g.calls():
+                    g.render_range(first, count)
+                    tris, calls = tris + count // 3, calls + 1
         if mode == "iat" and self._baked_tex.n_triangles:
             g = self._baked_tex
             self._pages.use(0)
-            self._uniforms(g.program, {**common, "pages": 0, "detail": 1, "page_scale": self._page_scale})
+            pa, pb = self._pair("iat")
+            blend = {
+                "layer_a": float(pa * self._iat_pages),
+                "layer_b": float(pb * self._iat_pages),
+                "blend": w if pa != pb else 0.0,
+            }
+            self._uniforms(
+                g.program, {**common, **blend, "pages": 0, "detail": 1, "page_scale": self._page_scale}
+            )
             for key, first, count in g.calls():
                 tex = self._detail["iat"].get(key)
                 (tex if tex is not None else self._white).use(1)

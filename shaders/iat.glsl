@@ -2,6 +2,10 @@
 // page, one layer of a texture array) holds linear radiance, or on patches with a
 // detail texture the incoming light, which is multiplied here by the repeated
 // detail (albedo) texture (report section 3.7).
+// Solution sets: the pages of every lighting state sit in the same texture array,
+// state k's page p at layer k * n_pages + p (one shared atlas layout); one pass
+// samples the two neighbouring states' layers and mixes them by `blend` (linear
+// radiance per texel; blend 0 reads state a alone, exactly).
 
 #if defined VERTEX_SHADER
 
@@ -32,6 +36,9 @@ uniform sampler2DArray pages;  // unit 0
 uniform sampler2D detail;      // unit 1, only read when use_detail
 uniform bool use_detail;       // this draw call's material has a detail texture
 uniform float page_scale;      // rgba8 pages store radiance / page_scale; 1 for float pages
+uniform float layer_a;         // layer offset of state a (k * n_pages)
+uniform float layer_b;         // layer offset of state b
+uniform float blend;           // 0: state a, 1: state b
 uniform float exposure;
 uniform bool tonemap;
 
@@ -47,7 +54,11 @@ vec3 srgb_encode(vec3 c) {
 }
 
 void main() {
-    vec3 c = texture(pages, vec3(v_uv, v_layer)).rgb * page_scale;
+    vec3 c = texture(pages, vec3(v_uv, v_layer + layer_a)).rgb;
+    if (blend > 0.0) {
+        c = mix(c, texture(pages, vec3(v_uv, v_layer + layer_b)).rgb, blend);
+    }
+    c *= page_scale;
     if (use_detail) {
         c *= mix(vec3(1.0), texture(detail, v_detail_uv).rgb, v_detail);
     }

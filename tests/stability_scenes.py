@@ -91,19 +91,23 @@ def floor_under_light(height=1.0, half=1.0, albedo=0.5) -> Scene:
 def room_with_light(light_pos, albedo=0.5, size=1.0) -> Scene:
     """A closed cube room (6 inward quads) with a unit point light at ``light_pos``."""
     faces = box_faces([0, 0, 0], [size] * 3, inward=True)
-    return make_scene(faces, [0] * 6, [Material("wall", albedo=np.full(3, albedo))], [point_light(*light_pos)])
+    return make_scene(
+        faces, [0] * 6, [Material("wall", albedo=np.full(3, albedo))], [point_light(*light_pos)]
+    )
 
 
-def wall_through_floor(depth_below=0.3) -> Scene:
-    """A 2 x 2 m floor (one patch) crossed by a wall at x = 0 that goes through it to y = -depth_below
-    (intersecting geometry), a point light on the x < 0 side. The x > 0 half must stay dark."""
+def wall_through_floor(wall_x=0.1, depth_below=0.3) -> Scene:
+    """A 2 x 2 m floor (one patch, x and z in [-1, 1]) crossed by a wall at x = ``wall_x`` that goes
+    through it down to y = -depth_below (intersecting geometry), a point light on the x < wall_x side.
+    The floor beyond the wall must stay dark. The default ``wall_x`` = 0.1 is on no lattice line
+    (x = -1 + 2 k / 2**D), so the wall always cuts through floor elements."""
     floor = quad_y(-1, 1, -1, 1)
-    wall = quad_x(0.0, -depth_below, 1.0, -1.0, 1.0, towards_plus=False)  # lit face towards -x
+    wall = quad_x(wall_x, -depth_below, 1.0, -1.0, 1.0, towards_plus=False)  # lit face towards -x
     return make_scene(
         [floor, wall],
         [0, 0],
         [Material("white", albedo=np.full(3, 0.5))],
-        [point_light(-0.5, 0.5, 0.0, 0.25)],
+        [point_light(wall_x - 0.5, 0.5, 0.0, 0.25)],
     )
 
 
@@ -154,11 +158,12 @@ def emitter_facing_away() -> Scene:
 
 
 def bright_and_dim(bright=5.0e4, dim_intensity=1.0e-3) -> Scene:
-    """Two floors far apart: one under a very bright point light, one under a very dim one; and a
-    bright emitter. Radiance spans about 8 decades in one scene."""
+    """Radiance over 8+ decades in one scene: a ``bright`` emitter facing up (it lights nothing, it
+    is only seen), a floor under a 10 W/sr point light, and a floor 10 m away under a
+    ``dim_intensity`` one (radiance ~1.6e-4)."""
     a = quad_y(-1, 1, -1, 1)
     b = quad_y(9, 11, -1, 1)
-    lamp = quad_y(-0.1, 0.1, -0.1, 0.1, y=3.0, up=False)
+    lamp = quad_y(-0.1, 0.1, -0.1, 0.1, y=3.0, up=True)
     return make_scene(
         [a, b, lamp],
         [0, 0, 1],

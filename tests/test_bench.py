@@ -96,7 +96,10 @@ def test_bench_json_schema(result):
     assert set(row["load_s"]) == {"scene", "upload_mesh", "upload_iat"}
     assert row["memory"]["texture_bytes"] > 0
     assert row["texture_mb"] == pytest.approx(row["memory"]["texture_bytes"] / 2**20)
-    assert {"max", "mean"} <= set(row["seam_error"])
+    assert {"max", "mean", "edges"} <= set(row["seam_error"]) and {"max", "mean"} <= set(
+        row["seam_error_mesh"]
+    )
+    assert row["radiance_p99"] > 0
     assert row["report"] is None  # the report has no Cornell box
 
 

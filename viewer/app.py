@@ -15,6 +15,11 @@ and change the :class:`~viewer.state.AppState`. Every frame the app:
 3. moves the camera (:mod:`viewer.navigation`: keyboard, mouse, gamepad, or a
    camera path being played) and records it when a path is being recorded;
 4. serves the panels' requests: open, export GLB, save solution / paths, screenshot.
+5. lighting: hands light edits to the background re-solve (:class:`~iat.lighting.Relighter`:
+   resolve from the last converged solution, coarse step first) and shows every
+   improvement as it arrives (mesh at once, the re-bake follows); solves the model's
+   lighting states for the day cycle (:class:`~viewer.state.SetJob`) and blends them
+   at the time-of-day slider (one pass on the GPU: ``Renderer.set_blend``).
 
 :func:`benchmark_rebake_frames` measures frame times while the threshold and
 scale sliders are dragged (``iat bench`` calls it).
@@ -48,7 +53,18 @@ from .navigation import (
     paths_file,
     save_paths,
 )
-from .state import AppState, BakeWorker, Opened, OpenJob, default_model, error_text
+from .state import (
+    AppState,
+    BakeSource,
+    BakeWorker,
+    Opened,
+    OpenJob,
+    SetJob,
+    default_model,
+    drag_on_plane,
+    error_text,
+    pick_light,
+)
 
 log = logging.getLogger(__name__)
 
@@ -146,6 +162,9 @@ class ViewerApp:
         self._last_swap: float | None = None
         self._draw_error = ""
         self.frames_drawn = 0
+        self._relit = None  # a re-solved solution waiting for the next draw
+        self._day_shown = False  # the renderer holds the day-cycle set (not the single solution)
+        self._source_gen = 0  # generation of the last bake source submitted
 
     # -- setup -----------------------------------------------------------------------------------
     def runner_params(self) -> hello_imgui.RunnerParams:
@@ -175,12 +194,14 @@ class ViewerApp:
             hello_imgui.DockingSplit("MainDockSpace", "LeftSpace", imgui.Dir.left, 0.25),
             hello_imgui.DockingSplit("LeftSpace", "LeftBottom", imgui.Dir.down, 0.45),
             hello_imgui.DockingSplit("MainDockSpace", "RightSpace", imgui.Dir.right, 0.27),
+            hello_imgui.DockingSplit("RightSpace", "RightBottom", imgui.Dir.down, 0.5),
         ]
         dp.dockable_windows = [
             self._window("Tuning", "LeftSpace", panels.tuning_panel),
             self._window("View", "LeftBottom", panels.view_panel),
             self._window("Model", "LeftBottom", panels.file_panel),
             self._window("Stats", "RightSpace", panels.stats_panel),
+            self._window("Lighting", "RightBottom", panels.lighting_panel),
         ]
         return rp
 
@@ -227,6 +248,11 @@ class ViewerApp:
         if s.open_job is not None:
             s.open_job.cancel()
             s.open_job.join(30.0)
+        if s.set_job is not None:
+            s.set_job.cancel()
+            s.set_job.join(30.0)
+        if s.relighter is not None:
+            s.relighter.close()
         if s.bake_worker is not None:
             s.bake_worker.close()
         for t in self._bg_threads:
@@ -287,9 +313,33 @@ class ViewerApp:
         except IATError as e:
             s.set_error(str(e))
         s.path_name = next(iter(s.paths), "")
+        self._reset_lighting(opened)
         what = "cached solution" if opened.from_cache else f"solved in {opened.solve_seconds:.1f} s"
         n = opened.scene.n_patches
         s.set_status(f"opened {opened.path} ({n} patches, {s.mesh_triangles:,} mesh triangles, {what})")
+
+    def _reset_lighting(self, opened: Opened) -> None:
+        """A new model: a fresh light editor, background re-solve and day-cycle state."""
+        from iat.lighting import LightEditor, Relighter, lighting_states
+
+        s = self.state
+        if s.relighter is not None:
+            s.relighter.close(5.0)
+        if s.set_job is not None:
+            s.set_job.cancel()
+        s.editor = LightEditor(opened.scene)
+        s.relighter = Relighter(opened.solution, opened.scene)
+        s.relight_version, s.relights, s.relight_step, s.relight_seconds = 0, 0, (0, 0), 0.0
+        s.selected_light = 0 if opened.scene.lights else -1
+        s.dragging_light = False
+        s.set_job, s.solution_set, s.day_cycle, s.day_time = None, None, False, 0.0
+        self._relit, self._day_shown = None, False
+        s.file_fields["lights"] = ""
+        try:
+            s.lighting_states = lighting_states(opened.scene)
+        except IATError as e:
+            s.lighting_states = {}
+            s.set_error(f"lighting states ignored: {e}")
 
     def _restore(self) -> None:
         """Upload the state's model and bake again (after a failed upload)."""
@@ -300,7 +350,7 @@ class ViewerApp:
             if s.solution is not None:
                 r.set_solution(s.solution)
             if s.baked is not None:
-                r.set_baked(s.baked)
+                self._set_baked(s.baked)
         except Exception:
             log.exception("cannot restore the previous model")
 
@@ -323,12 +373,14 @@ class ViewerApp:
             (s.set_error if kind == "error" else s.set_status)(text)
         self._serve_requests()
         self._poll_work()
+        self._poll_lighting()
         self._submit_policy()
         self._navigate()
         self._shortcuts()
         panels.error_window(s)
         panels.view_overlay(s)
-        if self.idle and (s.opening or s.rebaking or s.player or s.recorder or s.looking):
+        busy = s.opening or s.rebaking or s.relighting or s.solving_day_cycle
+        if self.idle and (busy or s.player or s.recorder or s.looking or s.dragging_light):
             hello_imgui.request_refresh()
 
     def _poll_work(self) -> None:
@@ -347,6 +399,8 @@ class ViewerApp:
         if res is None:
             return
         s.bake_seconds = res.seconds
+        if res.baked is not None and _is_set(res.baked) != bool(s.day_cycle and s.solution_set is not None):
+            return  # a bake of the mode just left (single solution / day-cycle set)
         if res.error is not None:
             pol = res.policy
             s.set_error(f"re-bake failed ({pol.method}, threshold {pol.threshold}): {res.error}")
@@ -362,22 +416,27 @@ class ViewerApp:
             self._to_upload = None  # results of the previous model's worker
             self.adopt(opened)
             self._uploaded_this_frame = True
+        self._upload_lighting()
         res, self._to_upload = self._to_upload, None
         if res is None:
             return
         try:
             t0 = time.perf_counter()
-            self.renderer.set_baked(res.baked)
+            if _is_set(res.baked):
+                self.renderer.set_baked_set(res.baked)
+            else:
+                self.renderer.set_baked(res.baked)
             self._upload_ms = (time.perf_counter() - t0) * 1000.0
         except Exception as e:
             s.set_error(f"cannot upload the new bake: {error_text(e)}")
             if s.baked is not None:
                 try:
-                    self.renderer.set_baked(s.baked)
+                    self._set_baked(s.baked)
                 except Exception:
                     log.exception("cannot restore the previous bake")
             return
         s.baked = res.baked
+        s.bake_source = res.source
         s.rebakes += 1
         s.uploads += 1
         self._uploaded_this_frame = True
@@ -390,6 +449,127 @@ class ViewerApp:
         if p != s.requested_policy:
             s.requested_policy = p
             s.bake_worker.submit(p)
+
+    # -- lighting -------------------------------------------------------------------------------------
+    def _set_baked(self, baked) -> None:
+        if _is_set(baked):
+            self.renderer.set_baked_set(baked)
+        else:
+            self.renderer.set_baked(baked)
+
+    def _submit_source(self, source: BakeSource) -> None:
+        """Re-bake the current policy from a new solution (or set)."""
+        s = self.state
+        if s.bake_worker is None:
+            return
+        self._source_gen += 1
+        p = s.policy()
+        s.requested_policy = p
+        s.bake_worker.submit(p, source, generation=self._source_gen)
+
+    def _poll_lighting(self) -> None:
+        """Hand light edits to the re-solve, pick up its results and the day cycle's solve."""
+        s = self.state
+        ed, rl = s.editor, s.relighter
+        if ed is not None and rl is not None and not s.day_cycle:
+            now = time.perf_counter()
+            if ed.version != s.relight_version and (not s.dragging_light or now - s.relight_submitted > 0.1):
+                rl.submit(ed.scene, ed.version)
+                s.relight_version, s.relight_submitted = ed.version, now
+            if s.request_remesh:
+                s.request_remesh = False
+                rl.submit(ed.scene, ed.version, remesh=True)
+                s.relight_version = ed.version
+                s.set_status("solving afresh: the mesh follows the new lights")
+        if rl is not None:
+            r = rl.poll()
+            if r is not None:
+                if r.error is not None:
+                    s.set_error(f"re-solve failed: {r.error}")
+                elif r.version >= (self._relit.version if self._relit is not None else -1):
+                    self._relit = r
+        if s.request_day_cycle:
+            s.request_day_cycle = False
+            if s.solution_set is not None:
+                s.day_cycle = True
+            elif s.lighting_states and ed is not None and s.solution is not None:
+                from iat.radiosity import SolveOptions
+
+                try:
+                    opts = SolveOptions.from_dict(s.solution.options)
+                except Exception:
+                    opts = s.solve_options
+                s.set_job = SetJob(ed.base, s.lighting_states, opts)
+                s.set_status(f"solving {len(s.lighting_states)} lighting states on one mesh")
+        job = s.set_job
+        if job is not None and job.done:
+            s.set_job = None
+            if job.result is not None:
+                s.solution_set = job.result
+                s.day_cycle = True
+                secs = sum(float(x.stats.get("time_s", 0.0)) for x in job.result.solutions)
+                s.set_status(f"day cycle: {len(job.result)} lighting states solved on one mesh ({secs:.1f} s)")
+            elif job.error:
+                s.set_error(job.error)
+
+    def _upload_lighting(self) -> None:
+        """GL side of the lighting (during the draw): a re-solved solution, entering or leaving the
+        day cycle, and the blend of the time-of-day slider."""
+        s, r = self.state, self.renderer
+        want_day = bool(s.day_cycle and s.solution_set is not None)
+        if want_day != self._day_shown:
+            try:
+                if want_day:
+                    r.set_solution_set(s.solution_set.solutions)
+                    self._submit_source(BakeSource(s.solution_set.first, s.scene, s.solution_set))
+                else:
+                    r.set_solution(s.solution)
+                    self._submit_source(BakeSource(s.solution, s.scene))
+                self._day_shown = want_day
+            except Exception as e:
+                s.set_error(f"cannot show the day cycle: {error_text(e)}")
+                s.day_cycle = False
+        res, self._relit = self._relit, None
+        if res is not None and not want_day:
+            try:
+                r.set_solution(res.solution)
+            except Exception as e:
+                s.set_error(f"cannot show the re-solved lighting: {error_text(e)}")
+            else:
+                s.solution, s.scene = res.solution, res.scene
+                s.relight_step, s.relight_seconds = (res.step, res.steps), res.total_seconds
+                s.relights += 1
+                self._submit_source(BakeSource(res.solution, res.scene))
+                if res.final:
+                    s.set_status(
+                        f"lighting re-solved in {res.total_seconds:.2f} s ({res.mode}, {res.steps} steps)"
+                    )
+        r.set_blend(*s.day_blend())
+
+    def _drag_light(self, mx: float, my: float, pressed: bool, down: bool, over: bool) -> bool:
+        """Select and drag a light marker in the view; True when the mouse is busy with a light."""
+        s = self.state
+        ed, cam = s.editor, s.camera
+        if ed is None or cam is None or not s.show_lights or s.day_cycle:
+            s.dragging_light = False
+            return False
+        if pressed and over:
+            k = pick_light(cam, ed.lights, s.view_rect, (mx, my))
+            if k >= 0:
+                s.selected_light, s.dragging_light = k, True
+                return True
+        if s.dragging_light:
+            if not down:
+                s.dragging_light = False
+                return True
+            k = s.selected_light
+            if 0 <= k < len(ed.lights):
+                lt = ed.lights[k]
+                p = drag_on_plane(cam, s.view_rect, (mx, my), float(lt.position[1]), ed.scene.bounds)
+                if p is not None and not np.allclose(p, lt.position):
+                    ed.move(k, p)
+            return True
+        return False
 
     def _input(self) -> InputState:
         s = self.state
@@ -405,7 +585,14 @@ class ViewerApp:
         near = s.mode == "split" and abs(mx - (x + s.split * w)) <= DIVIDER_GRAB_PX
         if over and (near or s.dragging_split):
             imgui.set_mouse_cursor(imgui.MouseCursor_.resize_ew)
-        if over and imgui.is_mouse_clicked(imgui.MouseButton_.left):
+        left_pressed = imgui.is_mouse_clicked(imgui.MouseButton_.left)
+        light_busy = not s.dragging_split and self._drag_light(
+            mx, my, left_pressed and not near, imgui.is_mouse_down(imgui.MouseButton_.left), over
+        )
+        if light_busy:
+            left_pressed = False
+            s.looking = False
+        if over and left_pressed:
             s.dragging_split, s.looking = (True, False) if near else (False, True)
         if over and imgui.is_mouse_clicked(imgui.MouseButton_.right):
             s.looking = True
@@ -476,6 +663,13 @@ class ViewerApp:
             path, s.request_save_solution = s.request_save_solution, None
             sol = s.solution
             self._in_background(f"saved the solution to {path}", lambda: sol.save(path))
+        if s.request_save_lights:
+            path, s.request_save_lights = s.request_save_lights, None
+            ed = s.editor
+            if ed is None:
+                s.set_error("nothing open to save lights of")
+            else:
+                self._in_background(f"saved the lights to {path}", lambda: ed.save(path))
         if s.request_save_paths:
             s.request_save_paths = False
             try:
@@ -495,6 +689,8 @@ class ViewerApp:
             s.set_error("nothing baked to export yet")
             return
         baked, scene = s.baked, s.scene
+        if _is_set(baked):  # the day cycle: the moment on screen
+            baked = baked.blend(*s.day_blend())
         self._in_background(f"exported the bake to {path}", lambda: export_glb(baked, path, scene))
 
     def _in_background(self, done: str, fn) -> None:
@@ -630,6 +826,13 @@ class ViewerApp:
         self._last_swap = now
         self._uploaded_this_frame = False
         self._upload_ms = 0.0
+
+
+def _is_set(baked) -> bool:
+    """A BakedSet (day cycle) rather than a single Baked."""
+    from iat.bake import BakedSet
+
+    return isinstance(baked, BakedSet)
 
 
 # -- entry points ----------------------------------------------------------------------------------------

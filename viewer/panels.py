@@ -8,8 +8,11 @@ method, budget, detail textures, exposure), **View** (mode, divider, cameras,
 speed, camera paths), **Stats** (frame rate and frame-time plot, triangles and
 draw calls, texture memory against the budget, atlas utilisation, patches,
 solve and re-bake times, solve progress with ETA and cancel), **Model** (open,
-solve options, export, save). Plus the menus, the error window and the overlay
-drawn over the 3D view (split divider, labels).
+solve options, export, save), **Lighting** (select, add, delete, move and colour point
+and spot lights, emissive strengths, the background re-solve's progress, saving the
+lights back to glTF; the day cycle: solve the model's lighting states and blend them
+with the time-of-day slider). Plus the menus, the error window and the overlay drawn
+over the 3D view (split divider, light markers, labels, the day-cycle HUD).
 """
 
 from __future__ import annotations
@@ -273,7 +276,8 @@ def stats_panel(state: AppState) -> None:
     over = state.tuning.budget_on and used > budget
     frac = used / budget if budget > 0 else (1.0 if used > 0 else 0.0)
     label = f"{_mb(used)} / {_mb(budget)}" + ("" if state.tuning.budget_on else " (budget off)")
-    imgui.text("Texture memory")
+    n_states = int(mem.get("solutions", 1)) if mem else 1
+    imgui.text("Texture memory" + (f"  ({n_states} lighting states: {n_states} layers per page)" if n_states > 1 else ""))
     _bar(frac, label, RED if (over or (budget <= 0 and used > 0 and state.tuning.budget_on)) else None)
     if mem:
         pages = f"{mem.get('pages', 0)} page(s) {mem.get('page_width', 0)}x{mem.get('page_height', 0)}"
@@ -307,6 +311,162 @@ def stats_panel(state: AppState) -> None:
     if state.status:
         imgui.separator()
         imgui.text_wrapped(state.status)
+
+
+# -- Lighting ---------------------------------------------------------------------------------------
+def _light_label(k: int, lt) -> str:
+    return f"{lt.name or f'light {k}'} ({lt.kind})##light{k}"
+
+
+def lighting_panel(state: AppState) -> None:
+    ed = state.editor
+    if ed is None:
+        imgui.text_disabled("nothing open yet")
+        return
+    _, state.show_lights = imgui.checkbox("Show lights", state.show_lights)
+    _help("Light markers in the view: click one to select it, drag it to move it at its height.")
+
+    day = state.day_cycle
+    imgui.begin_disabled(day)
+    lights = ed.lights
+    if state.selected_light >= len(lights):
+        state.selected_light = len(lights) - 1
+    if imgui.begin_list_box("##lights", ImVec2(-1, hello_imgui.em_size(5.5))):
+        for k, lt in enumerate(lights):
+            clicked, _ = imgui.selectable(_light_label(k, lt), k == state.selected_light)
+            if clicked:
+                state.selected_light = k
+        if not lights:
+            imgui.text_disabled("no point or spot lights")
+        imgui.end_list_box()
+    if imgui.button("Add point light"):
+        state.selected_light = ed.add("point", _add_position(state))
+    imgui.same_line()
+    if imgui.button("Add spot light"):
+        state.selected_light = ed.add("spot", _add_position(state))
+    imgui.same_line()
+    imgui.begin_disabled(state.selected_light < 0)
+    if imgui.button("Delete light") and state.selected_light >= 0:
+        ed.delete(state.selected_light)
+        state.selected_light = min(state.selected_light, len(ed.lights) - 1)
+    imgui.end_disabled()
+
+    k = state.selected_light
+    if 0 <= k < len(ed.lights):
+        lt = ed.lights[k]
+        lo, hi = ed.scene.bounds
+        step = float(np.linalg.norm(hi - lo)) * 0.002
+        changed, v = imgui.drag_float3("Position", [float(x) for x in lt.position], step)
+        if changed:
+            ed.move(k, np.clip(np.asarray(v, dtype=np.float64), lo, hi))
+        if lt.kind == "spot":
+            changed, v = imgui.drag_float3("Direction", [float(x) for x in lt.direction], 0.01)
+            if changed and np.linalg.norm(v) > 1e-6:
+                ed.edit(k, direction=v)
+            changed, outer = imgui.slider_angle("Outer cone", float(lt.outer_cone), 1.0, 90.0)
+            if changed and outer > lt.inner_cone:
+                ed.edit(k, outer_cone=float(outer))
+            changed, inner = imgui.slider_angle("Inner cone", float(lt.inner_cone), 0.0, 89.0)
+            if changed and inner < lt.outer_cone:
+                ed.edit(k, inner_cone=float(inner))
+        changed, col = imgui.color_edit3("Colour", [float(x) for x in lt.color])
+        if changed:
+            ed.edit(k, color=np.clip(col, 0.0, None))
+        top = max(float(lt.intensity) * 4.0, float(np.linalg.norm(hi - lo)) ** 2, 1e-3)
+        changed, v = imgui.slider_float(
+            "Intensity", float(lt.intensity), 0.0, top, "%.3g W/sr", imgui.SliderFlags_.logarithmic
+        )
+        if changed:
+            ed.edit(k, intensity=max(float(v), 0.0))
+
+    em = ed.emissive()
+    if em:
+        imgui.separator()
+        imgui.text("Emission strength")
+        for m in em:
+            changed, v = imgui.slider_float(
+                f"{ed.base.materials[m].name}##emission{m}", ed.strength(m), 0.0, 4.0, "x%.2f"
+            )
+            if changed:
+                ed.set_strength(m, max(float(v), 0.0))
+    imgui.end_disabled()
+    if day:
+        imgui.text_colored(DIM, "turn the day cycle off to edit the lights")
+
+    imgui.separator()
+    if state.relighting:
+        step, steps = state.relight_step
+        imgui.text_colored(DIM, f"re-solving... (step {step + 1 if step < steps else 1} of {max(steps, 1)})")
+    elif state.relights:
+        step, steps = state.relight_step
+        imgui.text_colored(DIM, f"solved in {_seconds(state.relight_seconds)} (step {step}/{steps}, resolve)")
+    if imgui.button("Refine mesh"):
+        state.request_remesh = True
+    _help("Moving lights keeps the mesh (the solve continues from the last solution, fast);\n"
+          "this solves afresh so the mesh follows the new shadows.")
+
+    if not state.file_fields["lights"] and state.model_path:
+        p = Path(ed.base.path or state.model_path)
+        state.file_fields["lights"] = str(p.with_name(p.stem + "-lit" + (p.suffix or ".glb")))
+    _path_input(state, "glTF file##lights", "lights")
+    imgui.begin_disabled(not ed.base.path)
+    if imgui.button("Save lights") and state.file_fields["lights"].strip():
+        state.request_save_lights = state.file_fields["lights"].strip()
+    imgui.end_disabled()
+    _help("Writes a copy of the model with these lights (KHR_lights_punctual) and emission; geometry unchanged.")
+
+    day_cycle_panel(state)
+
+
+def _add_position(state: AppState):
+    """A new light goes in front of the camera (one fifth of the model's size), inside the model."""
+    ed = state.editor
+    lo, hi = ed.scene.bounds
+    cam = state.camera
+    if cam is None:
+        return None
+    p = np.asarray(cam.eye) + np.asarray(cam.forward) * 0.2 * float(np.linalg.norm(hi - lo))
+    m = 0.05 * (hi - lo)
+    return np.clip(p, lo + m, hi - m)
+
+
+def day_cycle_panel(state: AppState) -> None:
+    imgui.separator()
+    imgui.text("Day cycle")
+    states = state.lighting_states
+    sset = state.solution_set
+    if not states and sset is None:
+        imgui.text_disabled("the model has no lighting states (extras iat_lighting_states)")
+        return
+    names = list(sset.names) if sset is not None else list(states)
+    imgui.text_colored(DIM, ", ".join(names))
+    job = state.set_job
+    if job is not None and not job.done:
+        _bar(job.fraction, f"{100 * job.fraction:.0f} %  {job.message[:40]}")
+        if imgui.button("Cancel##day"):
+            job.cancel()
+        return
+    if sset is None:
+        if imgui.button("Solve day cycle"):
+            state.request_day_cycle = True
+        _help("Solves every lighting state on one mesh (the mesh of all sources at once),\n"
+              "then bakes them into texture layers that share one atlas layout.")
+        return
+    changed, on = imgui.checkbox("Day cycle on", state.day_cycle)
+    if changed:
+        state.day_cycle = bool(on)
+    imgui.begin_disabled(not state.day_cycle)
+    changed, v = imgui.slider_float("Time of day", float(state.day_time), 0.0, 1.0, "%.3f")
+    if changed:
+        state.day_time = float(min(max(v, 0.0), 1.0))
+    imgui.text(state.day_label() or " ")
+    imgui.text_colored(DIM, "keys: " + "  ".join(f"{n} {t:.2f}" for n, t in zip(sset.names, sset.times, strict=True)))
+    mem = state.memory
+    if mem and int(mem.get("solutions", 1)) > 1:
+        n = int(mem["solutions"])
+        per = float(mem.get("texture_bytes", 0)) / n
+        imgui.text(f"{n} states x {_mb(per)} = {_mb(float(mem.get('texture_bytes', 0)))} of texture")
+    imgui.end_disabled()
 
 
 # -- File -------------------------------------------------------------------------------------------
@@ -491,7 +651,56 @@ def view_overlay(state: AppState) -> None:
         label(sx, "IAT")
     else:
         label(x, MODE_LABELS.get(shown, shown) + (f"  x{state.diff_gain:.0f}" if shown == "diff" else ""))
+    _light_markers(state, dl)
+    hud = hud_lines(state)
+    for k, line in enumerate(hud):
+        yy = y + h - 10 - 16 * (len(hud) - k)
+        dl.add_text(ImVec2(x + 9, yy + 1), shadow, line)
+        dl.add_text(ImVec2(x + 8, yy), white, line)
     if state.recorder is not None:
         dl.add_text(ImVec2(x + w - 60, y + 8), imgui.get_color_u32(RED), "REC")
     if state.player is not None:
         dl.add_text(ImVec2(x + w - 60, y + 8), white, "PLAY")
+
+
+def hud_lines(state: AppState) -> list[str]:
+    """Text drawn at the bottom of the view: the day-cycle moment and its texture memory against
+    the budget (N states cost N texture layers), the re-solve in progress."""
+    lines = []
+    if state.day_cycle and state.solution_set is not None:
+        lines.append(f"day {state.day_time:.2f}: {state.day_label()}")
+        mem = state.memory
+        if mem:
+            n = int(mem.get("solutions", 1))
+            used = float(mem.get("texture_bytes", 0))
+            budget = f"{_mb(float(state.tuning.budget_mb) * MB)} budget" if state.tuning.budget_on else "no budget"
+            lines.append(f"texture {n} x {_mb(used / max(n, 1))} = {_mb(used)} / {budget}")
+    if state.relighting:
+        lines.append("re-solving the lighting...")
+    return lines
+
+
+def _light_markers(state: AppState, dl) -> None:
+    """A circle per light (filled for the selected one), its name, and a spot light's direction."""
+    from .state import project_points
+
+    ed, cam = state.editor, state.camera
+    if not state.show_lights or ed is None or cam is None or not ed.lights:
+        return
+    lights = ed.lights
+    px, ok = project_points(cam, [lt.position for lt in lights], state.view_rect)
+    lo, hi = ed.scene.bounds
+    reach = 0.06 * float(np.linalg.norm(hi - lo))
+    tips, tok = project_points(cam, [lt.position + reach * lt.direction for lt in lights], state.view_rect)
+    for k, lt in enumerate(lights):
+        if not ok[k]:
+            continue
+        c = np.clip(np.asarray(lt.color, dtype=np.float64) / max(float(np.max(lt.color)), 1e-9), 0.0, 1.0)
+        col = imgui.get_color_u32(ImVec4(float(c[0]), float(c[1]), float(c[2]), 1.0))
+        edge = imgui.get_color_u32(ImVec4(1.0, 0.85, 0.2, 1.0) if k == state.selected_light else ImVec4(0, 0, 0, 0.9))
+        p = ImVec2(float(px[k, 0]), float(px[k, 1]))
+        if lt.kind == "spot" and tok[k]:
+            dl.add_line(p, ImVec2(float(tips[k, 0]), float(tips[k, 1])), edge, 2.0)
+        dl.add_circle_filled(p, 7.0, col)
+        dl.add_circle(p, 8.0, edge, 0, 3.0 if k == state.selected_light else 1.5)
+        dl.add_text(ImVec2(p.x + 10, p.y - 7), edge if k == state.selected_light else col, lt.name)

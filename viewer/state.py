@@ -14,7 +14,14 @@ Long work runs off the UI thread:
 - :class:`BakeWorker` re-bakes the latest requested :class:`~iat.bake.BakePolicy`
   on one worker thread (pure numpy); the UI thread picks the result up with
   :meth:`BakeWorker.poll` and uploads it. Requests made while a bake runs are
-  coalesced: only the newest is baked next.
+  coalesced: only the newest is baked next. A request may also bring a new source
+  (a re-solved solution after a light moved, or a solution set for the day cycle);
+- :class:`~iat.lighting.Relighter` re-solves after light edits (resolve from the last
+  converged solution, coarse first), :class:`SetJob` solves the model's lighting states
+  on one mesh for the day-cycle slider.
+
+Light picking and dragging in the view is pure geometry here (:func:`project_points`,
+:func:`pick_light`, :func:`drag_on_plane`), testable without a window.
 """
 
 from __future__ import annotations
@@ -114,12 +121,27 @@ class Tuning:
 # -- background work --------------------------------------------------------------------------------
 @dataclass
 class BakeResult:
-    """What a bake request came to: ``baked`` or ``error`` (one line), and how long it took."""
+    """What a bake request came to: ``baked`` (a Baked, or a BakedSet for a solution set) or
+    ``error`` (one line), how long it took, and the source generation it baked."""
 
     policy: BakePolicy
     baked: Any = None
     error: str | None = None
     seconds: float = 0.0
+    source: int = 0
+
+
+@dataclass
+class BakeSource:
+    """What a :class:`BakeWorker` bakes from: one solution, or a solution set (``solutions``),
+    with the scene (detail textures). The Baker is built on the worker thread."""
+
+    solution: Any
+    scene: Any = None
+    solutions: Any = None  # a SolutionSet: bake_set instead of bake
+
+    def baker(self) -> Baker:
+        return Baker(self.solution, self.scene)
 
 
 class BakeWorker:
@@ -130,8 +152,11 @@ class BakeWorker:
 
     def __init__(self, baker: Baker, name: str = "iat-bake"):
         self.baker = baker
+        self.solutions = None  # the set baked with bake_set, or None
+        self.source = 0  # generation of the source baked from (0: the one given here)
         self._cv = threading.Condition()
         self._pending: BakePolicy | None = None
+        self._pending_source: tuple[int, BakeSource] | None = None
         self._result: BakeResult | None = None
         self._running = False
         self._stop = False
@@ -139,10 +164,14 @@ class BakeWorker:
         self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
         self._thread.start()
 
-    def submit(self, policy: BakePolicy) -> None:
-        """Ask for a bake of ``policy``; replaces a request not started yet."""
+    def submit(self, policy: BakePolicy, source: BakeSource | None = None, generation: int | None = None) -> None:
+        """Ask for a bake of ``policy``; replaces a request not started yet. ``source`` switches
+        to another solution (or set) first; its ``generation`` comes back in the result."""
         with self._cv:
             self._pending = policy
+            if source is not None:
+                gen = self.source + 1 if generation is None else int(generation)
+                self._pending_source = (gen, source)
             self._cv.notify()
 
     def poll(self) -> BakeResult | None:
@@ -184,14 +213,22 @@ class BakeWorker:
                 if self._stop:
                     return
                 policy, self._pending = self._pending, None
+                source, self._pending_source = self._pending_source, None
                 self._running = True
             t0 = time.perf_counter()
             try:
-                r = BakeResult(policy, baked=self.baker.bake(policy))
+                if source is not None:
+                    gen, src = source
+                    self.baker, self.solutions, self.source = src.baker(), src.solutions, gen
+                if self.solutions is not None:
+                    r = BakeResult(policy, baked=self.baker.bake_set(self.solutions, policy))
+                else:
+                    r = BakeResult(policy, baked=self.baker.bake(policy))
             except Exception as e:  # shown in the window; the viewer keeps the last good bake
                 log.debug("bake failed", exc_info=True)
                 r = BakeResult(policy, error=error_text(e))
             r.seconds = time.perf_counter() - t0
+            r.source = self.source
             with self._cv:
                 self._result = r
                 self._running = False
@@ -357,6 +394,111 @@ class OpenJob:
         )
 
 
+# -- lighting: the day cycle's solve, light picking -------------------------------------------------
+class SetJob:
+    """Solve a model's lighting states on one mesh (:func:`iat.solution_set.solve_set`) on a worker
+    thread, with progress (``fraction``, ``message``) and :meth:`cancel`; ``result`` (a
+    :class:`~iat.solution_set.SolutionSet`) or ``error`` (one line) when done."""
+
+    def __init__(self, scene, states: dict, options: SolveOptions, mesh: str = "union"):
+        self.scene, self.states, self.options, self.mesh = scene, states, options, mesh
+        self.fraction = 0.0
+        self.message = "starting"
+        self.started = time.perf_counter()
+        self.result = None
+        self.error: str | None = None
+        self._cancel = threading.Event()
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="iat-day-cycle", daemon=True)
+        self._thread.start()
+
+    def cancel(self) -> None:
+        self._cancel.set()
+
+    @property
+    def done(self) -> bool:
+        return self._done.is_set()
+
+    def join(self, timeout: float | None = None) -> bool:
+        return self._done.wait(timeout)
+
+    def _progress(self, fraction: float, message: str) -> bool:
+        self.fraction = float(min(max(fraction, 0.0), 1.0))
+        self.message = str(message)
+        return not self._cancel.is_set()
+
+    def _run(self) -> None:
+        from iat.solution_set import solve_set
+
+        try:
+            self.result = solve_set(self.scene, self.states, self.options, self._progress, mesh=self.mesh)
+        except Cancelled:
+            self.error = "day cycle: cancelled"
+        except Exception as e:
+            log.debug("day-cycle solve failed:\n%s", traceback.format_exc())
+            self.error = f"day cycle: {error_text(e)}"
+        finally:
+            self._done.set()
+
+
+def project_points(camera: Camera, points, rect) -> tuple[np.ndarray, np.ndarray]:
+    """Window pixel positions of world ``points`` (k, 3) seen by ``camera`` in the view ``rect``
+    (x, y from the top left, w, h): (k, 2) float64 and (k,) bool in front of the camera and inside."""
+    x, y, w, h = (float(v) for v in rect)
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if w <= 0 or h <= 0 or not len(p):
+        return np.zeros((len(p), 2)), np.zeros(len(p), dtype=bool)
+    c = np.concatenate([p, np.ones((len(p), 1))], axis=1) @ np.asarray(camera.clip_from_world(w / h)).T
+    front = c[:, 3] > 1e-9
+    ndc = c[:, :3] / np.where(front, c[:, 3], 1.0)[:, None]
+    px = np.stack([x + (ndc[:, 0] + 1) * 0.5 * w, y + (1 - ndc[:, 1]) * 0.5 * h], axis=1)
+    inside = front & (np.abs(ndc[:, :2]) <= 1.0).all(axis=1) & (np.abs(ndc[:, 2]) <= 1.0)
+    return px, inside
+
+
+def pick_light(camera: Camera, lights, rect, mouse, radius: float = 12.0) -> int:
+    """Index of the light whose marker is nearest to ``mouse`` (window pixels) within ``radius``, or -1."""
+    if not lights:
+        return -1
+    px, ok = project_points(camera, [lt.position for lt in lights], rect)
+    d = np.linalg.norm(px - np.asarray(mouse, dtype=np.float64)[None, :], axis=1)
+    d[~ok] = np.inf
+    k = int(np.argmin(d))
+    return k if d[k] <= radius else -1
+
+
+def mouse_ray(camera: Camera, rect, mouse) -> tuple[np.ndarray, np.ndarray]:
+    """World origin and unit direction of the ray through window pixel ``mouse``."""
+    x, y, w, h = (float(v) for v in rect)
+    nx = (float(mouse[0]) - x) / w * 2.0 - 1.0
+    ny = 1.0 - (float(mouse[1]) - y) / h * 2.0
+    inv = np.linalg.inv(np.asarray(camera.clip_from_world(w / h), dtype=np.float64))
+    a = inv @ np.array([nx, ny, -1.0, 1.0])
+    b = inv @ np.array([nx, ny, 1.0, 1.0])
+    a, b = a[:3] / a[3], b[:3] / b[3]
+    d = b - a
+    return a, d / max(float(np.linalg.norm(d)), 1e-300)
+
+
+def drag_on_plane(camera: Camera, rect, mouse, height: float, bounds=None, margin: float = 0.02):
+    """Where the ray through ``mouse`` meets the horizontal plane ``y = height`` (a light dragged at
+    its height), kept inside ``bounds`` (2, 3) shrunk by ``margin`` of its size; None when the ray
+    runs away from the plane (or parallel to it)."""
+    o, d = mouse_ray(camera, rect, mouse)
+    if abs(d[1]) < 1e-9:
+        return None
+    t = (float(height) - o[1]) / d[1]
+    if t <= 0:
+        return None
+    p = o + t * d
+    if bounds is not None:
+        lo, hi = np.asarray(bounds, dtype=np.float64)
+        m = margin * (hi - lo)
+        p = np.clip(p, lo + m, hi - m)
+        p[1] = float(height)
+    return p
+
+
 # -- the state ---------------------------------------------------------------------------------------
 @dataclass
 class AppState:
@@ -404,6 +546,23 @@ class AppState:
     solution_from_cache: str = ""
     rebakes: int = 0
     uploads: int = 0
+    # lighting: edits, the background re-solve, the day cycle
+    editor: Any = None  # iat.lighting.LightEditor of the open model
+    relighter: Any = None  # iat.lighting.Relighter (re-solves after edits)
+    relight_version: int = 0  # the editor version last submitted
+    relight_step: tuple[int, int] = (0, 0)  # (step, steps) of the last result shown
+    relight_seconds: float = 0.0  # time from the edit to the last result shown
+    relights: int = 0  # results shown
+    relight_submitted: float = 0.0  # when the last edit was submitted (throttles drags)
+    selected_light: int = -1
+    dragging_light: bool = False
+    show_lights: bool = True
+    lighting_states: dict = field(default_factory=dict)  # the model's named states
+    set_job: SetJob | None = None
+    solution_set: Any = None  # iat.solution_set.SolutionSet of the day cycle
+    day_cycle: bool = False  # show the set blended at day_time
+    day_time: float = 0.0
+    bake_source: int = 0  # generation of the source the bake on screen came from
     # messages
     error: str = ""  # shown until dismissed
     errors: list[str] = field(default_factory=list)
@@ -421,10 +580,13 @@ class AppState:
     request_screenshot: str | None = None
     request_save_paths: bool = False
     request_save_solution: str | None = None
+    request_save_lights: str | None = None
+    request_day_cycle: bool = False
+    request_remesh: bool = False
     request_quit: bool = False
     # file dialogs in flight (portable_file_dialogs objects) and the Model panel's path fields
     dialogs: dict = field(default_factory=dict)
-    file_fields: dict = field(default_factory=lambda: {"open": "", "export": "", "solution": ""})
+    file_fields: dict = field(default_factory=lambda: {"open": "", "export": "", "solution": "", "lights": ""})
 
     # -- derived ---------------------------------------------------------------------------
     def policy(self) -> BakePolicy:
@@ -448,8 +610,31 @@ class AppState:
 
     @property
     def memory(self) -> dict:
-        """The shown bake's :class:`~iat.bake.MemoryReport` as a dict ({} when none)."""
+        """The shown bake's :class:`~iat.bake.MemoryReport` as a dict ({} when none); a day-cycle
+        set's counts every state's texture layers (``solutions``)."""
         return self.baked.memory.to_dict() if self.baked is not None else {}
+
+    @property
+    def relighting(self) -> bool:
+        return self.relighter is not None and self.relighter.busy
+
+    @property
+    def solving_day_cycle(self) -> bool:
+        return self.set_job is not None and not self.set_job.done
+
+    def day_blend(self) -> tuple[int, int, float]:
+        """(a, b, w) of ``day_time`` in the day-cycle set ((0, 0, 0) without one)."""
+        if self.solution_set is None or not self.day_cycle:
+            return 0, 0, 0.0
+        return self.solution_set.weights(self.day_time)
+
+    def day_label(self) -> str:
+        """'noon -> evening 40 %' at the day time (or the key state's name)."""
+        if self.solution_set is None or not self.day_cycle:
+            return ""
+        a, b, w = self.day_blend()
+        names = self.solution_set.names
+        return names[a] if w == 0.0 else f"{names[a]} -> {names[b]} {100 * w:.0f} %"
 
     @property
     def mesh_triangles(self) -> int:

@@ -108,7 +108,7 @@ class Solution:
         vert_key: np.ndarray,
         vert_radiance: np.ndarray,
         **kw,
-    ) -> "Solution":
+    ) -> Solution:
         """Assemble a solution; computes the anchored triangulation."""
         return cls(
             max_depth=forest.max_depth,
@@ -145,17 +145,21 @@ class Solution:
         try:
             with os.fdopen(fd, "wb") as fh:
                 np.savez_compressed(fh, **arrays, **meta)
+                fh.flush()
+                os.fsync(fh.fileno())
             os.replace(tmp, path)
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
             raise
 
     @classmethod
-    def load(cls, path: str | Path) -> "Solution":
+    def load(cls, path: str | Path) -> Solution:
         """Read a solution; a damaged file or one of another version raises SolutionFileError."""
         path = Path(path)
         if not path.exists():
-            raise SolutionFileError("no such file", path)
+            raise SolutionFileError("file not found", path)
+        if not zipfile.is_zipfile(path):
+            raise SolutionFileError("not an IAT solution file (not an .npz archive)", path)
         try:
             with np.load(path, allow_pickle=False) as z:
                 names = set(z.files)

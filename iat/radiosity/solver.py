@@ -9,9 +9,10 @@ A. **Meshing by direct light.** The direct radiance at every vertex (emission,
    plus light reflected from emissive patches and from point / spot lights, with
    ray-traced visibility) is evaluated *exactly* at each vertex. Elements whose
    corner and probe values (edge midpoints and centre, which become the
-   children's corners) vary by more than ``tolerance`` are split, the forest is
-   2:1 balanced, and only the new points are evaluated (cached by key). This
-   repeats until nothing splits. No vertex is ever interpolated from its
+   children's corners) deviate by more than ``tolerance`` (see ``criterion``) are
+   split, unless their children would be smaller than ``min_element_size``; the
+   forest is 2:1 balanced, and only the new points are evaluated (cached by key).
+   This repeats until nothing splits. No vertex is ever interpolated from its
    parent; the bias that interpolation *would* have caused is measured and
    reported (``stats['interpolation_bias']``: sum |parent-interpolated - exact|
    over sum exact, luminance of reflected direct light, over the vertices made
@@ -19,13 +20,15 @@ A. **Meshing by direct light.** The direct radiance at every vertex (emission,
 B. **Progressive refinement on the settled mesh.** Each vertex's unshot
    radiance starts as its reflected direct radiance (the emitters' emission was
    shot in A). The patch with the most unshot power (pi x area x area-weighted
-   mean, from a sparse (P, V) averaging matrix) shoots: every vertex in front of
-   it receives ``rho * <F * vis * L>`` -- the analytic point-to-polygon form
-   factor (:mod:`.formfactor`) times the visible fraction and the shooter's
-   radiance, estimated from stratified samples on the shooter's area and
-   cosine-distributed directions from the vertex (multiple importance sampling,
-   see :meth:`_Context.gather`), with embreex shadow rays (:mod:`.visibility`).
-   Faint shots use fewer samples.
+   mean of |unshot|, from a sparse (P, V) averaging matrix) shoots: every vertex
+   in front of it receives ``rho * <F * vis * L>`` -- the analytic
+   point-to-polygon form factor (:mod:`.formfactor`) times the visible fraction
+   and the shooter's radiance, estimated from stratified samples on the shooter's
+   area and, for near receivers, cosine-distributed directions from the vertex
+   (multiple importance sampling, see :meth:`_Context.gather`), with embreex
+   shadow rays (:mod:`.visibility`). Whole patches are culled per shot first
+   (behind the shooter, facing away, or -- for a shooter's later shots -- found
+   fully occluded by its earlier ones). Faint shots use fewer samples.
 C. **Refinement on the total radiance** (``refine_indirect``), once after the
    first bounces (unshot below sqrt(convergence)) and once at convergence: the
    same split test on direct + indirect radiance, so that surfaces lit only
@@ -35,10 +38,25 @@ C. **Refinement on the total radiance** (``refine_indirect``), once after the
    unshot radiance is what it received minus what its patch already shot from
    there, so light a coarse element could not hold is shot again, not lost.
    Shooting then continues to ``convergence`` (unshot power over emitted power).
+D. **Ambient term** (``ambient``, Cohen et al. 1988): the light still unshot at
+   convergence would, over all its later bounces, add a reflected power of
+   ``U * r / (1 - r)`` (``U`` the unshot power, ``r`` the fraction of a shot's
+   power that the scene reflects back, measured on the last half of the shots,
+   so an open scene's escaping light counts). It is spread as a uniform
+   incoming radiance ``E`` (per channel), every vertex adding ``rho * E``: the
+   energy of the result is right on average, only the distribution of the last
+   ``convergence`` of the light is approximated.
 
 Because every vertex, early or late, receives every shot, the final values are
 unbiased with respect to the mesh: no late vertex misses early shots, the trap
 the design warns of.
+
+Two entry points reuse a settled mesh (for lighting variants whose trees must
+align): ``solve(scene, mesh=solution)`` solves afresh on the leaves of
+``solution`` (no subdivision; same ``vert_key``), and :func:`resolve` continues
+from a previous solution when only the lights / emission changed, shooting only
+the difference (radiosity is linear in the sources; the difference field may be
+negative and is shot by the magnitude of its power).
 """
 
 from __future__ import annotations
@@ -46,7 +64,8 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields, replace
+from types import SimpleNamespace
 
 import numpy as np
 from scipy import sparse
@@ -65,8 +84,23 @@ ABS_FLOOR = 0.02
 RAY_EPS = 1e-4
 #: in-plane nudge of form-factor points off shared edges, fraction of the scene diagonal
 FF_EPS = 1e-6
-#: receivers per vectorised gather block (bounds the (n, samples, 3) temporaries)
-GATHER_BLOCK = 4096
+#: receivers per vectorised gather block (bounds the (n, samples) temporaries)
+GATHER_BLOCK = 8192
+#: ``min_element_size=None`` means this fraction of the scene's bounding-box diagonal
+MIN_ELEMENT_FRACTION = 1.0 / 400.0
+#: receivers whose form factor to the shooter is below this use area samples only (the
+#: kernel is then nearly flat over the shooter); nearer ones add cosine-direction samples
+F_DIRECTION = 0.02
+#: a receiver patch to which a shooter's earlier gathers traced at least this many rays,
+#: none of them unoccluded, is skipped by that shooter's later shots
+CULL_RAYS = 64
+#: most (receiver, shooter) form factors kept for the shooters' later shots on the same mesh
+#: (8 bytes each)
+FF_CACHE_ENTRIES = 12_000_000
+#: the direct pass (emitters) uses this many times the per-side samples of ``samples``
+DIRECT_SAMPLE_FACTOR = 2
+#: upper bound of the measured reflected fraction in the ambient term
+MAX_REFLECTANCE = 0.95
 
 Progress = Callable[[float, str], "bool | None"]
 
@@ -75,54 +109,61 @@ Progress = Callable[[float, str], "bool | None"]
 class SolveOptions:
     """Options of :func:`solve` (lengths in scene units).
 
-    max_depth : int, 0..12, typical 6. Deepest quad-tree level; the lattice has
+    max_depth : int, 0..12, default 6. Deepest quad-tree level; the lattice has
         ``2**max_depth + 1`` points per patch side. Deeper resolves sharper shadows
         at up to 4x the elements (and texels) per level.
-    tolerance : float > 0, typical 0.05. Relative radiance variation that splits an
-        element (see ``criterion``), relative to the mean of its corners and probes plus
-        a small absolute floor (2 % of the scene's mean reflected radiance, so dark
-        corners do not split forever). Smaller: more elements, smoother gradients.
-    min_element_size : float >= 0, default 0 (no limit). An element is not split
-        when its children's longest edge would be shorter than this.
-    convergence : float in (0, 1], typical 0.01. Stop shooting when the unshot
-        power is below this fraction of the emitted power (patches and lights); the
-        light left unshot is missing from the result (about that fraction, amplified
-        by interreflection). Smaller costs more shots for the last, faint bounces.
-    samples : int 1..1024, typical 16. Per receiver and shot: that many stratified
-        points on the shooter's area and as many cosine-distributed directions (both
-        rounded up to ``k*k``), rotated per vertex. More samples: less noise on dim,
-        indirectly lit surfaces and smoother penumbrae, at proportionally more rays
-        (64 takes about twice the time of 16 on the Cornell box).
+    tolerance : float > 0, default 0.1. Relative radiance error that splits an element
+        (see ``criterion``), relative to the mean of its corners and probes plus a
+        small absolute floor (2 % of the scene's mean reflected radiance, so dark
+        corners do not split forever). Smaller: more elements.
+    min_element_size : float >= 0 or None (default). An element is not split when its
+        children's longest edge would be shorter than this; 0: no limit; None: 1/400 of
+        the scene's bounding-box diagonal (3.8 cm in the 12 m house), which stops the
+        endless subdivision of tiny regions along hard shadow edges.
+    convergence : float in (0, 1], default 0.02. Stop shooting when the unshot power is
+        below this fraction of the emitted power (patches and lights); with ``ambient``
+        its later bounces are added as a uniform ambient term, otherwise that light
+        (amplified by interreflection) is missing from the result. Smaller costs more
+        shots for the last, faint bounces.
+    samples : int 1..1024, default 16. Per receiver and shot: that many stratified
+        points on the shooter's area and, for near receivers, as many cosine-distributed
+        directions (both rounded up to ``k*k``). The direct pass from emissive patches
+        uses ``(2k)**2`` with patterns rotated per vertex; shots of reflected light use
+        one pattern per shot for all receivers (errors smooth in space, no speckle) and
+        fewer samples as they get fainter.
     max_shots : int >= 0, default 20000. Hard cap on progressive shots (0: direct
         light only).
     max_edge : float > 0 or None. Recorded for the loader's pre-split of long
         patches into a grid of roots (``load_scene(max_edge=...)``); the solver
         itself takes the scene as it is.
     seed : int, default 0. Seed of the sample jitter; a solve is deterministic.
-    criterion : "variation" (default) or "interpolation". What ``tolerance`` bounds:
-        "variation" splits on max - min over the element's corners and probes (the
-        classic test; smooth gradients refine too, so lit surfaces go deep: 56 k
-        elements on the Cornell box at depth 6); "interpolation" splits on the
-        largest gap between a probe and the value the corners interpolate there
-        (linear gradients stay coarse, shadows still go deep; fewer elements for the
-        same error, but a feature that falls between the probes can be missed).
+    criterion : "interpolation" (default) or "variation". What ``tolerance`` bounds:
+        "interpolation" splits on the largest gap between a probe and the value the
+        corners interpolate there (linear gradients stay coarse, shadows still go deep:
+        the mesh goes where the light has features); "variation" splits on max - min
+        over the element's corners and probes (the classic test; smooth gradients
+        refine too, so lit surfaces go deep: about 10x the elements).
     refine_indirect : bool, default True. Refine on the total (direct + indirect)
         radiance after the first bounces and at convergence, so that surfaces lit
         only indirectly (a ceiling) get elements too; new vertices gather everything
         shot so far (exact, never interpolated). Without it such surfaces keep their
-        direct-light mesh and their light is under-counted (5-10 % darker rooms).
+        direct-light mesh.
+    ambient : bool, default True. Add the ambient term for the light still unshot at
+        convergence (see the module docstring); False leaves it out (the result is
+        then darker by about ``convergence`` times the interreflection gain).
     """
 
     max_depth: int = 6
-    tolerance: float = 0.05
-    min_element_size: float = 0.0
-    convergence: float = 0.01
+    tolerance: float = 0.1
+    min_element_size: float | None = None
+    convergence: float = 0.02
     samples: int = 16
     max_shots: int = 20000
     max_edge: float | None = None
     seed: int = 0
-    criterion: str = "variation"
+    criterion: str = "interpolation"
     refine_indirect: bool = True
+    ambient: bool = True
 
     def validate(self) -> SolveOptions:
         """Raise :class:`iat.errors.OptionError` on an out-of-range option; return self."""
@@ -148,8 +189,8 @@ class SolveOptions:
             bad("max_depth", "must be between 0 and 12")
         if not num("tolerance") > 0:
             bad("tolerance", "must be > 0")
-        if not num("min_element_size") >= 0:
-            bad("min_element_size", "must be >= 0")
+        if self.min_element_size is not None and not num("min_element_size") >= 0:
+            bad("min_element_size", "must be >= 0 or None")
         if not 0 < num("convergence") <= 1:
             bad("convergence", "must be in (0, 1]")
         if not 1 <= integer("samples") <= 1024:
@@ -161,6 +202,8 @@ class SolveOptions:
         integer("seed")
         if not isinstance(self.refine_indirect, bool | np.bool_):
             bad("refine_indirect", "must be True or False")
+        if not isinstance(self.ambient, bool | np.bool_):
+            bad("ambient", "must be True or False")
         if self.criterion not in ("variation", "interpolation"):
             bad("criterion", 'must be "variation" or "interpolation"')
         return self
@@ -169,6 +212,12 @@ class SolveOptions:
         """JSON-able dict of the options."""
         d = asdict(self)
         return {k: (v.item() if isinstance(v, np.generic) else v) for k, v in d.items()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> SolveOptions:
+        """Options from :meth:`to_dict` output (unknown keys, e.g. from a newer version, ignored)."""
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in dict(d).items() if k in names})
 
 
 class _Cancel(Exception):
@@ -185,11 +234,25 @@ class _Geo:
     normal: np.ndarray  # (n, 3)
     ff: np.ndarray  # (n, 3) form-factor point, nudged into its own patch
     origin: np.ndarray  # (n, 3) ray origin, off the surface
+    start: np.ndarray | None = None  # (P + 1,) first index of each patch when keys are sorted
+    cache: dict | None = None  # per-shooter form factors (the mesh's geometry only)
 
     def take(self, idx) -> _Geo:
         return _Geo(
             self.key[idx], self.patch[idx], self.pos[idx], self.normal[idx], self.ff[idx], self.origin[idx]
         )
+
+
+def _ranges(start: np.ndarray, patches: np.ndarray) -> np.ndarray:
+    """Concatenated ``arange(start[p], start[p + 1])`` over ``patches`` (sorted)."""
+    a, b = start[patches], start[patches + 1]
+    n = b - a
+    keep = n > 0
+    a, n = a[keep], n[keep]
+    if len(n) == 0:
+        return np.zeros(0, dtype=np.int64)
+    off = np.repeat(a - np.concatenate([[0], np.cumsum(n)[:-1]]), n)
+    return np.arange(int(n.sum()), dtype=np.int64) + off
 
 
 class _Context:
@@ -203,14 +266,17 @@ class _Context:
         self.area = scene.patch_area
         self.albedo = scene.patch_albedo
         self.emission = scene.patch_emission
+        self.n_patches = len(self.area)
         self.n_corners = np.where(self.is_quad, 4, 3)
         self.centre = np.where(
             self.is_quad[:, None], self.corners.mean(axis=1), self.corners[:, :3].mean(axis=1)
         )
-        lo, hi = scene.bounds
+        lo, hi = scene.bounds if self.n_patches else (np.zeros(3), np.zeros(3))
         self.scale = max(float(np.linalg.norm(hi - lo)), 1e-12)
         self.eps_ray = RAY_EPS * self.scale
         self.eps_ff = FF_EPS * self.scale
+        mes = opts.min_element_size
+        self.min_size = MIN_ELEMENT_FRACTION * self.scale if mes is None else float(mes)
         self.n = 1 << opts.max_depth
         self.vis = vis
         self.lights = [lt for lt in scene.lights if lt.kind in ("point", "spot")]
@@ -218,15 +284,22 @@ class _Context:
         # a tangent frame per patch (for cosine-distributed directions)
         helper = np.where(np.abs(self.normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
         t1 = np.cross(self.normal, helper)
-        t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+        t1 /= np.maximum(np.linalg.norm(t1, axis=1, keepdims=True), 1e-300)
         self.tangent = np.stack([t1, np.cross(self.normal, t1)], axis=1)  # (P, 2, 3)
+        # receiver corners' heights (P, 4) over their own patch centre, for the plane tests
+        self._valid_corner = np.arange(4)[None, :] < self.n_corners[:, None]
         self._shooters: dict[int, _Shooter] = {}
+        self._cand: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        # per shooter: rays traced to each receiver patch and how many were unoccluded
+        self._vis_rays: dict[int, np.ndarray] = {}
+        self._vis_seen: dict[int, np.ndarray] = {}
 
     # -- geometry -------------------------------------------------------------
     def polygon(self, s: int) -> np.ndarray:
         return self.corners[s, : self.n_corners[s]]
 
     def geometry(self, keys: np.ndarray) -> _Geo:
+        keys = np.asarray(keys, dtype=np.int64)
         p, i, j = qt.decode_key(keys, self.n)
         pos = qt.lattice_to_world(self.corners, self.is_quad, p, i, j, self.n)
         nrm = self.normal[p]
@@ -236,11 +309,14 @@ class _Context:
         that = t / np.maximum(tl, 1e-300)[:, None]
         ff = pos + np.minimum(self.eps_ff, 0.5 * tl)[:, None] * that
         origin = pos + self.eps_ray * nrm + np.minimum(self.eps_ray, 0.5 * tl)[:, None] * that
-        return _Geo(np.asarray(keys, dtype=np.int64), p, pos, nrm, ff, origin)
+        start = None
+        if len(keys) == 0 or np.all(keys[1:] > keys[:-1]):
+            start = np.searchsorted(keys, qt.make_key(np.arange(self.n_patches + 1), 0, 0, self.n))
+        return _Geo(keys, p, pos, nrm, ff, origin, start)
 
     def pattern(self, s: int, m: int, shot: int) -> np.ndarray:
         """(m*m, 2) stratified jittered (u, v) in [0, 1)^2 for patch s (fixed per seed, patch, shot)."""
-        rng = np.random.default_rng([self.opts.seed, int(s), int(shot)])
+        rng = np.random.default_rng([self.opts.seed, int(s), int(shot), int(m)])
         a, b = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
         return np.stack([(a.ravel() + rng.random(m * m)) / m, (b.ravel() + rng.random(m * m)) / m], axis=1)
 
@@ -252,15 +328,67 @@ class _Context:
         return self._shooters[s]
 
     # -- kernels --------------------------------------------------------------
-    def receivers(self, s: int, geo: _Geo) -> np.ndarray:
-        """Indices into ``geo`` of vertices that can receive from patch s (front side, other patch)."""
-        poly = self.polygon(s)
-        # patches with some corner of s strictly in front of their plane
-        h = np.einsum("pkc,pc->pk", poly[None, :, :] - self.centre[:, None, :], self.normal)
-        sees = (h > 1e-9 * self.scale).any(axis=1)
-        sees[s] = False
-        front = np.einsum("nc,c->n", geo.ff - self.centre[s], self.normal[s]) > 0.1 * self.eps_ff
-        return np.flatnonzero(front & sees[geo.patch])
+    def candidates(self, s: int) -> tuple[np.ndarray, np.ndarray]:
+        """(P,) bool ``full, part``: receiver patches that can see the front of patch s, entirely
+        in front of its plane (``full``) or straddling it (``part``: test per vertex)."""
+        if s not in self._cand:
+            poly = self.polygon(s)
+            # some corner of s strictly in front of the receiver's plane
+            h = np.einsum("pkc,pc->pk", poly[None, :, :] - self.centre[:, None, :], self.normal)
+            sees = (h > 1e-9 * self.scale).any(axis=1)
+            sees[s] = False
+            # receiver corners in front of the plane of s
+            hr = np.einsum("pkc,c->pk", self.corners - self.centre[s], self.normal[s])
+            ahead = hr > 0.1 * self.eps_ff + 1e-9 * self.scale
+            any_ahead = (ahead & self._valid_corner).any(axis=1)
+            all_ahead = (ahead | ~self._valid_corner).all(axis=1)
+            self._cand[s] = (sees & all_ahead, sees & any_ahead & ~all_ahead)
+        return self._cand[s]
+
+    def receivers(self, s: int, geo: _Geo, cull: bool = False) -> np.ndarray:
+        """Sorted indices into ``geo`` of vertices that can receive from patch s (front side,
+        other patch; with ``cull``, not on a patch that earlier gathers of s found occluded)."""
+        full, part = self.candidates(s)
+        if cull and s in self._vis_rays:
+            hidden = (self._vis_rays[s] >= CULL_RAYS) & (self._vis_seen[s] == 0)
+            full, part = full & ~hidden, part & ~hidden
+        if geo.start is not None:
+            idx_full = _ranges(geo.start, np.flatnonzero(full))
+            idx_part = _ranges(geo.start, np.flatnonzero(part))
+        else:
+            idx_full = np.flatnonzero(full[geo.patch])
+            idx_part = np.flatnonzero(part[geo.patch])
+        front = (geo.ff[idx_part] - self.centre[s]) @ self.normal[s] > 0.1 * self.eps_ff
+        return np.sort(np.concatenate([idx_full, idx_part[front]]))
+
+    def form_factors(self, s: int, geo: _Geo, cull: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Receivers of s in ``geo`` with a form factor > 0 (indices, sorted) and their analytic
+        form factors; cached per shooter for the mesh's geometry (``geo.cache``), since a patch
+        shoots several times on the same mesh."""
+        cache = geo.cache
+        if cache is not None and s in cache:
+            return cache[s]
+        idx = self.receivers(s, geo, cull and cache is None)
+        f = point_polygon(geo.ff[idx], geo.normal[idx], self.polygon(s)) if len(idx) else np.zeros(0)
+        keep = f > 1e-12
+        res = (idx[keep].astype(np.int32 if len(geo.key) < 2**31 else np.int64), f[keep])
+        if cache is not None:  # the oldest shooters go first when full
+            size = cache.setdefault("_size", 0) + len(res[0])
+            while size > FF_CACHE_ENTRIES and len(cache) > 1:
+                old = next(k for k in cache if k != "_size")
+                size -= len(cache.pop(old)[0])
+            cache["_size"] = size
+            cache[s] = (res[0], res[1].astype(np.float32))
+        return res
+
+    def culled_fraction(self) -> float:
+        """Fraction of (shooter, candidate receiver patch) pairs found fully occluded."""
+        tot = hid = 0
+        for s, rays in self._vis_rays.items():
+            full, part = self.candidates(s)
+            tot += int((full | part).sum())
+            hid += int(((rays >= CULL_RAYS) & (self._vis_seen[s] == 0) & (full | part)).sum())
+        return hid / tot if tot else 0.0
 
     def gather(
         self,
@@ -270,6 +398,9 @@ class _Context:
         shot: int = 0,
         field: np.ndarray | None = None,
         field_mean: np.ndarray | None = None,
+        *,
+        correlated: bool = False,
+        cull: bool = False,
     ) -> np.ndarray:
         """Form factor x visible fraction from every vertex of ``geo`` to patch s.
 
@@ -278,6 +409,10 @@ class _Context:
         field : None for a uniform shooter, returning (n,) ``F * vis``; or the shooter's
         radiance on its lattice, (N+1, N+1, 3), with its area mean ``field_mean`` (3,),
         returning (n, 3) the radiance-weighted form factor: a shooter need not be uniform.
+        correlated : one sample pattern for all receivers (errors vary smoothly over the
+        receivers: no speckle), instead of the pattern rotated per receiver (errors
+        independent per receiver: penumbrae become noise instead of banding).
+        cull : skip receiver patches that earlier gathers from s found fully occluded.
 
         ``F`` is the analytic form factor and ``vis`` the ratio of two estimates of the
         kernel integral (with and without visibility) from the same samples, so it is
@@ -285,92 +420,135 @@ class _Context:
         variate: the field at the receiver's foot on the shooter for near receivers, the
         shooter's mean for far ones), weighted by ``F * vis``, and the rest, whose kernel
         integral is estimated directly (not as a ratio: a ratio of correlated estimates
-        loses energy when the field is bright where the kernel is large). The samples
-        combine two strategies with
-        the balance heuristic: m x m stratified points on the shooter's area (good when the
-        shooter is far and small) and m x m cosine-distributed directions from the receiver
-        that hit the shooter (good when it is near and large: the kernel is then too peaked
-        for area samples). Both patterns are rotated per receiver (Cranley-Patterson,
-        keyed by the vertex), so errors are decorrelated between vertices.
+        loses energy when the field is bright where the kernel is large). Near receivers
+        (``F >= F_DIRECTION``) combine two strategies with the balance heuristic: m x m
+        stratified points on the shooter's area (good when the shooter is far and small)
+        and m x m cosine-distributed directions from the receiver that hit the shooter
+        (good when it is near and large: the kernel is then too peaked for area samples);
+        far receivers use the area samples alone. All kernel terms are computed from
+        per-receiver scalars (no (n, samples, 3) arrays).
         """
-        out = np.zeros(len(geo.patch) if field is None else (len(geo.patch), 3))
-        idx = self.receivers(s, geo)
+        n_geo = len(geo.key)
+        out = np.zeros(n_geo if field is None else (n_geo, 3))
+        idx, f = self.form_factors(s, geo, cull)
+        if cull and len(idx) and s in self._vis_rays:
+            hidden = (self._vis_rays[s] >= CULL_RAYS) & (self._vis_seen[s] == 0)
+            keep = ~hidden[geo.patch[idx]]
+            idx, f = idx[keep], f[keep]
         if len(idx) == 0:
             return out
-        f = point_polygon(geo.ff[idx], geo.normal[idx], self.polygon(s))
-        keep = f > 1e-12
-        idx, f = idx[keep], f[keep]
         sh = self.shooter(s)
         pat = self.pattern(s, m, shot)
         n_s = len(pat)
         salt = (int(self.opts.seed) * 1_000_003 + int(s)) * 1_000_003 + int(shot)
         flat = None if field is None else field.reshape(-1, 3)
+        if field is not None:
+            lo, hi = float(flat.min()), float(flat.max())
+            clamp_lo = 0.0 if lo >= 0 else None  # a field of one sign gives results of that sign
+            clamp_hi = 0.0 if hi <= 0 else None
+        rays_p = np.zeros(self.n_patches)
+        seen_p = np.zeros(self.n_patches)
         for a in range(0, len(idx), GATHER_BLOCK):
             ii = idx[a : a + GATHER_BLOCK]
+            fb = f[a : a + GATHER_BLOCK]
             b = len(ii)
             x, nr = geo.ff[ii], geo.normal[ii]
-            rot = _hash_uniform(geo.key[ii], salt, 4)
-            # area samples: stratified (u, v), rotated per receiver
+            rot = _hash_uniform(np.zeros(1, dtype=np.int64) if correlated else geo.key[ii], salt, 4)
+            # area samples: stratified (u, v), rotated per receiver (or once for all)
             ua = (pat[None, :, 0] + rot[:, :1]) % 1.0
             va = (pat[None, :, 1] + rot[:, 1:2]) % 1.0
             if not sh.is_quad:  # area-uniform square -> triangle warp
                 su = np.sqrt(ua)
                 ua, va = su * (1 - va), su * va
-            ya = sh.point(ua, va)  # (b, S, 3)
-            da = ya - x[:, None, :]
-            r2 = np.einsum("bsc,bsc->bs", da, da)
-            ka = np.maximum(np.einsum("bsc,bc->bs", da, nr), 0.0) * np.maximum(-(da @ sh.normal), 0.0)
-            ka /= np.pi * np.maximum(r2 * r2, 1e-300)
-            pa = 1.0 / sh.jacobian(ua, va)
-            wa = ka / (n_s * pa + n_s * ka + 1e-300)
-            # direction samples: cosine-distributed about the receiver normal, kept where they hit
-            t1, t2 = self.tangent[geo.patch[ii], 0], self.tangent[geo.patch[ii], 1]
-            dx, dy = _concentric((pat[None, :, 0] + rot[:, 2:3]) % 1.0, (pat[None, :, 1] + rot[:, 3:4]) % 1.0)
-            dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
-            w = (
-                dx[..., None] * t1[:, None, :]
-                + dy[..., None] * t2[:, None, :]
-                + dz[..., None] * nr[:, None, :]
-            )
-            den = w @ sh.normal  # < 0: towards the front of the shooter
-            t = ((sh.origin - x) @ sh.normal)[:, None] / np.where(den < 0, den, -1.0)
-            yd = x[:, None, :] + t[..., None] * w
-            hit = (den < -1e-12) & (t > 0) & sh.inside(yd)
-            ud, vd = sh.uv(yd)
-            kd = np.where(hit, dz * -den / (np.pi * np.maximum(t * t, 1e-300)), 0.0)
-            wd = np.where(hit, kd / (n_s / sh.jacobian(ud, vd) + n_s * kd + 1e-300), 0.0)
-            # visibility of the samples that count
-            wt = np.concatenate([wa, wd], axis=1)  # (b, 2S)
+            d0 = sh.origin - x  # (b, 3) receiver -> shooter origin
+            ka = sh.kernel(ua, va, d0, nr)  # (b or 1.., S) broadcast to (b, S)
+            ja = sh.jacobian(ua, va)
+            near = fb >= F_DIRECTION
+            wa = ka / (n_s / ja + n_s * ka * near[:, None] + 1e-300)
+            ua, va = np.broadcast_to(ua, wa.shape), np.broadcast_to(va, wa.shape)
+            # direction samples (near receivers): cosine-distributed about the normal, kept where they hit
+            sub = np.flatnonzero(near)
+            if len(sub):
+                wd, ud, vd = self._direction_samples(sh, pat, rot, sub, x, nr, geo.patch[ii], n_s, correlated)
+                wt = np.concatenate([wa, np.zeros_like(wa)], axis=1)  # (b, 2S)
+                wt[sub, n_s:] = wd
+                uu = np.concatenate([ua, np.zeros_like(wa)], axis=1)
+                vv = np.concatenate([va, np.zeros_like(wa)], axis=1)
+                uu[sub, n_s:], vv[sub, n_s:] = ud, vd
+            else:
+                wt, uu, vv = wa, ua, va
             wsum = wt.sum(axis=1)
             bi, si = np.nonzero(wt > 0)
             if len(bi) == 0:
                 continue
-            pts = np.concatenate([ya, yd], axis=1)[bi, si]
+            lu, lv = uu[bi, si], vv[bi, si]
             o = geo.origin[ii][bi]
-            dr = sh.target(pts) - o
-            r = np.sqrt(np.einsum("kc,kc->k", dr, dr))
+            dr = sh.target_uv(lu, lv) - o
+            r = np.sqrt(dr[:, 0] * dr[:, 0] + dr[:, 1] * dr[:, 1] + dr[:, 2] * dr[:, 2])
             vis = ~self.vis.occluded(
                 o, dr / np.maximum(r, 1e-300)[:, None], np.maximum(r - 0.5 * self.eps_ray, 0.0)
             )
+            rp = geo.patch[ii][bi]
+            rays_p += np.bincount(rp, minlength=self.n_patches)
+            seen_p += np.bincount(rp, weights=vis, minlength=self.n_patches)
             wraw = wt[bi, si] * vis  # MIS estimate of the visible kernel integral, per sample
             frac = np.bincount(bi, weights=wraw, minlength=b) / np.where(wsum > 0, wsum, 1.0)
-            fv = f[a : a + GATHER_BLOCK] * frac  # analytic F x visible fraction
+            fv = fb * frac  # analytic F x visible fraction
             if field is None:
                 out[ii] = fv
             else:
                 nl = field.shape[0] - 1
                 # control variate: the field where the receiver's kernel peaks (its foot on the
                 # shooter) for near receivers, the shooter's mean for far ones
-                foot = x - ((x - sh.origin) @ sh.normal)[:, None] * sh.normal
-                fu, fw = sh.uv(foot)
-                near = np.minimum(1.0, 2.0 * f[a : a + GATHER_BLOCK])[:, None]
-                cv = near * _sample_lattice(flat, nl, fu, fw) + (1.0 - near) * field_mean  # (b, 3)
-                lu = np.concatenate([ua, ud], axis=1)[bi, si]
-                lv = np.concatenate([va, vd], axis=1)[bi, si]
+                fu, fw = sh.foot_uv(x)
+                w_near = np.minimum(1.0, 2.0 * fb)[:, None]
+                cv = w_near * _sample_lattice(flat, nl, fu, fw) + (1.0 - w_near) * field_mean  # (b, 3)
                 rest = (_sample_lattice(flat, nl, lu, lv) - cv[bi]) * wraw[:, None]
                 res = np.stack([np.bincount(bi, weights=rest[:, c], minlength=b) for c in range(3)], axis=1)
-                out[ii] = np.maximum(fv[:, None] * cv + res, 0.0)
+                val = fv[:, None] * cv + res
+                if clamp_lo is not None:
+                    val = np.maximum(val, clamp_lo)
+                if clamp_hi is not None:
+                    val = np.minimum(val, clamp_hi)
+                out[ii] = val
+        if s in self._vis_rays:
+            self._vis_rays[s] += rays_p
+            self._vis_seen[s] += seen_p
+        else:
+            self._vis_rays[s], self._vis_seen[s] = rays_p, seen_p
         return out
+
+    def _direction_samples(self, sh, pat, rot, sub, x, nr, rpatch, n_s, correlated):
+        """MIS weights (k, S) and lattice parameters of the cosine-direction samples of the
+        receivers ``sub`` (rows of the block) that hit the shooter (weight 0 elsewhere)."""
+        r = rot if correlated else rot[sub]
+        dx, dy = _concentric((pat[None, :, 0] + r[:, 2:3]) % 1.0, (pat[None, :, 1] + r[:, 3:4]) % 1.0)
+        dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
+        t1, t2 = self.tangent[rpatch[sub], 0], self.tangent[rpatch[sub], 1]
+        xs, ns = x[sub], nr[sub]
+
+        def proj(g):  # w . g for the sample directions w, (k, S)
+            return dx * (t1 @ g)[:, None] + dy * (t2 @ g)[:, None] + dz * (ns @ g)[:, None]
+
+        den = proj(sh.normal)  # < 0: towards the front of the shooter
+        hx = (xs - sh.origin) @ sh.normal  # receiver height over the shooter's plane (> 0)
+        ok = den < -1e-12
+        t = np.where(ok, hx[:, None] / np.where(ok, -den, 1.0), 0.0)
+        if sh.parallelogram:
+            ud = ((xs - sh.origin) @ sh.a1)[:, None] + t * proj(sh.a1)
+            vd = ((xs - sh.origin) @ sh.a2)[:, None] + t * proj(sh.a2)
+            hit = ok & (t > 0) & sh.inside_uv(ud, vd)
+            ud, vd = sh.clip_uv(ud, vd)
+            jd = sh.area
+        else:
+            w = dx[..., None] * t1[:, None, :] + dy[..., None] * t2[:, None, :] + dz[..., None] * ns[:, None, :]
+            yd = xs[:, None, :] + t[..., None] * w
+            hit = ok & (t > 0) & sh.inside(yd)
+            ud, vd = sh.uv(yd)
+            jd = sh.jacobian(ud, vd)
+        kd = np.where(hit, dz * -den / (np.pi * np.maximum(t * t, 1e-300)), 0.0)
+        wd = np.where(hit, kd / (n_s / jd + n_s * kd + 1e-300), 0.0)
+        return wd, np.broadcast_to(ud, wd.shape), np.broadcast_to(vd, wd.shape)
 
     def light_irradiance(self, light, geo: _Geo) -> np.ndarray:
         """(n, 3) irradiance from a point or spot light, with visibility."""
@@ -396,16 +574,20 @@ class _Context:
         e[ok] = k[:, None] * light.radiant_intensity[None, :]
         return e
 
-    def direct(self, keys: np.ndarray, check: Callable[[], None]) -> np.ndarray:
+    def emitter_gather(self, e: int, geo: _Geo) -> np.ndarray:
+        """(n,) ``F * vis`` from emissive patch e, as the direct pass computes it (per-vertex
+        rotated patterns, ``DIRECT_SAMPLE_FACTOR`` x the per-side samples, shot 0)."""
+        return self.gather(int(e), geo, DIRECT_SAMPLE_FACTOR * _side(self.opts.samples))
+
+    def direct(self, keys: np.ndarray, check: Callable[[], None], geo: _Geo | None = None) -> np.ndarray:
         """(n, 3) reflected direct radiance (emission excluded) at vertex keys."""
         out = np.zeros((len(keys), 3))
         if len(keys) == 0:
             return out
-        geo = self.geometry(keys)
+        geo = self.geometry(keys) if geo is None else geo
         incoming = np.zeros((len(keys), 3))  # radiance-weighted: rho * incoming = reflected
-        m = _side(self.opts.samples)
         for e in self.emitters:
-            incoming += self.gather(int(e), geo, m)[:, None] * self.emission[e]
+            incoming += self.emitter_gather(e, geo)[:, None] * self.emission[e]
             check()
         for light in self.lights:
             incoming += self.light_irradiance(light, geo) / np.pi
@@ -416,9 +598,13 @@ class _Context:
         """Luminance power emitted by emissive patches and lights (W, luminance-weighted)."""
         p = float(np.pi * (self.emission @ LUMINANCE * self.area).sum())
         for lt in self.lights:
-            solid = 4 * np.pi if lt.kind == "point" else 2 * np.pi * (1 - math.cos(lt.outer_cone))
-            p += float(lt.radiant_intensity @ LUMINANCE) * solid
+            p += _light_power(lt)
         return p
+
+
+def _light_power(lt) -> float:
+    solid = 4 * np.pi if lt.kind == "point" else 2 * np.pi * (1 - math.cos(lt.outer_cone))
+    return float(lt.radiant_intensity @ LUMINANCE) * solid
 
 
 def _hash_uniform(keys: np.ndarray, salt: int, k: int = 2) -> np.ndarray:
@@ -453,7 +639,8 @@ def _cross2(p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 class _Shooter:
-    """Geometry of one patch as a shooter: inside test, inverse parametrisation, area Jacobian.
+    """Geometry of one patch as a shooter: kernel terms, inside test, inverse parametrisation,
+    area Jacobian.
 
     Quads: ``p(u, v) = c0 + u e1 + v e2 + u v e3`` (bilinear); triangles: ``c0 + u e1 + v e2``.
     """
@@ -478,6 +665,36 @@ class _Shooter:
         self.edge_n = np.cross(np.roll(c, -1, axis=0) - c, normal)  # (k, 3) outward edge normals
         self.edge_o = c
         self.tol = 1e-9 * max(float(np.abs(c - c.mean(axis=0)).max()), 1e-300)
+        # dual basis of (e1, e2) in the plane: (y - origin) . a1 = u for parallelograms
+        cn = float(np.cross(self.e1, self.e2) @ normal)
+        cn = cn if abs(cn) > 1e-300 else 1e-300
+        self.a1 = np.cross(self.e2, normal) / cn
+        self.a2 = np.cross(normal, self.e1) / cn
+        # Gram terms of the parametrisation, for kernels from per-receiver scalars
+        self.basis = np.stack([self.e1, self.e2, self.e3])  # (3, 3)
+        self.gram = self.basis @ self.basis.T
+        self.bn = self.basis @ normal
+        cr = np.stack([np.cross(self.e1, self.e2), np.cross(self.e1, self.e3), np.cross(self.e3, self.e2)])
+        self.cgram = cr @ cr.T
+
+    def kernel(self, u: np.ndarray, v: np.ndarray, d0: np.ndarray, nr: np.ndarray) -> np.ndarray:
+        """(b, S) ``cos_r cos_s / (pi r^2)`` at points p(u, v) (u, v: (b or 1, S)) seen from
+        receivers with normals nr (b, 3) at ``origin - d0`` (d0: (b, 3))."""
+        g, bn = self.gram, self.bn
+        d0n = np.einsum("bc,bc->b", d0, nr)[:, None]
+        dd = np.einsum("bc,bc->b", d0, d0)[:, None]
+        de = d0 @ self.basis.T  # (b, 3): d0 . e1, d0 . e2, d0 . e3
+        en = nr @ self.basis.T  # (b, 3)
+        h = (d0 @ self.normal)[:, None]
+        dn = d0n + u * en[:, :1] + v * en[:, 1:2]  # d . nr, d = p - x
+        ds = h + u * bn[0] + v * bn[1]  # d . n_s (< 0 in front)
+        r2 = dd + 2 * u * de[:, :1] + 2 * v * de[:, 1:2] + u * u * g[0, 0] + v * v * g[1, 1] + 2 * u * v * g[0, 1]
+        if not self.parallelogram:
+            uv = u * v
+            dn = dn + uv * en[:, 2:3]
+            ds = ds + uv * bn[2]
+            r2 = r2 + 2 * uv * de[:, 2:3] + uv * uv * g[2, 2] + 2 * uv * (u * g[0, 2] + v * g[1, 2])
+        return np.maximum(dn, 0.0) * np.maximum(-ds, 0.0) / (np.pi * np.maximum(r2 * r2, 1e-300))
 
     def inside(self, pts: np.ndarray) -> np.ndarray:
         """(...) bool: points (..., 3) on the plane inside the convex polygon."""
@@ -485,6 +702,27 @@ class _Shooter:
         for o, en in zip(self.edge_o, self.edge_n, strict=True):
             ok &= (pts - o) @ en <= self.tol * np.linalg.norm(en)
         return ok
+
+    def inside_uv(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(...) bool: parallelogram / triangle parameters inside the patch."""
+        t = 1e-9
+        ok = (u >= -t) & (v >= -t)
+        return ok & (u + v <= 1 + t) if not self.is_quad else ok & (u <= 1 + t) & (v <= 1 + t)
+
+    def clip_uv(self, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        u, v = np.clip(u, 0.0, 1.0), np.clip(v, 0.0, 1.0)
+        if not self.is_quad:
+            tot = np.maximum(u + v, 1.0)
+            u, v = u / tot, v / tot
+        return u, v
+
+    def foot_uv(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Lattice parameters of the feet of points x (b, 3) on the patch plane (clipped)."""
+        if self.parallelogram:
+            rel = x - self.origin
+            return self.clip_uv(rel @ self.a1, rel @ self.a2)
+        foot = x - ((x - self.origin) @ self.normal)[:, None] * self.normal
+        return self.uv(foot)
 
     def uv(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Lattice parameters (u, v) of points (..., 3) on the patch plane (clipped to the patch)."""
@@ -507,12 +745,7 @@ class _Shooter:
             u = np.einsum("...c,...c->...", h - v[..., None] * f, den) / np.maximum(
                 np.einsum("...c,...c->...", den, den), 1e-300
             )
-        u, v = np.clip(u, 0.0, 1.0), np.clip(v, 0.0, 1.0)
-        if not self.is_quad:
-            over = u + v > 1.0
-            tot = np.where(over, u + v, 1.0)
-            u, v = u / tot, v / tot
-        return u, v
+        return self.clip_uv(u, v)
 
     def point(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """(..., 3) points at lattice parameters (u, v)."""
@@ -526,13 +759,20 @@ class _Shooter:
         neighbouring wall)."""
         return pts + self.eps * self.normal + self.shrink * (self.centre - pts)
 
-    def jacobian(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    def target_uv(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(k, 3) :meth:`target` of the points at lattice parameters u, v (k,)."""
+        k = 1.0 - self.shrink
+        base = k * self.origin + self.eps * self.normal + self.shrink * self.centre
+        out = base + np.outer(u, k * self.e1) + np.outer(v, k * self.e2)
+        return out if self.parallelogram else out + np.outer(u * v, k * self.e3)
+
+    def jacobian(self, u: np.ndarray, v: np.ndarray) -> np.ndarray | float:
         """Area per unit (u, v) of the area samples at lattice parameters (u, v)."""
         if self.parallelogram:  # constant; the square -> triangle warp is area-uniform too
-            return np.full(np.shape(u), self.area)
-        du = self.e1 + np.asarray(v)[..., None] * self.e3
-        dv = self.e2 + np.asarray(u)[..., None] * self.e3
-        return np.maximum(np.linalg.norm(np.cross(du, dv), axis=-1), 1e-300)
+            return self.area
+        c = self.cgram
+        j2 = c[0, 0] + u * u * c[1, 1] + v * v * c[2, 2] + 2 * u * c[0, 1] + 2 * v * c[0, 2] + 2 * u * v * c[1, 2]
+        return np.maximum(np.sqrt(np.maximum(j2, 0.0)), 1e-300)
 
 
 def _sample_lattice(flat: np.ndarray, n: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -711,28 +951,6 @@ def _averaging_matrix(forest: qt.Forest, keys: np.ndarray, corners: np.ndarray, 
     return sparse.csr_matrix((wc.ravel(), (rows, idx.ravel())), shape=(len(area), len(keys)))
 
 
-# -- the solver ------------------------------------------------------------------
-def solve(scene, options: SolveOptions | None = None, progress: Progress | None = None) -> Solution:
-    """Solve diffuse global illumination of ``scene``; see the module docstring.
-
-    progress : ``progress(fraction, message) -> bool``; returning False cancels. A
-      cancelled solve returns a consistent partial :class:`Solution` (the mesh
-      settled so far, its direct light, the shots done) with
-      ``stats['cancelled'] = True``.
-    Raises :class:`iat.errors.OptionError` for invalid options.
-    """
-    opts = SolveOptions() if options is None else options
-    if not isinstance(opts, SolveOptions):
-        raise OptionError(f"solve options must be SolveOptions, not {type(opts).__name__}")
-    opts.validate()
-    t_start = time.perf_counter()
-    vis = Visibility(scene.corner_positions, scene.patch_is_quad)
-    try:
-        return _solve(scene, opts, progress, vis, t_start)
-    finally:
-        vis.close()
-
-
 class _Cache:
     """Values (n, 3) at sorted vertex keys (n,), grown by :meth:`add`."""
 
@@ -758,11 +976,11 @@ class _Cache:
 
 
 def _refine(ctx: _Context, forest: qt.Forest, cache: _Cache, evaluate, report, label: str, span):
-    """Split elements until nothing varies by more than the tolerance (see the module docstring).
+    """Split elements until nothing deviates by more than the tolerance (see the module docstring).
 
     cache : reflected radiance (n, 3) at vertex keys, extended with ``evaluate(new_keys)``.
-    Returns (forest, passes); on cancel the last forest whose vertices are all evaluated
-    (or the given one) is returned and ``_Cancel`` is re-raised by the caller's check.
+    Returns (forest, passes, cancelled); on cancel the last forest whose vertices are all
+    evaluated (or the given one) is returned.
     """
     opts, D = ctx.opts, ctx.opts.max_depth
     emission_y = _lum(ctx.emission)
@@ -771,8 +989,8 @@ def _refine(ctx: _Context, forest: qt.Forest, cache: _Cache, evaluate, report, l
         while True:
             keys = qt.vertex_keys(forest)
             cand = forest.leaf_level < D
-            if opts.min_element_size > 0 and cand.any():
-                cand &= _leaf_longest_edge(forest, ctx.corners) / 2 >= opts.min_element_size
+            if ctx.min_size > 0 and cand.any():
+                cand[cand] = _leaf_longest_edge(forest.take(cand), ctx.corners) / 2 >= ctx.min_size
             sub = forest.take(cand)
             pk, pvalid = _probe_keys(sub)
             need = np.union1d(keys, pk[pvalid])
@@ -816,6 +1034,347 @@ def _refine(ctx: _Context, forest: qt.Forest, cache: _Cache, evaluate, report, l
     return forest, passes, False
 
 
+def _sources(ctx: _Context) -> dict:
+    """JSON-able description of the light sources of a solve (for :func:`resolve`)."""
+    return {
+        "lights": [
+            {
+                "kind": lt.kind,
+                "position": [float(x) for x in lt.position],
+                "direction": [float(x) for x in lt.direction],
+                "radiant_intensity": [float(x) for x in lt.radiant_intensity],
+                "inner_cone": float(lt.inner_cone),
+                "outer_cone": float(lt.outer_cone),
+            }
+            for lt in ctx.lights
+        ],
+        "emitters": [[int(p), *(float(x) for x in ctx.emission[p])] for p in ctx.emitters],
+    }
+
+
+def _light_from(d: dict):
+    """A light-like object (what :meth:`_Context.light_irradiance` reads) from :func:`_sources`."""
+    return SimpleNamespace(
+        kind=d["kind"],
+        position=np.asarray(d["position"], dtype=np.float64),
+        direction=np.asarray(d["direction"], dtype=np.float64),
+        radiant_intensity=np.asarray(d["radiant_intensity"], dtype=np.float64),
+        inner_cone=float(d["inner_cone"]),
+        outer_cone=float(d["outer_cone"]),
+    )
+
+
+class _Run:
+    """The state of one solve: the mesh, per-vertex reflected and unshot radiance, stats."""
+
+    def __init__(self, scene, opts: SolveOptions, progress, vis: Visibility, t_start: float):
+        self.scene, self.opts, self.vis, self.t_start = scene, opts, vis, t_start
+        self.progress = progress
+        self.ctx = ctx = _Context(scene, opts, vis)
+        self.P = len(ctx.area)
+        self.m_side = _side(opts.samples)
+        self.state = {"cancelled": False, "last": 0.0, "fraction": 0.0, "message": ""}
+        self.stats: dict = {
+            "interpolation_bias": 0.0,
+            "interpolation_bias_vertices": 0,
+            "interpolation_bias_total": 0.0,
+            "interpolation_bias_total_vertices": 0,
+            "mesh_passes": 0,
+            "refine_passes": 0,
+        }
+        self.timings = {"meshing_s": 0.0, "shooting_s": 0.0, "refining_s": 0.0}
+        self.shots = 0
+        self.shot_index = np.ones(self.P, dtype=np.int64)  # jitter index per patch; 0 was the direct pass
+        self.shot_power = np.zeros(self.P)  # luminance power each patch has shot so far
+        self.shot_log: list[tuple[np.ndarray, np.ndarray]] = []  # (shot, received-and-reflected) power
+        self.p_first: float | None = None
+        self.power0 = ctx.emitted_power()
+        self.mesh: dict = {}
+        self.reflected = np.zeros((0, 3))
+        self.unshot = np.zeros((0, 3))
+
+    # -- progress -----------------------------------------------------------------
+    def report(self, fraction: float, message: str) -> None:
+        st = self.state
+        st["fraction"], st["message"] = fraction, message
+        if self.progress is not None and self.progress(float(min(max(fraction, 0.0), 1.0)), message) is False:
+            st["cancelled"] = True
+            raise _Cancel
+
+    def check(self) -> None:  # cheap poll inside long loops, at most 20 times a second
+        now = time.perf_counter()
+        if self.progress is not None and now - self.state["last"] > 0.05:
+            self.state["last"] = now
+            self.report(self.state["fraction"], self.state["message"])
+
+    # -- the mesh -----------------------------------------------------------------
+    def set_mesh(self, forest: qt.Forest, keys: np.ndarray) -> None:
+        ctx, mesh = self.ctx, self.mesh
+        mesh["forest"], mesh["keys"] = forest, keys
+        mesh["M"] = _averaging_matrix(forest, keys, ctx.corners, ctx.area)
+        mesh["lattice"] = _Lattice(forest, keys)
+        mesh["start"] = np.searchsorted(keys, qt.make_key(np.arange(self.P + 1), 0, 0, ctx.n))
+        mesh["geo"] = ctx.geometry(keys)
+        mesh["geo"].cache = {}
+        mesh["rho"] = ctx.albedo[qt.decode_key(keys, ctx.n)[0]]
+
+    @property
+    def forest(self) -> qt.Forest:
+        return self.mesh["forest"]
+
+    @property
+    def keys(self) -> np.ndarray:
+        return self.mesh["keys"]
+
+    def mesh_by_direct_light(self) -> None:
+        """Stage A."""
+        ctx = self.ctx
+        t0 = time.perf_counter()
+        roots = qt.roots(ctx.is_quad, self.opts.max_depth)
+        self.direct_cache = _Cache()
+        forest, passes, _ = _refine(
+            ctx, roots, self.direct_cache, lambda k: ctx.direct(k, self.check), self.report, "meshing", (0.0, 0.2)
+        )
+        keys = qt.vertex_keys(forest)
+        bias, bias_n = _interpolation_bias(keys, qt.vertex_keys(roots), self.direct_cache, ctx)
+        self.stats.update(mesh_passes=int(passes), interpolation_bias=bias, interpolation_bias_vertices=bias_n)
+        self.set_mesh(forest, keys)
+        self.reflected = self.direct_cache.get(keys)  # 0 where a cancel left a vertex unevaluated
+        self.unshot = self.reflected.copy()
+        self.timings["meshing_s"] = time.perf_counter() - t0
+
+    def take_mesh(self, sol: Solution) -> None:
+        """The leaves and vertices of ``sol``, unchanged."""
+        forest = qt.Forest(
+            sol.max_depth,
+            np.asarray(sol.patch_is_quad, dtype=bool),
+            np.asarray(sol.leaf_patch, dtype=np.int32),
+            np.asarray(sol.leaf_level, dtype=np.int8),
+            np.asarray(sol.leaf_i, dtype=np.int32),
+            np.asarray(sol.leaf_j, dtype=np.int32),
+            np.asarray(sol.leaf_flip, dtype=bool),
+        )
+        self.set_mesh(forest, np.asarray(sol.vert_key, dtype=np.int64))
+        self.reflected = np.zeros((len(self.keys), 3))
+        self.unshot = np.zeros((len(self.keys), 3))
+
+    def direct_on_mesh(self) -> None:
+        """Direct light at every vertex of the given mesh (no subdivision)."""
+        t0 = time.perf_counter()
+        self.report(0.0, f"direct light on the given mesh: {len(self.keys)} vertices")
+        try:
+            self.reflected = self.ctx.direct(self.keys, self.check, self.mesh["geo"])
+        except _Cancel:
+            self.reflected = np.zeros((len(self.keys), 3))
+        self.unshot = self.reflected.copy()
+        self.timings["meshing_s"] = time.perf_counter() - t0
+
+    # -- shooting -----------------------------------------------------------------
+    def patch_power(self, unshot: np.ndarray) -> np.ndarray:
+        """(P,) luminance power of each patch's unshot field (by magnitude: it may be signed)."""
+        return np.pi * _lum(self.mesh["M"] @ np.abs(unshot)) * self.ctx.area
+
+    def shoot(self, span, target: float) -> None:
+        """Shoot until the unshot power is below ``target`` or max_shots."""
+        ctx, mesh, opts = self.ctx, self.mesh, self.opts
+        if self.power0 <= 0 or len(self.keys) == 0:
+            return
+        t0 = time.perf_counter()
+        u_start = self.u_start
+        span_log = math.log(u_start / target) if u_start > target else 1.0  # progress on a log scale
+        try:
+            while self.shots < opts.max_shots:
+                power = self.patch_power(self.unshot)
+                total = float(power.sum())
+                if total <= target:
+                    break
+                done = min(1.0, max(0.0, math.log(u_start / max(total, 1e-300)) / span_log))
+                self.state["fraction"] = span[0] + (span[1] - span[0]) * done
+                self.state["message"] = f"shooting: {self.shots} shots, unshot {total / self.power0:.3g} of emitted"
+                self.check()
+                s = int(np.argmax(power))
+                a, b = mesh["start"][s], mesh["start"][s + 1]
+                field = mesh["lattice"].grid(s, self.unshot)
+                field_mean = np.ravel(mesh["M"][s] @ self.unshot)
+                # fewer samples for faint shots: their noise matters less (sqrt keeps power / m flat-ish)
+                if self.p_first is None:
+                    self.p_first = float(power[s])
+                m = max(1, min(self.m_side, round(self.m_side * math.sqrt(float(power[s]) / self.p_first))))
+                g = ctx.gather(
+                    s, mesh["geo"], m, int(self.shot_index[s]), field, field_mean, correlated=True, cull=True
+                )
+                self.shot_index[s] += 1
+                self.shot_power[s] += float(power[s])
+                self.shots += 1
+                self.unshot[a:b] = 0.0
+                dv = mesh["rho"] * g
+                self.reflected += dv
+                self.unshot += dv
+                received = np.pi * (ctx.area[:, None] * (mesh["M"] @ dv)).sum(axis=0)
+                self.shot_log.append((np.pi * ctx.area[s] * field_mean, received))
+        finally:
+            self.timings["shooting_s"] += time.perf_counter() - t0
+
+    def refine_total(self, label: str, span) -> None:
+        """Stage C: refine on the total radiance. New vertices get their direct light and a
+        gather of everything each patch has shot so far (exact: shots are linear, so one
+        gather of their sum equals replaying them all), never an interpolated value. Their
+        unshot radiance is what they received minus what their patch already shot from
+        there, so energy the coarser mesh could not hold is shot again, not lost."""
+        ctx, mesh = self.ctx, self.mesh
+        t0 = time.perf_counter()
+        keys = self.keys
+        shot_field = self.reflected - self.unshot
+        lattice_b = mesh["lattice"]
+        sources = np.flatnonzero(self.shot_index > 1)
+        grids = {int(p): lattice_b.grid(int(p), shot_field) for p in sources}
+        means = mesh["M"] @ shot_field
+        total_cache = _Cache(keys, self.reflected.copy())
+        # samples per source by the power it has shot (as the shots themselves)
+        pmax = max(float(self.shot_power.max()), 1e-300)
+        m_src = {
+            int(p): max(1, min(self.m_side, round(self.m_side * math.sqrt(self.shot_power[p] / pmax))))
+            for p in sources
+        }
+        n_pass = self.stats["refine_passes"]
+
+        def evaluate_total(new: np.ndarray) -> np.ndarray:
+            out = self.direct_cache.get(new)
+            missing = self.direct_cache.find(new) < 0
+            if missing.any():
+                out[missing] = ctx.direct(new[missing], self.check)
+            if len(new):
+                geo = ctx.geometry(new)
+                rho = ctx.albedo[geo.patch]
+                for p in sources:
+                    p = int(p)
+                    jitter = int(self.shot_index[p]) + 1_000_000 * (1 + n_pass)
+                    out += rho * ctx.gather(p, geo, m_src[p], jitter, grids[p], means[p], correlated=True, cull=True)
+                    self.check()
+            return out
+
+        old_keys = keys
+        forest, passes, _ = _refine(ctx, self.forest, total_cache, evaluate_total, self.report, label, span)
+        self.stats["refine_passes"] += passes
+        keys = qt.vertex_keys(forest)
+        self.timings["refining_s"] += time.perf_counter() - t0
+        if len(keys) == len(old_keys):
+            return
+        b, bn = _interpolation_bias(keys, old_keys, total_cache, ctx)
+        n_old = self.stats["interpolation_bias_total_vertices"]
+        if bn:  # vertex-weighted mean over the refinement stages
+            self.stats["interpolation_bias_total"] = (self.stats["interpolation_bias_total"] * n_old + b * bn) / (
+                n_old + bn
+            )
+        self.stats["interpolation_bias_total_vertices"] = n_old + bn
+        old_idx = qt.lookup(old_keys, keys)
+        new_unshot = np.zeros((len(keys), 3))
+        new_unshot[old_idx >= 0] = self.unshot[old_idx[old_idx >= 0]]
+        self.reflected = total_cache.get(keys)
+        p_new, i_new, j_new = qt.decode_key(keys, ctx.n)
+        for p in np.unique(p_new[old_idx < 0]):
+            sel = np.flatnonzero((old_idx < 0) & (p_new == p))
+            shot_here = grids[int(p)][i_new[sel], j_new[sel]] if int(p) in grids else 0.0
+            new_unshot[sel] = np.maximum(self.reflected[sel] - shot_here, 0.0)
+        self.unshot = new_unshot
+        self.set_mesh(forest, keys)
+
+    def run_plan(self, plan) -> None:
+        self.u_start = max(float(self.patch_power(self.unshot).sum()), 1e-300)
+        try:
+            for kind, arg, span in plan:
+                if self.state["cancelled"]:
+                    break
+                if kind == "shoot":
+                    self.shoot(span, arg)
+                elif self.opts.refine_indirect and self.shots:
+                    self.refine_total(arg, span)
+        except _Cancel:
+            pass
+
+    # -- the result ---------------------------------------------------------------
+    def ambient(self, fallback_reflectance=None) -> tuple[np.ndarray, np.ndarray]:
+        """(3,) uniform incoming radiance standing for the unshot light's later bounces, and the
+        (3,) reflected fraction r it was derived from (see the module docstring)."""
+        ctx = self.ctx
+        log = self.shot_log[len(self.shot_log) // 2 :]
+        if log:
+            sp = np.sum([np.abs(a) for a, _ in log], axis=0)
+            rp = np.sum([np.abs(b) for _, b in log], axis=0)
+            r = np.where(sp > 0, rp / np.where(sp > 0, sp, 1.0), 0.0)
+        elif fallback_reflectance is not None:
+            r = np.asarray(fallback_reflectance, dtype=np.float64)
+        else:
+            return np.zeros(3), np.zeros(3)
+        r = np.clip(r, 0.0, MAX_REFLECTANCE)
+        phi_u = np.pi * (ctx.area[:, None] * (self.mesh["M"] @ self.unshot)).sum(axis=0)
+        denom = np.pi * (ctx.area[:, None] * ctx.albedo).sum(axis=0)
+        e = np.where(denom > 0, phi_u * r / (1.0 - r) / np.where(denom > 0, denom, 1.0), 0.0)
+        return e, r
+
+    def finish(self, base_reflected=None, mode="solve", fallback_reflectance=None, extra=None) -> Solution:
+        ctx, opts = self.ctx, self.opts
+        forest, keys = self.forest, self.keys
+        unshot_power = self.patch_power(self.unshot)
+        vpatch = qt.decode_key(keys, ctx.n)[0]
+        reflected = self.reflected
+        amb, refl_frac = np.zeros(3), np.zeros(3)
+        if opts.ambient and opts.max_shots > 0 and len(keys):
+            amb, refl_frac = self.ambient(fallback_reflectance)
+            reflected = reflected + ctx.albedo[vpatch] * amb
+        radiance = ctx.emission[vpatch] + reflected
+        if not np.isfinite(radiance).all():
+            raise FloatingPointError("radiosity produced non-finite radiance (a solver bug)")
+        radiance = np.maximum(radiance, 0.0)
+        unshot_fraction = float(unshot_power.sum() / self.power0) if self.power0 > 0 else 0.0
+        if not self.state["cancelled"]:
+            try:
+                self.report(1.0, f"done: {self.shots} shots, {len(keys)} vertices")
+            except _Cancel:
+                pass
+        elapsed = time.perf_counter() - self.t_start
+        vis = self.vis
+        sol = Solution.from_forest(
+            forest,
+            ctx.corners,
+            self.scene.patch_material,
+            ctx.albedo,
+            keys,
+            radiance,
+            options=opts.to_dict(),
+            model_path=str(getattr(self.scene, "path", "") or ""),
+        )
+        area_tot = float(ctx.area.sum())
+        sol.stats = {
+            "elements": int(forest.n_leaves),
+            "vertices": int(len(keys)),
+            "triangles": int(len(sol.tri_vertices)),
+            "shots": int(self.shots),
+            "rays": int(vis.rays),
+            "rays_per_s": float(vis.rays / vis.seconds) if vis.seconds > 0 else 0.0,
+            "time_s": float(elapsed),
+            **{k: float(v) for k, v in self.timings.items()},
+            "unshot_fraction": unshot_fraction,
+            **self.stats,
+            "max_depth_reached": int(forest.leaf_level.max()) if forest.n_leaves else 0,
+            "emitted_power": float(self.power0),
+            "ambient": [float(x) for x in amb],
+            "ambient_luminance_fraction": float(
+                _lum(amb * (ctx.area[:, None] * ctx.albedo).sum(axis=0)) * np.pi / self.power0
+            )
+            if self.power0 > 0 and area_tot > 0
+            else 0.0,
+            "reflectance": [float(x) for x in refl_frac],
+            "culled_pairs": float(ctx.culled_fraction()),
+            "mode": mode,
+            "sources": _sources(ctx),
+            "cancelled": bool(self.state["cancelled"]),
+            "options": opts.to_dict(),
+            **(extra or {}),
+        }
+        return sol
+
+
 def _interpolation_bias(
     keys: np.ndarray, old_keys: np.ndarray, cache: _Cache, ctx: _Context
 ) -> tuple[float, int]:
@@ -836,214 +1395,152 @@ def _interpolation_bias(
     return (float(np.abs(interp - exact).sum() / tot) if tot > 0 else 0.0), int(ok.sum())
 
 
-def _solve(scene, opts: SolveOptions, progress, vis: Visibility, t_start: float) -> Solution:
-    ctx = _Context(scene, opts, vis)
-    P = len(ctx.area)
-    m_side = _side(opts.samples)
-    state = {"cancelled": False, "last": 0.0, "fraction": 0.0, "message": ""}
+# -- the solver ------------------------------------------------------------------
+def _options(options) -> SolveOptions:
+    opts = SolveOptions() if options is None else options
+    if not isinstance(opts, SolveOptions):
+        raise OptionError(f"solve options must be SolveOptions, not {type(opts).__name__}")
+    return opts.validate()
 
-    def report(fraction: float, message: str) -> None:
-        state["fraction"], state["message"] = fraction, message
-        if progress is not None and progress(float(min(max(fraction, 0.0), 1.0)), message) is False:
-            state["cancelled"] = True
-            raise _Cancel
 
-    def check() -> None:  # cheap poll inside long loops, at most 20 times a second
-        now = time.perf_counter()
-        if progress is not None and now - state["last"] > 0.05:
-            state["last"] = now
-            report(state["fraction"], state["message"])
-
-    stats: dict = {"interpolation_bias_total": 0.0, "interpolation_bias_total_vertices": 0}
-    timings = {}
-
-    # ---- A. meshing by direct light --------------------------------------------------
-    t0 = time.perf_counter()
-    roots = qt.roots(ctx.is_quad, opts.max_depth)
-    root_keys = qt.vertex_keys(roots)
-    direct_cache = _Cache()
-    forest, passes_a, _ = _refine(
-        ctx, roots, direct_cache, lambda k: ctx.direct(k, check), report, "meshing", (0.0, 0.2)
+def _check_mesh(sol: Solution, scene, what: str) -> None:
+    """Raise OptionError unless ``sol`` was solved on the patches of ``scene``."""
+    if not isinstance(sol, Solution):
+        raise OptionError(f"{what} must be a Solution, not {type(sol).__name__}")
+    corners = scene.corner_positions
+    same = (
+        sol.patch_corners.shape == corners.shape
+        and np.array_equal(np.asarray(sol.patch_is_quad, dtype=bool), scene.patch_is_quad)
+        and np.allclose(sol.patch_corners, corners, rtol=0.0, atol=1e-9 * max(1.0, float(np.abs(corners).max(initial=0))))
     )
-    keys = qt.vertex_keys(forest)
-    bias, bias_n = _interpolation_bias(keys, root_keys, direct_cache, ctx)
-    timings["meshing_s"] = time.perf_counter() - t0
+    if not same:
+        raise OptionError(f"{what}: the solution was solved on other patches than this scene's")
 
-    # ---- B. progressive refinement -------------------------------------------------
-    reflected = direct_cache.get(keys)  # 0 where a cancel left a vertex unevaluated
-    unshot_v = reflected.copy()  # per-vertex unshot radiance: shooters need not be uniform
-    power0 = ctx.emitted_power()
-    target = opts.convergence * power0
-    shots = 0
-    shot_index = np.ones(P, dtype=np.int64)  # jitter index per patch; 0 was the direct pass
-    mesh = {}
 
-    def set_mesh(forest, keys):
-        mesh["forest"], mesh["keys"] = forest, keys
-        mesh["M"] = _averaging_matrix(forest, keys, ctx.corners, ctx.area)
-        mesh["lattice"] = _Lattice(forest, keys)
-        mesh["start"] = np.searchsorted(keys, qt.make_key(np.arange(P + 1), 0, 0, ctx.n))
-        mesh["geo"] = ctx.geometry(keys) if len(keys) else None
-        mesh["rho"] = ctx.albedo[qt.decode_key(keys, ctx.n)[0]]
+def solve(
+    scene, options: SolveOptions | None = None, progress: Progress | None = None, *, mesh: Solution | None = None
+) -> Solution:
+    """Solve diffuse global illumination of ``scene``; see the module docstring.
 
-    def patch_power(unshot_v):
-        return np.pi * _lum(mesh["M"] @ unshot_v) * ctx.area
+    progress : ``progress(fraction, message) -> bool``; returning False cancels. A
+      cancelled solve returns a consistent partial :class:`Solution` (the mesh
+      settled so far, its direct light, the shots done) with
+      ``stats['cancelled'] = True``.
+    mesh : a :class:`Solution` of the same patches, or None. When given, its leaves and
+      vertices are kept exactly (no subdivision, the same ``vert_key``; ``max_depth`` is
+      taken from it) and only the radiance is solved afresh, so solutions of different
+      lighting share one tree and can be blended per vertex or texel.
+    Raises :class:`iat.errors.OptionError` for invalid options or a mesh of other patches.
+    """
+    opts = _options(options)
+    if mesh is not None:
+        _check_mesh(mesh, scene, "solve mesh")
+        opts = replace(opts, max_depth=int(mesh.max_depth)).validate()
+    t_start = time.perf_counter()
+    with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
+        run = _Run(scene, opts, progress, vis, t_start)
+        target = opts.convergence * run.power0
+        if mesh is None:
+            run.mesh_by_direct_light()
+            first_target = max(target, math.sqrt(opts.convergence) * run.power0)
+            plan = [("shoot", first_target, (0.2, 0.6)), ("refine", "refining", (0.6, 0.7))]
+            plan += [("shoot", target, (0.7, 0.85)), ("refine", "refining again", (0.85, 0.95))]
+            plan += [("shoot", target, (0.95, 1.0))]
+        else:
+            run.take_mesh(mesh)
+            if not run.state["cancelled"]:
+                run.direct_on_mesh()
+            plan = [("shoot", target, (0.2, 1.0))]
+        if not run.state["cancelled"]:
+            run.run_plan(plan)
+        return run.finish(mode="solve" if mesh is None else "mesh")
 
-    set_mesh(forest, keys)
-    u_start = max(float(patch_power(unshot_v).sum()), 1e-300)
 
-    p_first = [None]  # power of the first (strongest) shot
+def resolve(
+    previous: Solution, scene, options: SolveOptions | None = None, progress: Progress | None = None
+) -> Solution:
+    """Continue from ``previous`` after the lights or the emission of ``scene`` changed.
 
-    def shoot(span, target):
-        """Shoot until the unshot power is below ``target`` or max_shots."""
-        nonlocal shots, reflected, unshot_v
-        if power0 <= 0 or len(mesh["keys"]) == 0:
-            return
-        span_log = math.log(u_start / target) if u_start > target else 1.0  # progress on a log scale
-        while shots < opts.max_shots:
-            power = patch_power(unshot_v)
-            total = float(power.sum())
-            if total <= target:
-                break
-            done = min(1.0, max(0.0, math.log(u_start / max(total, 1e-300)) / span_log))
-            state["fraction"] = span[0] + (span[1] - span[0]) * done
-            state["message"] = f"shooting: {shots} shots, unshot {total / power0:.3g} of emitted"
-            check()
-            s = int(np.argmax(power))
-            a, b = mesh["start"][s], mesh["start"][s + 1]
-            field = mesh["lattice"].grid(s, unshot_v)
-            field_mean = mesh["M"][s] @ unshot_v
-            # fewer samples for faint shots: their noise matters less (sqrt keeps power / m flat-ish)
-            if p_first[0] is None:
-                p_first[0] = float(power[s])
-            m = max(2, min(m_side, round(m_side * math.sqrt(float(power[s]) / p_first[0]))))
-            g = ctx.gather(s, mesh["geo"], m, int(shot_index[s]), field, np.ravel(field_mean))
-            shot_index[s] += 1
-            shots += 1
-            unshot_v[a:b] = 0.0
-            dv = mesh["rho"] * g
-            reflected += dv
-            unshot_v += dv
+    The geometry and the albedos must be those ``previous`` was solved with (else
+    :class:`iat.errors.OptionError`); the lights (point / spot) and the emission may differ.
+    Radiosity is linear in the sources, so only the difference is solved: at every vertex
+    of ``previous`` (the same leaves and ``vert_key``) the direct light of the sources that
+    changed -- new minus old, exactly as a fresh solve computes it -- is added to the
+    previous reflected radiance, and that difference field (which may be negative) is shot
+    progressively until its unshot power is below ``convergence`` of the new emitted power.
+    The result matches ``solve(scene, mesh=previous)`` within the solver's noise and
+    convergence, in a fraction of its time when only some sources changed.
 
-    def refine_total(label: str, span) -> None:
-        """Phase C: refine on the total radiance. New vertices get their direct light and a
-        gather of everything each patch has shot so far (exact: shots are linear, so one
-        gather of their sum equals replaying them all), never an interpolated value. Their
-        unshot radiance is what they received minus what their patch already shot from
-        there, so energy the coarser mesh could not hold is shot again, not lost."""
-        nonlocal forest, keys, reflected, unshot_v
-        shot_field = reflected - unshot_v
-        lattice_b = mesh["lattice"]
-        sources = [p for p in range(P) if shot_index[p] > 1]
-        grids = {p: lattice_b.grid(p, shot_field) for p in sources}
-        means = mesh["M"] @ shot_field
-        total_cache = _Cache(keys, reflected.copy())
-
-        def evaluate_total(new: np.ndarray) -> np.ndarray:
-            out = direct_cache.get(new)
-            missing = direct_cache.find(new) < 0
-            if missing.any():
-                out[missing] = ctx.direct(new[missing], check)
-            if len(new):
-                geo = ctx.geometry(new)
-                rho = ctx.albedo[geo.patch]
-                for p in sources:
-                    jitter = int(shot_index[p]) + 1_000_000 * (1 + stats["refine_passes"])
-                    out += rho * ctx.gather(p, geo, m_side, jitter, grids[p], means[p])
-                    check()
-            return out
-
-        old_keys = keys
-        forest, passes, _ = _refine(ctx, forest, total_cache, evaluate_total, report, label, span)
-        stats["refine_passes"] += passes
-        keys = qt.vertex_keys(forest)
-        if len(keys) == len(old_keys):
-            return
-        b, bn = _interpolation_bias(keys, old_keys, total_cache, ctx)
-        n_old = stats["interpolation_bias_total_vertices"]
-        if bn:  # vertex-weighted mean over the refinement stages
-            stats["interpolation_bias_total"] = (stats["interpolation_bias_total"] * n_old + b * bn) / (
-                n_old + bn
-            )
-        stats["interpolation_bias_total_vertices"] = n_old + bn
-        old_idx = qt.lookup(old_keys, keys)
-        new_unshot = np.zeros((len(keys), 3))
-        new_unshot[old_idx >= 0] = unshot_v[old_idx[old_idx >= 0]]
-        reflected = total_cache.get(keys)
-        p_new, i_new, j_new = qt.decode_key(keys, ctx.n)
-        for p in np.unique(p_new[old_idx < 0]):
-            sel = np.flatnonzero((old_idx < 0) & (p_new == p))
-            shot_here = grids[p][i_new[sel], j_new[sel]] if p in grids else 0.0
-            new_unshot[sel] = np.maximum(reflected[sel] - shot_here, 0.0)
-        unshot_v = new_unshot
-        set_mesh(forest, keys)
-
-    # stages: shoot the first bounces, refine, shoot to convergence, refine, finish
-    t_shoot = t_refine = 0.0
-    stats["refine_passes"] = 0
-    first_target = max(target, math.sqrt(opts.convergence) * power0)
-    plan = [("shoot", first_target, (0.2, 0.6)), ("refine", "refining", (0.6, 0.7))]
-    plan += [("shoot", target, (0.7, 0.85)), ("refine", "refining again", (0.85, 0.95))]
-    plan += [("shoot", target, (0.95, 1.0))]
-    try:
-        for kind, arg, span in plan:
-            if state["cancelled"]:
-                break
-            t0 = time.perf_counter()
-            if kind == "shoot":
-                shoot(span, arg)
-                t_shoot += time.perf_counter() - t0
-            elif opts.refine_indirect and shots:
-                refine_total(arg, span)
-                t_refine += time.perf_counter() - t0
-    except _Cancel:
-        pass
-    timings["shooting_s"], timings["refining_s"] = t_shoot, t_refine
-    unshot_power = patch_power(unshot_v)
-
-    # ---- result ------------------------------------------------------------------
-    vpatch = qt.decode_key(keys, ctx.n)[0]
-    radiance = ctx.emission[vpatch] + reflected
-    if not np.isfinite(radiance).all():
-        raise FloatingPointError("radiosity produced non-finite radiance (a solver bug)")
-    radiance = np.maximum(radiance, 0.0)
-    unshot_fraction = float(unshot_power.sum() / power0) if power0 > 0 else 0.0
-    if not state["cancelled"]:
+    options : None takes ``previous``'s options (``max_depth`` always comes from it).
+    A solution without the record of its sources (``stats['sources']``, written since
+    this function exists) is solved afresh on its mesh (``stats['mode'] == 'mesh'``).
+    """
+    _check_mesh(previous, scene, "resolve")
+    opts = SolveOptions.from_dict(previous.options) if options is None else options
+    opts = replace(_options(opts), max_depth=int(previous.max_depth)).validate()
+    if not np.allclose(previous.patch_albedo, scene.patch_albedo, rtol=1e-6, atol=1e-9):
+        raise OptionError("resolve: the albedos changed since the previous solution; solve again")
+    src = previous.stats.get("sources") if isinstance(previous.stats, dict) else None
+    if not src:
+        return solve(scene, opts, progress, mesh=previous)
+    t_start = time.perf_counter()
+    with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
+        run = _Run(scene, opts, progress, vis, t_start)
+        ctx = run.ctx
+        run.take_mesh(previous)
+        keys, geo = run.keys, run.mesh["geo"]
+        vpatch = geo.patch
+        old_emission = np.zeros_like(ctx.emission)
+        for row in src.get("emitters", []):
+            old_emission[int(row[0])] = row[1:4]
+        old_reflected = np.asarray(previous.vert_radiance, dtype=np.float64) - old_emission[vpatch]
+        t0 = time.perf_counter()
+        changed = 0
         try:
-            report(1.0, f"done: {shots} shots, {len(keys)} vertices")
+            run.report(0.0, "resolving: direct light of the changed sources")
+            incoming = np.zeros((len(keys), 3))
+            diff = ctx.emission - old_emission
+            for e in np.flatnonzero((diff != 0).any(axis=1)):
+                incoming += ctx.emitter_gather(int(e), geo)[:, None] * diff[e]
+                changed += 1
+                run.check()
+            old_lights = [_light_from(d) for d in src.get("lights", [])]
+            new_lights = list(ctx.lights)
+            sig = _light_signature
+            for lt in list(new_lights):  # lights present in both cancel
+                match = next((o for o in old_lights if sig(o) == sig(lt)), None)
+                if match is not None:
+                    old_lights.remove(match)
+                    new_lights.remove(lt)
+            for sign, group in ((1.0, new_lights), (-1.0, old_lights)):
+                for lt in group:
+                    incoming += sign * ctx.light_irradiance(lt, geo) / np.pi
+                    changed += 1
+                    run.check()
+            delta = ctx.albedo[vpatch] * incoming
         except _Cancel:
-            pass
-    elapsed = time.perf_counter() - t_start
-    sol = Solution.from_forest(
-        forest,
-        ctx.corners,
-        scene.patch_material,
-        ctx.albedo,
-        keys,
-        radiance,
-        options=opts.to_dict(),
-        model_path=str(getattr(scene, "path", "") or ""),
+            delta = np.zeros((len(keys), 3))
+        run.timings["meshing_s"] = time.perf_counter() - t0
+        run.reflected = old_reflected + delta
+        run.unshot = delta.copy()
+        if not run.state["cancelled"]:
+            run.run_plan([("shoot", opts.convergence * run.power0, (0.2, 1.0))])
+        return run.finish(
+            mode="resolve",
+            fallback_reflectance=previous.stats.get("reflectance"),
+            extra={"changed_sources": int(changed)},
+        )
+
+
+def _light_signature(lt) -> tuple:
+    return (
+        lt.kind,
+        tuple(np.round(np.asarray(lt.position, dtype=np.float64), 12)),
+        tuple(np.round(np.asarray(lt.direction, dtype=np.float64), 12)),
+        tuple(np.round(np.asarray(lt.radiant_intensity, dtype=np.float64), 12)),
+        round(float(lt.inner_cone), 12),
+        round(float(lt.outer_cone), 12),
     )
-    sol.stats = {
-        "elements": int(forest.n_leaves),
-        "vertices": int(len(keys)),
-        "triangles": int(len(sol.tri_vertices)),
-        "shots": int(shots),
-        "rays": int(vis.rays),
-        "rays_per_s": float(vis.rays / vis.seconds) if vis.seconds > 0 else 0.0,
-        "time_s": float(elapsed),
-        **{k: float(v) for k, v in timings.items()},
-        "mesh_passes": int(passes_a),
-        "unshot_fraction": unshot_fraction,
-        "interpolation_bias": bias,
-        "interpolation_bias_vertices": bias_n,
-        **stats,
-        "max_depth_reached": int(forest.leaf_level.max()) if forest.n_leaves else 0,
-        "emitted_power": float(power0),
-        "cancelled": bool(state["cancelled"]),
-        "options": opts.to_dict(),
-    }
-    return sol
 
 
 def _area_mean(forest: qt.Forest, keys: np.ndarray, kidx: np.ndarray, y: np.ndarray, ctx: _Context) -> float:
