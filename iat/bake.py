@@ -873,7 +873,10 @@ class Baker:
             mesh_radiance=mesh_radiance,
             memory=mem,
             policy=first.policy,
-            timings={"total": time.perf_counter() - t_start, "states": [b.timings.get("total", 0.0) for b in bakes]},
+            timings={
+                "total": time.perf_counter() - t_start,
+                "states": [b.timings.get("total", 0.0) for b in bakes],
+            },
         )
 
 

@@ -146,7 +146,9 @@ def cmd_solve(args) -> int:
             sol.stats = {**sol.stats, "lighting_state": name, "lighting_time": float(t)}
             p = _set_output(out, name)
             sol.save(p)
-            written.append({"state": name, "time": float(t), "output": str(p), "time_s": sol.stats.get("time_s")})
+            written.append(
+                {"state": name, "time": float(t), "output": str(p), "time_s": sol.stats.get("time_s")}
+            )
         _emit(args, {"states": written, "vertices": int(len(sset.first.vert_key))})
         return 0
     bar = ProgressBar(f"solve {Path(args.input).name}", enabled=not args.json)
@@ -363,7 +365,9 @@ def build_parser() -> argparse.ArgumentParser:
             help="solutions of one model on one mesh (lighting states, e.g. times of day)",
         )
         sp.add_argument("--at", type=float, help="time in [0, 1] to blend the set at (default 0)")
-        sp.add_argument("--times", help="key times of the set, comma-separated (default: from the files or the model)")
+        sp.add_argument(
+            "--times", help="key times of the set, comma-separated (default: from the files or the model)"
+        )
 
     def bake_flags(sp):
         sp.add_argument("--threshold", type=int, help="tree depth from which a patch becomes a texture")
@@ -383,14 +387,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--states",
         action="store_true",
-        help="solve the model's lighting states (extras iat_lighting_states) on one mesh: SOL-<state>.npz each",
+        help="solve the model's lighting states (extras iat_lighting_states) on one mesh: "
+        "SOL-<state>.npz each",
     )
     s.add_argument(
         "--states-mesh",
         dest="states_mesh",
-        choices=["union", "first"],
-        default="union",
-        help="mesh of the states: settled on all sources at once (default) or on the first state",
+        choices=["merge", "union", "first"],
+        default="merge",
+        help="mesh of the states: the union of their own adaptive meshes (default), "
+        "the mesh of all sources at once, or the first state's",
     )
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_solve)

@@ -378,7 +378,9 @@ def _load(doc: dict, binary: bytes, path: Path) -> GlbDocument:
             uvs = []
             for k in ("TEXCOORD_0", "TEXCOORD_1"):
                 uvs.append(
-                    _accessor(doc, bufs, attrs[k], path).astype(np.float32) if k in attrs else np.zeros((n, 2), np.float32)
+                    _accessor(doc, bufs, attrs[k], path).astype(np.float32)
+                    if k in attrs
+                    else np.zeros((n, 2), np.float32)
                 )
             m = prim.get("material")
             mat = materials[m] if m is not None else {}
@@ -474,7 +476,11 @@ class GlbView:
     def _primitive(self, p: GlbPrimitive):
         ctx = self.ctx
         bufs = [
-            (self._keep(ctx.buffer(np.ascontiguousarray(p.positions, np.float32).tobytes())), "3f", "in_position"),
+            (
+                self._keep(ctx.buffer(np.ascontiguousarray(p.positions, np.float32).tobytes())),
+                "3f",
+                "in_position",
+            ),
             (self._keep(ctx.buffer(np.ascontiguousarray(p.colors, np.float32).tobytes())), "4f", "in_color"),
             (self._keep(ctx.buffer(np.ascontiguousarray(p.uv0, np.float32).tobytes())), "2f", "in_uv0"),
             (self._keep(ctx.buffer(np.ascontiguousarray(p.uv1, np.float32).tobytes())), "2f", "in_uv1"),

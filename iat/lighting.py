@@ -134,7 +134,9 @@ def _checked_light(lt: Light) -> Light:
     return lt
 
 
-def copy_lighting(scene: Scene, lights: list[Light] | None = None, materials: list[Material] | None = None) -> Scene:
+def copy_lighting(
+    scene: Scene, lights: list[Light] | None = None, materials: list[Material] | None = None
+) -> Scene:
     """A new Scene sharing ``scene``'s geometry arrays, with its own copies of the lights and
     materials (or the ones given)."""
     lights = [_copy_light(lt) for lt in scene.lights] if lights is None else list(lights)
@@ -244,7 +246,9 @@ def set_emission(scene: Scene, material: int | str, emission) -> Scene:
     i = _material_index(scene, material)
     e = np.broadcast_to(np.asarray(emission, dtype=np.float64), (3,)).copy()
     if not np.isfinite(e).all() or (e < 0).any():
-        raise OptionError(f"emission of {scene.materials[i].name!r} must be finite and >= 0, got {e.tolist()}")
+        raise OptionError(
+            f"emission of {scene.materials[i].name!r} must be finite and >= 0, got {e.tolist()}"
+        )
     mats = [_copy_material(m) for m in scene.materials]
     mats[i] = _copy_material(scene.materials[i], emission=e)
     return copy_lighting(scene, materials=mats)
@@ -263,7 +267,9 @@ def lights_only_changed(a: Scene, b: Scene) -> bool:
         return False
     if not (a.vertices is b.vertices or np.array_equal(a.vertices, b.vertices)):
         return False
-    if not np.array_equal(a.patch_corners, b.patch_corners) or not np.array_equal(a.patch_material, b.patch_material):
+    if not np.array_equal(a.patch_corners, b.patch_corners) or not np.array_equal(
+        a.patch_material, b.patch_material
+    ):
         return False
     return all(np.array_equal(x.albedo, y.albedo) for x, y in zip(a.materials, b.materials, strict=True))
 
@@ -612,7 +618,9 @@ def save_gltf(
             kept_defs.append(defs[li])
         node.extensions = {**node.extensions, EXT_LIGHTS: {"light": remap[li]}}
 
-    scene_index = doc.scene if doc.scene is not None and doc.scenes and 0 <= doc.scene < len(doc.scenes) else 0
+    scene_index = (
+        doc.scene if doc.scene is not None and doc.scenes and 0 <= doc.scene < len(doc.scenes) else 0
+    )
     used_nodes: set[int] = set()
     for k, lt in enumerate(scene.lights):
         lt = _checked_light(_copy_light(lt))
@@ -625,14 +633,22 @@ def save_gltf(
         node_i = None
         if src_k is not None:
             if not 0 <= int(src_k) < len(file_lights):
-                raise OptionError(f"light {k}: source {src_k} is not one of the file's {len(file_lights)} lights")
+                raise OptionError(
+                    f"light {k}: source {src_k} is not one of the file's {len(file_lights)} lights"
+                )
             node_i = file_lights[int(src_k)][0]
             node = doc.nodes[node_i]
             old = defs[file_lights[int(src_k)][1]]
             for key in ("range", "extras", "extensions"):
                 if key in old:
                     d[key] = old[key]
-            if node_i in used_nodes or node.mesh is not None or node.camera is not None or node.children or node.skin is not None:
+            if (
+                node_i in used_nodes
+                or node.mesh is not None
+                or node.camera is not None
+                or node.children
+                or node.skin is not None
+            ):
                 node_i = None  # the node carries more than the light: give the light a node of its own
         li = len(kept_defs)
         kept_defs.append(d)
@@ -751,9 +767,10 @@ class Relighter:
 
     solution, scene : the converged solution on screen and the scene it was solved for
     options : the solve options (default: the solution's own)
-    schedule : coarse convergence targets solved before the final one (each step starts
-      again from the last converged solution, with more effort, and is published as it
-      arrives: the first after a fraction of the final time)
+    schedule : coarser steps solved before the final one, as multiples of the final
+      convergence (capped at 0.5); each step starts again from the last converged solution
+      with more effort and is published as it arrives (the first after a fraction of the
+      final time). The default (8, 2.5) with convergence 0.05 runs 0.4, 0.125, then 0.05.
 
     ``submit(scene)`` asks for the lights of ``scene`` (cancels the step in progress, except a
     first, coarse step, which finishes so that a continuous drag still shows progress);
@@ -761,7 +778,7 @@ class Relighter:
     returns the newest result not yet returned.
     """
 
-    def __init__(self, solution, scene, options=None, schedule=(0.2, 0.05), name: str = "iat-relight"):
+    def __init__(self, solution, scene, options=None, schedule=(8.0, 2.5), name: str = "iat-relight"):
         from .radiosity import SolveOptions
 
         self.base = solution
@@ -831,6 +848,16 @@ class Relighter:
     def _loop(self) -> None:
         from .radiosity import resolve, solve
 
+        current = {"hold": False}
+
+        def progress(fraction, message):
+            # the first (coarse) step always finishes, so a light dragged without pause still
+            # shows a new solution every step's time; later steps give way to a newer edit
+            if current["hold"]:
+                with self._cv:
+                    return not self._stop
+            return not self._cancel_requested()
+
         while True:
             with self._cv:
                 while self._pending is None and not self._stop:
@@ -840,22 +867,15 @@ class Relighter:
                 (scene, version, remesh), self._pending = self._pending, None
                 self._running = True
             t_job = time.perf_counter()
-            current = {"hold": False}
-
-            def progress(fraction, message):
-                # the first (coarse) step always finishes, so a light dragged without pause still
-                # shows a new solution every step's time; later steps give way to a newer edit
-                if current["hold"]:
-                    with self._cv:
-                        return not self._stop
-                return not self._cancel_requested()
+            current["hold"] = False
 
             try:
                 final_conv = float(self.options.convergence)
                 if remesh or not lights_only_changed(self.base_scene, scene):
                     plan = [("solve", final_conv)]
                 else:
-                    plan = [("resolve", c) for c in self.schedule if c > final_conv] + [("resolve", final_conv)]
+                    coarse = sorted({min(0.5, final_conv * m) for m in self.schedule}, reverse=True)
+                    plan = [("resolve", c) for c in coarse if c > final_conv] + [("resolve", final_conv)]
                 for k, (how, conv) in enumerate(plan, 1):
                     current["hold"] = k == 1 and len(plan) > 1
                     if k > 1 and self._cancel_requested():
@@ -865,12 +885,25 @@ class Relighter:
                     if how == "solve":
                         sol = solve(scene, opts, progress)
                     else:
-                        sol = resolve(self.base, scene, opts, progress)
+                        try:
+                            sol = resolve(self.base, scene, opts, progress)
+                        except IATError:
+                            raise
+                        except Exception:  # a solver bug: solve afresh on the mesh, slower but right
+                            log.warning("resolve failed, solving on the mesh instead", exc_info=True)
+                            sol = solve(scene, opts, progress, mesh=self.base)
                     if sol.stats.get("cancelled"):
                         break
                     now = time.perf_counter()
                     r = RelightResult(
-                        sol, scene, k, len(plan), version, now - t0, now - t_job, str(sol.stats.get("mode", how))
+                        sol,
+                        scene,
+                        k,
+                        len(plan),
+                        version,
+                        now - t0,
+                        now - t_job,
+                        str(sol.stats.get("mode", how)),
                     )
                     if k == len(plan):
                         self.base, self.base_scene = sol, scene

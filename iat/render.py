@@ -571,7 +571,9 @@ class Renderer:
         state's mesh-part colours; :meth:`set_blend` picks and mixes two states."""
         pages = np.asarray(baked_set.pages)
         if pages.ndim != 5:
-            raise RenderError(f"baked set pages have shape {pages.shape}, expected (n_states, n_pages, H, W, 3)")
+            raise RenderError(
+                f"baked set pages have shape {pages.shape}, expected (n_states, n_pages, H, W, 3)"
+            )
         n = int(pages.shape[0])
         rad = np.asarray(baked_set.mesh_radiance)
         if rad.ndim != 3 or rad.shape[0] != n:

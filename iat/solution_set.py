@@ -11,9 +11,10 @@ so blending two solutions is the solution of the blended sources),
 :func:`blend_weights`: exact at the key times, clamped outside them.
 
 :func:`solve_set` solves a model's lighting states (``extras["iat_lighting_states"]``,
-see :mod:`iat.lighting`) on one mesh: by default the mesh of the *union* of the
-states (every source on at once), so that each state's shadows are resolved,
-then every state on it.
+see :mod:`iat.lighting`) on one mesh: by default the *merged* mesh (every state
+solved adaptively, then the union of their quad-trees, :func:`merge_meshes`: each
+state's shadows resolved as finely as its own solve would), then every state on it.
+Cheaper choices: the mesh of all sources at once (``"union"``), or the first state's.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ __all__ = [
     "blend_weights",
     "even_times",
     "load_set",
+    "merge_meshes",
     "same_mesh",
     "solve_set",
 ]
@@ -89,12 +91,73 @@ def same_mesh(a, b) -> bool:
         return True
     if int(a.max_depth) != int(b.max_depth):
         return False
-    for name in ("vert_key", "leaf_patch", "leaf_level", "leaf_i", "leaf_j", "leaf_flip", "tri_vertices", "patch_is_quad"):
+    for name in (
+        "vert_key",
+        "leaf_patch",
+        "leaf_level",
+        "leaf_i",
+        "leaf_j",
+        "leaf_flip",
+        "tri_vertices",
+        "patch_is_quad",
+    ):
         x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name))
         if x.shape != y.shape or not np.array_equal(x, y):
             return False
     pa, pb = np.asarray(a.patch_corners), np.asarray(b.patch_corners)
-    return pa.shape == pb.shape and np.allclose(pa, pb, rtol=0.0, atol=1e-9 * max(1.0, float(np.abs(pa).max(initial=0))))
+    return pa.shape == pb.shape and np.allclose(
+        pa, pb, rtol=0.0, atol=1e-9 * max(1.0, float(np.abs(pa).max(initial=0)))
+    )
+
+
+def _leaf_codes(forest) -> np.ndarray:
+    """(L,) int64 identity of each leaf: (patch, level, i, j, flip)."""
+    n1 = np.int64(forest.n + 1)
+    code = np.asarray(forest.leaf_patch, np.int64) * np.int64(forest.max_depth + 1) + forest.leaf_level
+    code = (code * n1 + forest.leaf_i) * n1 + forest.leaf_j
+    return code * 2 + np.asarray(forest.leaf_flip, np.int64)
+
+
+def merge_meshes(solutions):
+    """A Solution (radiance zero) whose quad-trees are the union of ``solutions``' trees: every
+    element split in any of them is split (then 2:1 balanced). Every vertex of every input is a
+    vertex of the result, so a solve on it (``solve(scene, mesh=merged)``) resolves each input's
+    features as finely as that input did."""
+    from . import quadtree as qt
+    from .radiosity.solution import Solution
+
+    sols = list(solutions)
+    first = sols[0]
+    D = int(first.max_depth)
+    for s in sols[1:]:
+        if (
+            int(s.max_depth) != D
+            or np.asarray(s.patch_corners).shape != np.asarray(first.patch_corners).shape
+        ):
+            raise OptionError("merge_meshes: the solutions have different patches or max_depth")
+    leaves = [np.sort(_leaf_codes(s.forest)) for s in sols]
+    forest = qt.roots(np.asarray(first.patch_is_quad, dtype=bool), D)
+    node_of = np.ones((forest.n_leaves, len(sols)), dtype=bool)  # this leaf is a node of tree k
+    for _ in range(D + 1):
+        code = _leaf_codes(forest)
+        internal = node_of & ~np.stack([np.isin(code, lv) for lv in leaves], axis=1)
+        mask = internal.any(axis=1) & (forest.leaf_level < D)
+        if not mask.any():
+            break
+        node_of = np.concatenate([node_of[~mask], np.tile(internal[mask], (4, 1))])
+        forest = qt.split(forest, mask)  # keeps the unsplit leaves first, then the 4 children blocks
+    forest = qt.balance(forest)
+    keys = qt.vertex_keys(forest)
+    return Solution.from_forest(
+        forest,
+        first.patch_corners,
+        first.patch_material,
+        first.patch_albedo,
+        keys,
+        np.zeros((len(keys), 3), np.float32),
+        options=dict(first.options),
+        model_path=first.model_path,
+    )
 
 
 def blend_radiance(solutions, times, t: float) -> np.ndarray:
@@ -240,16 +303,18 @@ def solve_set(
     options=None,
     progress: Callable[[float, str], bool | None] | None = None,
     *,
-    mesh: str = "union",
+    mesh: str = "merge",
     method: str = "mesh",
 ) -> SolutionSet:
     """Solve lighting states of ``scene`` on one mesh.
 
     states : {name: state dict (see :mod:`iat.lighting`) or Scene}; None: the model's own
       ``extras["iat_lighting_states"]``. Key times from the states (``time``) or even.
-    mesh : "union" settles the mesh on every source at once (one extra solve; each state's
-      features refined), "first" on the first state (cheaper; later states' shadows are only as
-      fine as the first state's mesh happens to be there), or a Solution to reuse.
+    mesh : "merge" (default) solves every state adaptively and merges their trees
+      (:func:`merge_meshes`: each state's features as fine as its own solve; 2 N solves),
+      "union" settles the mesh on every source at once (N + 1 solves; the brightest sources
+      decide where it refines), "first" on the first state (N solves; later states' shadows only
+      as fine as the first state's mesh happens to be there), or a Solution to reuse.
     method : "mesh" solves each state afresh on that mesh (``solve(..., mesh=)``), "resolve"
       continues from the mesh solution (shoots only the difference: faster when the states share
       most sources).
@@ -272,7 +337,7 @@ def solve_set(
     scenes = [v if isinstance(v, Scene) else apply_lighting_state(scene, v) for v in states.values()]
     n = len(scenes)
     t_start = time.perf_counter()
-    steps = n + (1 if isinstance(mesh, str) and mesh == "union" else 0)
+    steps = n + {"union": 1, "merge": n}.get(mesh, 0) if isinstance(mesh, str) else n
     done = [0]
 
     def sub(label):
@@ -291,10 +356,16 @@ def solve_set(
     if isinstance(mesh, str):
         if mesh == "union":
             base = check(solve(union_lighting(scenes), opts, sub("mesh (all sources)")), "the union")
+        elif mesh == "merge":
+            own = [
+                check(solve(sc, opts, sub(f"mesh of {name}")), name)
+                for name, sc in zip(names, scenes, strict=True)
+            ]
+            base = merge_meshes(own)
         elif mesh == "first":
             base = None
         else:
-            raise OptionError(f'mesh must be "union", "first" or a Solution, got {mesh!r}')
+            raise OptionError(f'mesh must be "merge", "union", "first" or a Solution, got {mesh!r}')
     else:
         base = mesh
     sols = []

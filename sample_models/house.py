@@ -15,8 +15,16 @@ are cut out on panel lines.
 Light: a point light under the ceiling of the living room, bedroom and study,
 a spot light over the study desk, a 0.8 m square emissive ceiling panel in the
 kitchen, and two daylight windows (emissive quads filling holes in the outer
-walls) in the living room and the bedroom. Three cameras and a 36-pose walk
-through all four rooms (root ``extras["iat_camera_paths"]["default"]``).
+walls, materials ``window_south`` in the living room and ``window_north`` in the
+bedroom). Three cameras and a 36-pose walk through all four rooms (root
+``extras["iat_camera_paths"]["default"]``).
+
+A day cycle (root ``extras["iat_lighting_states"]``, read by :mod:`iat.lighting`):
+``morning`` (low warm sun through the south window, cool sky in the north one,
+the kitchen panel at half strength, lamps off), ``noon`` (both windows bright and
+neutral, everything else off) and ``evening`` (a dim orange dusk, every lamp on),
+at key times 0, 0.5 and 1. The file's own lighting (what :func:`iat.scene.load_scene`
+gives) is everything on at once.
 
 Output is deterministic: the same script gives the same bytes.
 """
@@ -85,6 +93,27 @@ BOOKS = [(0.55, 0.10, 0.08), (0.10, 0.25, 0.50), (0.15, 0.40, 0.15), (0.60, 0.50
 WINDOW_RADIANCE = (3.0, 3.6, 4.8)
 PANEL_RADIANCE = (16.0, 14.5, 12.0)
 LAMP_COLOR = (1.0, 0.85, 0.65)
+
+#: the day cycle: lighting states by name (see iat.lighting): window radiance in linear RGB,
+#: lamp intensities in W/sr, the kitchen panel's strength as a multiplier of PANEL_RADIANCE
+LAMPS_OFF = {"living_lamp": 0.0, "bedroom_lamp": 0.0, "study_lamp": 0.0, "desk_lamp": 0.0}
+LIGHTING_STATES = {
+    "morning": {
+        "time": 0.0,
+        "lights": LAMPS_OFF,
+        "emission": {"window_south": [6.0, 4.8, 3.2], "window_north": [1.2, 1.5, 2.2], "lamp_panel": 0.5},
+    },
+    "noon": {
+        "time": 0.5,
+        "lights": LAMPS_OFF,
+        "emission": {"window_south": [5.0, 5.4, 6.0], "window_north": [2.6, 3.0, 3.8], "lamp_panel": 0.0},
+    },
+    "evening": {
+        "time": 1.0,
+        "lights": {"living_lamp": 10.0, "bedroom_lamp": 8.0, "study_lamp": 8.0, "desk_lamp": 12.0},
+        "emission": {"window_south": [1.4, 0.7, 0.3], "window_north": [0.3, 0.35, 0.5], "lamp_panel": 1.0},
+    },
+}
 
 
 def _door_box(kind: str, c: float) -> tuple[tuple, tuple]:
@@ -215,7 +244,8 @@ def build_geometry(mb: ModelBuilder) -> None:
     mb.material("fabric_red", FABRIC_RED)
     mb.material("linen", LINEN)
     mb.material("lacquer", WHITE_LACQUER)
-    mb.material("window", (0.8, 0.8, 0.8), emissive=WINDOW_RADIANCE)
+    mb.material("window_south", (0.8, 0.8, 0.8), emissive=WINDOW_RADIANCE)
+    mb.material("window_north", (0.8, 0.8, 0.8), emissive=WINDOW_RADIANCE)
     mb.material("lamp_panel", (0.8, 0.8, 0.8), emissive=PANEL_RADIANCE)
     for k, c in enumerate(BOOKS):
         mb.material(f"books_{k}", c)
@@ -249,7 +279,8 @@ def build_geometry(mb: ModelBuilder) -> None:
     # windows: emissive panes filling the holes, facing into the room
     for _, fname, (lo, hi) in WINDOWS:
         sign = +1 if fname.startswith("-") else -1
-        mb.face("windows", "window", lo, hi, sign, panel=2.0)
+        mat = "window_south" if fname == "-z" else "window_north"
+        mb.face(mat, mat, lo, hi, sign, panel=2.0)
 
     # -- living room (x 0..5.94, z 0..4.44): sofa against the west wall, armchair, coffee table, shelf
     mb.box("sofa", "fabric_blue", (0.0, 0.0, 1.2), (0.9, 0.42, 3.4), skip=("-y", "-x"))
@@ -342,6 +373,7 @@ def make_builder() -> ModelBuilder:
     lights(mb)
     mb.emit_meshes()
     add_cameras(mb, cameras(), camera_path())
+    mb.glb.extras["iat_lighting_states"] = LIGHTING_STATES
     return mb
 
 

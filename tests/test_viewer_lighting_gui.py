@@ -117,7 +117,9 @@ def test_viewer_lighting_end_to_end(tmp_path, monkeypatch):
     def settle(ctx, frames=3):
         wait_until(
             ctx,
-            lambda: not (s.rebaking or s.opening or s.relighting or s.solving_day_cycle) and app._relit is None,
+            lambda: (
+                not (s.rebaking or s.opening or s.relighting or s.solving_day_cycle) and app._relit is None
+            ),
             120,
             "the background work",
         )
@@ -158,32 +160,38 @@ def test_viewer_lighting_end_to_end(tmp_path, monkeypatch):
         # the view improves step by step: wait for the final (converged) step and its bake
         wait_until(ctx, lambda: s.relights > 0, 120, "the first re-solved solution")
         got["first_step"] = s.relight_step
-        wait_until(ctx, lambda: s.relight_step[0] == s.relight_step[1] and s.relight_step[1] > 0, 120, "the last step")
+        wait_until(
+            ctx,
+            lambda: s.relight_step[0] == s.relight_step[1] and s.relight_step[1] > 0,
+            120,
+            "the last step",
+        )
         settle(ctx)
         got["relights"] = s.relights
+        got["steps_published"] = s.relighter.steps_done
         got["mode"] = s.solution.stats.get("mode")
         got["bake_source"] = s.bake_source
         shot(ctx, "moved")
 
         # add and delete a light with the panel's buttons
         n = len(ed.lights)
-        ctx.item_click("//**/Add point light")
+        ctx.item_click("//Lighting/Add point light")
         ctx.yield_(2)
         got["added"] = (len(ed.lights), s.selected_light)
-        ctx.item_click("//**/Delete light")
+        ctx.item_click("//Lighting/Delete light")
         ctx.yield_(2)
         got["deleted"] = len(ed.lights) == n
         settle(ctx)
 
         # save the lights back to glTF
-        ctx.item_input_value("//**/glTF file##lights", str(tmp_path / "saved.glb"))
-        ctx.item_click("//**/Save lights")
+        ctx.item_input_value("//Lighting/glTF file##lights", str(tmp_path / "saved.glb"))
+        ctx.item_click("//Lighting/Save lights")
         wait_until(ctx, lambda: "saved the lights" in s.status or s.error, 60, "the save")
         got["save_status"] = s.status
         got["saved_lights"] = [(lt.name, lt.position.copy()) for lt in ed.lights]
 
         # the day cycle: solve the states, then drag the time of day
-        ctx.item_click("//**/Solve day cycle")
+        ctx.item_click("//Lighting/Solve day cycle")
         wait_until(ctx, lambda: s.solution_set is not None, 300, "the day-cycle solve")
         wait_until(ctx, lambda: isinstance(s.baked, BakedSet), 120, "the day-cycle bake")
         settle(ctx)
@@ -191,11 +199,11 @@ def test_viewer_lighting_end_to_end(tmp_path, monkeypatch):
         got["memory"] = dict(s.memory)
         got["hud"] = panels.hud_lines(s)
         for t, name in ((0.0, "t0"), (1.0, "t1"), (0.5, "t05"), (0.25, "t025")):
-            ctx.item_input_value("//**/Time of day", t)
+            ctx.item_input_value("//Lighting/Time of day", t)
             ctx.yield_(3)
             got.setdefault("blend", {})[name] = (s.day_time, app.renderer.blend)
             shot(ctx, name)
-        ctx.item_click("//**/Day cycle on")
+        ctx.item_click("//Lighting/Day cycle on")
         settle(ctx)
         got["day_off_baked"] = type(s.baked).__name__
 
@@ -212,7 +220,8 @@ def test_viewer_lighting_end_to_end(tmp_path, monkeypatch):
     assert abs(moved[1] - start[1]) < 1e-9  # dragged in its horizontal plane
     assert np.linalg.norm(moved - start) > 0.05  # a few centimetres at least in a 0.55 m box
     assert got["first_step"][1] >= 2  # coarse step first, then the final one
-    assert got["relights"] >= 2 and got["mode"] == "resolve"
+    assert got["steps_published"] >= 2  # each step was published (the view takes the newest per frame)
+    assert got["relights"] >= 1 and got["mode"] == "resolve"
     assert got["bake_source"] > 0  # the bake on screen is of a re-solved solution
     before, after = images["before"], images["moved"]
     assert before.mean() > 30  # a lit room

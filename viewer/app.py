@@ -194,7 +194,7 @@ class ViewerApp:
             hello_imgui.DockingSplit("MainDockSpace", "LeftSpace", imgui.Dir.left, 0.25),
             hello_imgui.DockingSplit("LeftSpace", "LeftBottom", imgui.Dir.down, 0.45),
             hello_imgui.DockingSplit("MainDockSpace", "RightSpace", imgui.Dir.right, 0.27),
-            hello_imgui.DockingSplit("RightSpace", "RightBottom", imgui.Dir.down, 0.5),
+            hello_imgui.DockingSplit("RightSpace", "RightBottom", imgui.Dir.down, 0.55),
         ]
         dp.dockable_windows = [
             self._window("Tuning", "LeftSpace", panels.tuning_panel),
@@ -508,7 +508,8 @@ class ViewerApp:
                 s.solution_set = job.result
                 s.day_cycle = True
                 secs = sum(float(x.stats.get("time_s", 0.0)) for x in job.result.solutions)
-                s.set_status(f"day cycle: {len(job.result)} lighting states solved on one mesh ({secs:.1f} s)")
+                n = len(job.result)
+                s.set_status(f"day cycle: {n} lighting states solved on one mesh ({secs:.1f} s)")
             elif job.error:
                 s.set_error(job.error)
 
@@ -666,10 +667,15 @@ class ViewerApp:
         if s.request_save_lights:
             path, s.request_save_lights = s.request_save_lights, None
             ed = s.editor
-            if ed is None:
+            if ed is None or not ed.base.path:
                 s.set_error("nothing open to save lights of")
             else:
-                self._in_background(f"saved the lights to {path}", lambda: ed.save(path))
+                from iat.lighting import save_gltf
+
+                scene, sources, src = ed.scene, list(ed.sources), ed.base.path  # a snapshot: edits go on
+                self._in_background(
+                    f"saved the lights to {path}", lambda: save_gltf(scene, src, path, sources=sources)
+                )
         if s.request_save_paths:
             s.request_save_paths = False
             try:

@@ -277,7 +277,8 @@ def stats_panel(state: AppState) -> None:
     frac = used / budget if budget > 0 else (1.0 if used > 0 else 0.0)
     label = f"{_mb(used)} / {_mb(budget)}" + ("" if state.tuning.budget_on else " (budget off)")
     n_states = int(mem.get("solutions", 1)) if mem else 1
-    imgui.text("Texture memory" + (f"  ({n_states} lighting states: {n_states} layers per page)" if n_states > 1 else ""))
+    layers = f"  ({n_states} lighting states: {n_states} layers per page)" if n_states > 1 else ""
+    imgui.text("Texture memory" + layers)
     _bar(frac, label, RED if (over or (budget <= 0 and used > 0 and state.tuning.budget_on)) else None)
     if mem:
         pages = f"{mem.get('pages', 0)} page(s) {mem.get('page_width', 0)}x{mem.get('page_height', 0)}"
@@ -331,7 +332,7 @@ def lighting_panel(state: AppState) -> None:
     lights = ed.lights
     if state.selected_light >= len(lights):
         state.selected_light = len(lights) - 1
-    if imgui.begin_list_box("##lights", ImVec2(-1, hello_imgui.em_size(5.5))):
+    if imgui.begin_list_box("##lights", ImVec2(-1, hello_imgui.em_size(3.6))):
         for k, lt in enumerate(lights):
             clicked, _ = imgui.selectable(_light_label(k, lt), k == state.selected_light)
             if clicked:
@@ -400,10 +401,14 @@ def lighting_panel(state: AppState) -> None:
     elif state.relights:
         step, steps = state.relight_step
         imgui.text_colored(DIM, f"solved in {_seconds(state.relight_seconds)} (step {step}/{steps}, resolve)")
+    imgui.begin_disabled(day)
     if imgui.button("Refine mesh"):
         state.request_remesh = True
-    _help("Moving lights keeps the mesh (the solve continues from the last solution, fast);\n"
-          "this solves afresh so the mesh follows the new shadows.")
+    imgui.end_disabled()
+    _help(
+        "Moving lights keeps the mesh (the solve continues from the last solution, fast);\n"
+        "this solves afresh so the mesh follows the new shadows."
+    )
 
     if not state.file_fields["lights"] and state.model_path:
         p = Path(ed.base.path or state.model_path)
@@ -413,7 +418,10 @@ def lighting_panel(state: AppState) -> None:
     if imgui.button("Save lights") and state.file_fields["lights"].strip():
         state.request_save_lights = state.file_fields["lights"].strip()
     imgui.end_disabled()
-    _help("Writes a copy of the model with these lights (KHR_lights_punctual) and emission; geometry unchanged.")
+    _help(
+        "Writes a copy of the model with these lights (KHR_lights_punctual) and emission;\n"
+        "the geometry is unchanged."
+    )
 
     day_cycle_panel(state)
 
@@ -449,8 +457,10 @@ def day_cycle_panel(state: AppState) -> None:
     if sset is None:
         if imgui.button("Solve day cycle"):
             state.request_day_cycle = True
-        _help("Solves every lighting state on one mesh (the mesh of all sources at once),\n"
-              "then bakes them into texture layers that share one atlas layout.")
+        _help(
+            "Solves every lighting state on one mesh (the union of their own adaptive meshes),\n"
+            "then bakes them into texture layers that share one atlas layout."
+        )
         return
     changed, on = imgui.checkbox("Day cycle on", state.day_cycle)
     if changed:
@@ -460,7 +470,8 @@ def day_cycle_panel(state: AppState) -> None:
     if changed:
         state.day_time = float(min(max(v, 0.0), 1.0))
     imgui.text(state.day_label() or " ")
-    imgui.text_colored(DIM, "keys: " + "  ".join(f"{n} {t:.2f}" for n, t in zip(sset.names, sset.times, strict=True)))
+    keys = "  ".join(f"{n} {t:.2f}" for n, t in zip(sset.names, sset.times, strict=True))
+    imgui.text_colored(DIM, "keys: " + keys)
     mem = state.memory
     if mem and int(mem.get("solutions", 1)) > 1:
         n = int(mem["solutions"])
@@ -673,7 +684,8 @@ def hud_lines(state: AppState) -> list[str]:
         if mem:
             n = int(mem.get("solutions", 1))
             used = float(mem.get("texture_bytes", 0))
-            budget = f"{_mb(float(state.tuning.budget_mb) * MB)} budget" if state.tuning.budget_on else "no budget"
+            on = state.tuning.budget_on
+            budget = f"{_mb(float(state.tuning.budget_mb) * MB)} budget" if on else "no budget"
             lines.append(f"texture {n} x {_mb(used / max(n, 1))} = {_mb(used)} / {budget}")
     if state.relighting:
         lines.append("re-solving the lighting...")
@@ -697,7 +709,8 @@ def _light_markers(state: AppState, dl) -> None:
             continue
         c = np.clip(np.asarray(lt.color, dtype=np.float64) / max(float(np.max(lt.color)), 1e-9), 0.0, 1.0)
         col = imgui.get_color_u32(ImVec4(float(c[0]), float(c[1]), float(c[2]), 1.0))
-        edge = imgui.get_color_u32(ImVec4(1.0, 0.85, 0.2, 1.0) if k == state.selected_light else ImVec4(0, 0, 0, 0.9))
+        sel = k == state.selected_light
+        edge = imgui.get_color_u32(ImVec4(1.0, 0.85, 0.2, 1.0) if sel else ImVec4(0, 0, 0, 0.9))
         p = ImVec2(float(px[k, 0]), float(px[k, 1]))
         if lt.kind == "spot" and tok[k]:
             dl.add_line(p, ImVec2(float(tips[k, 0]), float(tips[k, 1])), edge, 2.0)

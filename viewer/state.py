@@ -164,7 +164,9 @@ class BakeWorker:
         self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
         self._thread.start()
 
-    def submit(self, policy: BakePolicy, source: BakeSource | None = None, generation: int | None = None) -> None:
+    def submit(
+        self, policy: BakePolicy, source: BakeSource | None = None, generation: int | None = None
+    ) -> None:
         """Ask for a bake of ``policy``; replaces a request not started yet. ``source`` switches
         to another solution (or set) first; its ``generation`` comes back in the result."""
         with self._cv:
@@ -400,7 +402,7 @@ class SetJob:
     thread, with progress (``fraction``, ``message``) and :meth:`cancel`; ``result`` (a
     :class:`~iat.solution_set.SolutionSet`) or ``error`` (one line) when done."""
 
-    def __init__(self, scene, states: dict, options: SolveOptions, mesh: str = "union"):
+    def __init__(self, scene, states: dict, options: SolveOptions, mesh: str = "merge"):
         self.scene, self.states, self.options, self.mesh = scene, states, options, mesh
         self.fraction = 0.0
         self.message = "starting"
@@ -586,7 +588,9 @@ class AppState:
     request_quit: bool = False
     # file dialogs in flight (portable_file_dialogs objects) and the Model panel's path fields
     dialogs: dict = field(default_factory=dict)
-    file_fields: dict = field(default_factory=lambda: {"open": "", "export": "", "solution": "", "lights": ""})
+    file_fields: dict = field(
+        default_factory=lambda: {"open": "", "export": "", "solution": "", "lights": ""}
+    )
 
     # -- derived ---------------------------------------------------------------------------
     def policy(self) -> BakePolicy:

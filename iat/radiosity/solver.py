@@ -94,6 +94,11 @@ F_DIRECTION = 0.02
 #: a receiver patch to which a shooter's earlier gathers traced at least this many rays,
 #: none of them unoccluded, is skipped by that shooter's later shots
 CULL_RAYS = 64
+#: receiver levels of a shot (hierarchical, after Hanrahan's BF refinement): a patch on which a
+#: shot adds less than COARSE_EPS[1] of its current radiance receives on its level-1 lattice grid
+#: (3 x 3 points, 6 on triangles), less than COARSE_EPS[0] at its corners only, the values
+#: interpolated to its vertices; otherwise at every vertex
+COARSE_EPS = (0.002, 0.02)
 #: most (receiver, shooter) form factors kept for the shooters' later shots on the same mesh
 #: (8 bytes each)
 FF_CACHE_ENTRIES = 12_000_000
@@ -156,7 +161,7 @@ class SolveOptions:
     max_depth: int = 6
     tolerance: float = 0.1
     min_element_size: float | None = None
-    convergence: float = 0.02
+    convergence: float = 0.05
     samples: int = 16
     max_shots: int = 20000
     max_edge: float | None = None
@@ -345,13 +350,21 @@ class _Context:
             self._cand[s] = (sees & all_ahead, sees & any_ahead & ~all_ahead)
         return self._cand[s]
 
-    def receivers(self, s: int, geo: _Geo, cull: bool = False) -> np.ndarray:
-        """Sorted indices into ``geo`` of vertices that can receive from patch s (front side,
-        other patch; with ``cull``, not on a patch that earlier gathers of s found occluded)."""
-        full, part = self.candidates(s)
+    def allowed(self, s: int, cull: bool, patches: np.ndarray | None) -> np.ndarray | None:
+        """(P,) bool receiver patches allowed for s (``patches``, less the ones earlier gathers
+        of s found fully occluded when ``cull``), or None for all."""
+        ok = None if patches is None else np.asarray(patches, dtype=bool)
         if cull and s in self._vis_rays:
             hidden = (self._vis_rays[s] >= CULL_RAYS) & (self._vis_seen[s] == 0)
-            full, part = full & ~hidden, part & ~hidden
+            ok = ~hidden if ok is None else ok & ~hidden
+        return ok
+
+    def receivers(self, s: int, geo: _Geo, allowed: np.ndarray | None = None) -> np.ndarray:
+        """Sorted indices into ``geo`` of vertices that can receive from patch s (front side,
+        other patch, on an ``allowed`` patch)."""
+        full, part = self.candidates(s)
+        if allowed is not None:
+            full, part = full & allowed, part & allowed
         if geo.start is not None:
             idx_full = _ranges(geo.start, np.flatnonzero(full))
             idx_part = _ranges(geo.start, np.flatnonzero(part))
@@ -361,25 +374,39 @@ class _Context:
         front = (geo.ff[idx_part] - self.centre[s]) @ self.normal[s] > 0.1 * self.eps_ff
         return np.sort(np.concatenate([idx_full, idx_part[front]]))
 
-    def form_factors(self, s: int, geo: _Geo, cull: bool = False) -> tuple[np.ndarray, np.ndarray]:
-        """Receivers of s in ``geo`` with a form factor > 0 (indices, sorted) and their analytic
-        form factors; cached per shooter for the mesh's geometry (``geo.cache``), since a patch
-        shoots several times on the same mesh."""
+    def form_factors(
+        self, s: int, geo: _Geo, cull: bool = False, patches: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Receivers of s in ``geo`` with a form factor > 0 (indices) and their analytic form
+        factors, on the allowed patches (see :meth:`allowed`). With ``geo.cache`` (a mesh's
+        geometry) they are kept per shooter and receiver patch, since a patch shoots several
+        times on the same mesh; the oldest shooters go first when the cache is full."""
+        ok = self.allowed(s, cull, patches)
         cache = geo.cache
-        if cache is not None and s in cache:
-            return cache[s]
-        idx = self.receivers(s, geo, cull and cache is None)
-        f = point_polygon(geo.ff[idx], geo.normal[idx], self.polygon(s)) if len(idx) else np.zeros(0)
-        keep = f > 1e-12
-        res = (idx[keep].astype(np.int32 if len(geo.key) < 2**31 else np.int64), f[keep])
-        if cache is not None:  # the oldest shooters go first when full
-            size = cache.setdefault("_size", 0) + len(res[0])
-            while size > FF_CACHE_ENTRIES and len(cache) > 1:
-                old = next(k for k in cache if k != "_size")
+        entry = None if cache is None else cache.get(s)
+        if cache is not None and entry is None:
+            entry = cache[s] = [np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float32), np.zeros(self.n_patches, dtype=bool)]
+        need = ok if entry is None else (~entry[2] if ok is None else ok & ~entry[2])
+        if entry is None or need.any():
+            idx = self.receivers(s, geo, need)
+            f = point_polygon(geo.ff[idx], geo.normal[idx], self.polygon(s)) if len(idx) else np.zeros(0)
+            keep = f > 1e-12
+            idx, f = idx[keep], f[keep]
+            if entry is None:
+                return idx, f
+            entry[0] = np.concatenate([entry[0], idx])
+            entry[1] = np.concatenate([entry[1], f.astype(np.float32)])
+            entry[2] |= True if need is None else need
+            size = cache.get("_size", 0) + len(idx)
+            while size > FF_CACHE_ENTRIES and len(cache) > 2:
+                old = next(k for k in cache if k not in ("_size", s))
                 size -= len(cache.pop(old)[0])
             cache["_size"] = size
-            cache[s] = (res[0], res[1].astype(np.float32))
-        return res
+        idx, f = entry[0], entry[1]
+        if ok is not None:
+            sel = ok[geo.patch[idx]]
+            idx, f = idx[sel], f[sel]
+        return idx, f
 
     def culled_fraction(self) -> float:
         """Fraction of (shooter, candidate receiver patch) pairs found fully occluded."""
@@ -401,6 +428,7 @@ class _Context:
         *,
         correlated: bool = False,
         cull: bool = False,
+        patches: np.ndarray | None = None,
     ) -> np.ndarray:
         """Form factor x visible fraction from every vertex of ``geo`` to patch s.
 
@@ -413,6 +441,7 @@ class _Context:
         receivers: no speckle), instead of the pattern rotated per receiver (errors
         independent per receiver: penumbrae become noise instead of banding).
         cull : skip receiver patches that earlier gathers from s found fully occluded.
+        patches : (P,) bool, receive only on these patches (None: all).
 
         ``F`` is the analytic form factor and ``vis`` the ratio of two estimates of the
         kernel integral (with and without visibility) from the same samples, so it is
@@ -430,11 +459,7 @@ class _Context:
         """
         n_geo = len(geo.key)
         out = np.zeros(n_geo if field is None else (n_geo, 3))
-        idx, f = self.form_factors(s, geo, cull)
-        if cull and len(idx) and s in self._vis_rays:
-            hidden = (self._vis_rays[s] >= CULL_RAYS) & (self._vis_seen[s] == 0)
-            keep = ~hidden[geo.patch[idx]]
-            idx, f = idx[keep], f[keep]
+        idx, f = self.form_factors(s, geo, cull, patches)
         if len(idx) == 0:
             return out
         sh = self.shooter(s)
@@ -939,6 +964,40 @@ def _parent_interpolation(keys: np.ndarray, is_quad: np.ndarray, n: int) -> tupl
     return qt.make_key(p[:, None], ci, cj, n), w
 
 
+def _coarse_keys(is_quad: np.ndarray, level: int, n: int) -> np.ndarray:
+    """(Vc,) sorted keys of every patch's lattice grid at ``level`` (triangles: i + j <= n)."""
+    k, s = 1 << level, n >> level
+    a, b = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
+    a, b = a.ravel(), b.ravel()
+    p = np.arange(len(is_quad))
+    keys = qt.make_key(p[:, None], a[None, :] * s, b[None, :] * s, n)
+    tri = a + b <= k
+    return np.sort(np.concatenate([keys[is_quad].ravel(), keys[~is_quad][:, tri].ravel()]))
+
+
+def _coarse_weights(keys: np.ndarray, coarse: np.ndarray, is_quad: np.ndarray, level: int, n: int):
+    """(V, Vc) sparse CSR: values at ``keys`` interpolated (bilinear / barycentric) in the
+    level-``level`` cells of their patches from values at the grid keys ``coarse``."""
+    p, i, j = qt.decode_key(keys, n)
+    k, s = 1 << level, n >> level
+    a, b = np.minimum(i // s, k - 1), np.minimum(j // s, k - 1)
+    fx, fy = (i - a * s) / s, (j - b * s) / s
+    quad = is_quad[p]
+    lower = fx + fy <= 1.0
+    ci = np.stack([a, a + 1, a + 1, a], axis=1)
+    cj = np.stack([b, b, b + 1, b + 1], axis=1)
+    w = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), fx * fy, (1 - fx) * fy], axis=1)
+    tl, tu = ~quad & lower, ~quad & ~lower
+    ci[tl], cj[tl] = np.stack([a, a + 1, a, a], 1)[tl], np.stack([b, b, b + 1, b + 1], 1)[tl]
+    w[tl] = np.stack([1 - fx - fy, fx, fy, 0 * fx], 1)[tl]
+    ci[tu], cj[tu] = np.stack([a + 1, a, a + 1, a + 1], 1)[tu], np.stack([b + 1, b + 1, b, b], 1)[tu]
+    w[tu] = np.stack([fx + fy - 1, 1 - fx, 1 - fy, 0 * fx], 1)[tu]
+    cols = qt.lookup(coarse, qt.make_key(p[:, None], ci * s, cj * s, n))
+    ok = w > 0
+    rows = np.repeat(np.arange(len(keys)), 4).reshape(-1, 4)
+    return sparse.csr_matrix((w[ok], (rows[ok], cols[ok])), shape=(len(keys), len(coarse)))
+
+
 def _averaging_matrix(forest: qt.Forest, keys: np.ndarray, corners: np.ndarray, area: np.ndarray):
     """(P, V) scipy.sparse CSR: row p averages vertex values over patch p (area-weighted leaf means)."""
     idx = qt.lookup(keys, qt.leaf_corner_keys(forest))
@@ -1090,6 +1149,8 @@ class _Run:
         self.p_first: float | None = None
         self.power0 = ctx.emitted_power()
         self.mesh: dict = {}
+        self.coarse: list[dict] | None = None  # coarse receiver grids, with what they received
+        self.levels: dict[int, np.ndarray] = {}  # per shooter: receiver level of each patch (-1: vertices)
         self.reflected = np.zeros((0, 3))
         self.unshot = np.zeros((0, 3))
 
@@ -1117,6 +1178,18 @@ class _Run:
         mesh["geo"] = ctx.geometry(keys)
         mesh["geo"].cache = {}
         mesh["rho"] = ctx.albedo[qt.decode_key(keys, ctx.n)[0]]
+        mesh["nverts"] = np.diff(mesh["start"])
+        if self.coarse is None:  # the coarse receiver grids do not depend on the mesh
+            self.coarse = []
+            for level in range(min(len(COARSE_EPS), ctx.opts.max_depth)):
+                ck = _coarse_keys(ctx.is_quad, level, ctx.n)
+                cgeo = ctx.geometry(ck)
+                cgeo.cache = {}
+                self.coarse.append(
+                    {"keys": ck, "geo": cgeo, "npts": np.diff(cgeo.start), "rho": ctx.albedo[cgeo.patch],
+                     "acc": np.zeros((len(ck), 3))}
+                )
+        mesh["coarse_w"] = [_coarse_weights(keys, c["keys"], ctx.is_quad, lv, ctx.n) for lv, c in enumerate(self.coarse)]
 
     @property
     def forest(self) -> qt.Forest:
@@ -1200,20 +1273,60 @@ class _Run:
                 if self.p_first is None:
                     self.p_first = float(power[s])
                 m = max(1, min(self.m_side, round(self.m_side * math.sqrt(float(power[s]) / self.p_first))))
-                g = ctx.gather(
-                    s, mesh["geo"], m, int(self.shot_index[s]), field, field_mean, correlated=True, cull=True
-                )
+                dv = self.shot_gather(s, m, field, field_mean)
                 self.shot_index[s] += 1
                 self.shot_power[s] += float(power[s])
                 self.shots += 1
                 self.unshot[a:b] = 0.0
-                dv = mesh["rho"] * g
                 self.reflected += dv
                 self.unshot += dv
                 received = np.pi * (ctx.area[:, None] * (mesh["M"] @ dv)).sum(axis=0)
                 self.shot_log.append((np.pi * ctx.area[s] * field_mean, received))
         finally:
             self.timings["shooting_s"] += time.perf_counter() - t0
+
+    def receiver_levels(self, s: int, field_mean: np.ndarray) -> np.ndarray:
+        """(P,) int8 receiver level of each patch for the shots of s: -1 at every vertex, k on
+        the coarse grid of level k (``COARSE_EPS``). Decided at the first shot of s, from the
+        largest form factor of a patch's grid points to s, the shot's radiance and the patch's
+        radiance then, and kept for its later (fainter) shots, so that every shot of s reaches a
+        patch at the same level (what :meth:`refine_total` relies on)."""
+        if s in self.levels:
+            return self.levels[s]
+        ctx, mesh = self.ctx, self.mesh
+        lvl = np.full(self.P, -1, dtype=np.int8)
+        if self.coarse:
+            cgeo = self.coarse[-1]["geo"]
+            idx, f = ctx.form_factors(s, cgeo)
+            fmax = np.zeros(self.P)
+            np.maximum.at(fmax, cgeo.patch[idx], f)
+            y = mesh["M"] @ _lum(self.reflected) + _lum(ctx.emission)
+            floor = ABS_FLOOR * float((y * ctx.area).sum() / max(ctx.area.sum(), 1e-300))
+            rel = fmax * float(_lum(np.abs(field_mean))) * _lum(ctx.albedo) / (y + max(floor, 1e-30))
+            for level in range(len(self.coarse) - 1, -1, -1):  # the coarsest that is fine enough
+                sel = (rel < COARSE_EPS[level]) & (mesh["nverts"] > self.coarse[level]["npts"])
+                lvl[sel] = level
+        self.levels[s] = lvl
+        return lvl
+
+    def shot_gather(self, s: int, m: int, field: np.ndarray, field_mean: np.ndarray) -> np.ndarray:
+        """(V, 3) reflected radiance one shot from s adds at every vertex: gathered at the
+        vertices of the patches it lights noticeably, interpolated from coarse grids on the
+        others (whose gathered values are kept, per grid point, in the grids' ``acc``)."""
+        ctx, mesh = self.ctx, self.mesh
+        shot = int(self.shot_index[s])
+        lvl = self.receiver_levels(s, field_mean)
+        g = ctx.gather(s, mesh["geo"], m, shot, field, field_mean, correlated=True, cull=True, patches=lvl < 0)
+        dv = mesh["rho"] * g
+        for level, (c, w) in enumerate(zip(self.coarse or [], mesh["coarse_w"], strict=True)):
+            sel = lvl == level
+            if sel.any():
+                gc = c["rho"] * ctx.gather(
+                    s, c["geo"], m, shot, field, field_mean, correlated=True, cull=True, patches=sel
+                )
+                c["acc"] += gc
+                dv += w @ gc
+        return dv
 
     def refine_total(self, label: str, span) -> None:
         """Stage C: refine on the total radiance. New vertices get their direct light and a
@@ -1246,10 +1359,21 @@ class _Run:
             if len(new):
                 geo = ctx.geometry(new)
                 rho = ctx.albedo[geo.patch]
+                on = np.zeros(self.P, dtype=bool)
+                on[geo.patch] = True
+                # what the coarse grids received, interpolated as at the old vertices
+                for level, c in enumerate(self.coarse or []):
+                    out += _coarse_weights(new, c["keys"], ctx.is_quad, level, ctx.n) @ c["acc"]
+                # and a gather of what each source shot at the vertices of these patches
                 for p in sources:
                     p = int(p)
+                    fine = self.levels[p] < 0 if p in self.levels else None
+                    if fine is not None and not (fine & on).any():
+                        continue
                     jitter = int(self.shot_index[p]) + 1_000_000 * (1 + n_pass)
-                    out += rho * ctx.gather(p, geo, m_src[p], jitter, grids[p], means[p], correlated=True, cull=True)
+                    out += rho * ctx.gather(
+                        p, geo, m_src[p], jitter, grids[p], means[p], correlated=True, cull=True, patches=fine
+                    )
                     self.check()
             return out
 
