@@ -230,8 +230,8 @@ def _pixel_centres_on_plane_z0(cam, w, h):
 @pytest.mark.parametrize("depth", [0, 2])
 def test_half_texel_placement_ramp_is_exact_up_to_the_polygon_edges(depth, renderer):
     """Texel centres on the polygon's corners: every pixel of the polygon, the outermost ones
-    included, shows the ramp's value at its centre (fp16 rounding only). A texture whose
-    edge texels straddled the edge instead would be off by half a texel of ramp there."""
+    included, shows the ramp's value at its centre (fp16 rounding only). A tile mapped edge to
+    edge instead would be off by up to half a texel of ramp just inside the edges."""
     from iat.camera import Camera
 
     sol = _ramp_solution(depth)
@@ -261,8 +261,8 @@ def test_half_texel_placement_ramp_is_exact_up_to_the_polygon_edges(depth, rende
         for near_edge in (x < 0.02, x > 0.98, y < 0.02, y > 0.98):
             assert (outline & near_edge).sum() >= 5, label
         edge_err = float(err[outline].max())
-        # a texture whose edge texels straddled the polygon edge would be off there by half a
-        # texel of ramp: 0.7 per unit in x on channel 0, a tile of 2**depth + 1 texels
+        # a tile mapped edge to edge (texel centres half a texel inside the corners) would be
+        # off by up to half a texel of ramp: 0.7 per unit in x, tiles of 2**depth + 1 texels
         assert edge_err < 0.5 * 0.7 / (2**depth + 1) / 10
         worst[label] = float(edge_err)
     record("half_texel", f"depth{depth}_edge_max_abs_error", worst)
@@ -470,8 +470,9 @@ def test_clamped_scaling_adds_no_seam_where_neighbours_agree_on_the_cornell_box(
 # 4. budget
 
 
-def test_budget_fits_and_error_never_rises_once_textures_appear(renderer):
-    scene, sol = solved("cornell_box", SPLIT)
+@pytest.mark.parametrize("name", ["cornell_box", "house"])
+def test_budget_fits_and_error_never_rises_once_textures_appear(name, renderer):
+    scene, sol = solved(name, SPLIT if name == "cornell_box" else QUICK)
     cam = scene.cameras[0]
     renderer.set_solution(sol)
     mesh = renderer.render(cam, SIZE, mode="mesh")
@@ -497,7 +498,7 @@ def test_budget_fits_and_error_never_rises_once_textures_appear(renderer):
             }
         )
         assert m.texture_bytes <= mb * 2**20 and m.budget_fits
-    record("budget", "cornell_box_split", rows)
+    record("budget", name, rows)
     tris = [r["triangles"] for r in rows]
     assert tris == sorted(tris, reverse=True)  # more budget, never more triangles
     assert rows[0]["patches_textured"] == 0 and rows[0]["mean_abs_error"] <= 1e-6  # all mesh = the reference
@@ -518,8 +519,8 @@ def _validator():
     return validator_env(), VALIDATE_JS
 
 
-@pytest.mark.parametrize("name", ["cornell_box", "house"])
-def test_exported_glb_validates_loads_and_draws_like_iat_mode(name, renderer, tmp_path):
+@pytest.mark.parametrize("name, threshold", [("cornell_box", 0), ("cornell_box", 2), ("house", 2)])
+def test_exported_glb_validates_loads_and_draws_like_iat_mode(name, threshold, renderer, tmp_path):
     import trimesh
 
     from iat.export import export_glb, radiance_scale
@@ -527,7 +528,7 @@ def test_exported_glb_validates_loads_and_draws_like_iat_mode(name, renderer, tm
 
     scene, sol = solved(name, QUICK)
     cam = scene.cameras[0]
-    bk = Baker(sol, scene).bake(BakePolicy(threshold=2, detail=False))
+    bk = Baker(sol, scene).bake(BakePolicy(threshold=threshold, detail=False))
     path = export_glb(bk, tmp_path / f"{name}.glb", scene)
     s = radiance_scale(bk)
     # trimesh reads it back: every triangle is there
@@ -546,7 +547,7 @@ def test_exported_glb_validates_loads_and_draws_like_iat_mode(name, renderer, tm
     at_auto = psnr8(img, iat, auto_exposure(iat))
     record(
         "glb",
-        name,
+        f"{name}/threshold{threshold}",
         {
             "psnr8_db_file_exposure": at_file,
             "psnr8_db_auto_exposure": at_auto,
@@ -562,3 +563,38 @@ def test_exported_glb_validates_loads_and_draws_like_iat_mode(name, renderer, tm
     assert r.returncode in (0, 1), r.stderr
     report = json.loads(r.stdout)
     assert report["issues"]["numErrors"] == 0, report["issues"]["messages"]
+    assert report["issues"]["numWarnings"] == 0, report["issues"]["messages"]
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="export.radiance_scale is the 99.5th percentile of all stored values; on the Cornell box "
+    "at threshold 0 the light's tile is 6 % of the texels, so the scale is the light's radiance and "
+    "the walls use 1/60 of the 8-bit range (see docs/baking.md); remove this marker once fixed",
+)
+def test_exported_colours_use_the_8_bit_range_on_the_cornell_box(renderer):
+    from iat.export import radiance_scale
+
+    scene, sol = solved("cornell_box", QUICK)
+    bk = Baker(sol, scene).bake(BakePolicy(threshold=0, detail=False))
+    renderer.set_baked(bk)
+    iat = renderer.render(scene.cameras[0], SIZE, mode="iat")
+    # white in the file should be within 2x of white at the image's own exposure
+    assert radiance_scale(bk) * auto_exposure(iat) <= 2.0
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="rgba8 pages: the baker rounds to sRGB8 of page / page_scale, the Renderer uploads linear "
+    "UNORM8 (GL_RGBA8) of the same, so dark texels are crushed (15.9 dB on the Cornell box; 39.3 dB "
+    "when the baker's sRGB8 values reach the GPU, see docs/baking.md); remove this marker once fixed",
+)
+def test_rgba8_pages_render_close_to_the_mesh(renderer):
+    scene, sol = solved("cornell_box", QUICK)
+    cam = scene.cameras[0]
+    renderer.set_solution(sol)
+    mesh = renderer.render(cam, SIZE, mode="mesh")
+    bk = Baker(sol, scene).bake(BakePolicy(threshold=0, detail=False, pixel_format="rgba8", mipmaps=False))
+    renderer.set_baked(bk)
+    iat = renderer.render(cam, SIZE, mode="iat")
+    assert psnr8(iat, mesh, auto_exposure(mesh)) >= 35.0

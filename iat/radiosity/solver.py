@@ -1288,7 +1288,7 @@ class _Run:
     def receiver_levels(self, s: int, field_mean: np.ndarray) -> np.ndarray:
         """(P,) int8 receiver level of each patch for the shots of s: -1 at every vertex, k on
         the coarse grid of level k (``COARSE_EPS``). Decided at the first shot of s, from the
-        largest form factor of a patch's grid points to s, the shot's radiance and the patch's
+        largest form factor of a patch's corners to s, the shot's radiance and the patch's
         radiance then, and kept for its later (fainter) shots, so that every shot of s reaches a
         patch at the same level (what :meth:`refine_total` relies on)."""
         if s in self.levels:
@@ -1296,7 +1296,7 @@ class _Run:
         ctx, mesh = self.ctx, self.mesh
         lvl = np.full(self.P, -1, dtype=np.int8)
         if self.coarse:
-            cgeo = self.coarse[-1]["geo"]
+            cgeo = self.coarse[0]["geo"]  # the patches' corners
             idx, f = ctx.form_factors(s, cgeo)
             fmax = np.zeros(self.P)
             np.maximum.at(fmax, cgeo.patch[idx], f)
@@ -1567,9 +1567,8 @@ def solve(
         if mesh is None:
             run.mesh_by_direct_light()
             first_target = max(target, math.sqrt(opts.convergence) * run.power0)
-            plan = [("shoot", first_target, (0.2, 0.6)), ("refine", "refining", (0.6, 0.7))]
-            plan += [("shoot", target, (0.7, 0.85)), ("refine", "refining again", (0.85, 0.95))]
-            plan += [("shoot", target, (0.95, 1.0))]
+            plan = [("shoot", first_target, (0.2, 0.6)), ("refine", "refining", (0.6, 0.75))]
+            plan += [("shoot", target, (0.75, 1.0))]
         else:
             run.take_mesh(mesh)
             if not run.state["cancelled"]:
