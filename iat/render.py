@@ -413,7 +413,8 @@ class Renderer:
             data = np.ones((n, h, w, 4), dtype=np.float16 if dtype == "f2" else np.float32)
             data[..., :3] = np.minimum(pages[..., :3], HALF_MAX) if dtype == "f2" else pages[..., :3]
             self._page_scale = 1.0
-        key = (w, h, n, dtype)
+        # the mip levels are part of the key: a texture that once held a mip chain keeps it allocated
+        key = (w, h, n, dtype, (mip_levels or 0) if mipmaps else 1)
         if self._pages is not None and self._pages_key == key:
             self._pages.write(data.tobytes())
         else:
@@ -711,9 +712,8 @@ class Renderer:
                 "layer_b": float(pb * self._iat_pages),
                 "blend": w if pa != pb else 0.0,
             }
-            self._uniforms(
-                g.program, {**common, **blend, "pages": 0, "detail": 1, "page_scale": self._page_scale}
-            )
+            pages = {"pages": 0, "detail": 1, "page_scale": self._page_scale}
+            self._uniforms(g.program, {**common, **blend, **pages})
             for key, first, count in g.calls():
                 tex = self._detail["iat"].get(key)
                 (tex if tex is not None else self._white).use(1)

@@ -53,10 +53,14 @@ vec3 srgb_encode(vec3 c) {
     return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(vec3(0.0031308), c));
 }
 
+vec3 page(float layer) {
+    return texture(pages, vec3(v_uv, v_layer + layer)).rgb;
+}
+
 void main() {
-    vec3 c = texture(pages, vec3(v_uv, v_layer + layer_a)).rgb;
+    vec3 c = page(layer_a);
     if (blend > 0.0) {
-        c = mix(c, texture(pages, vec3(v_uv, v_layer + layer_b)).rgb, blend);
+        c = mix(c, page(layer_b), blend);
     }
     c *= page_scale;
     if (use_detail) {

@@ -374,12 +374,6 @@ def test_memory_report_equals_the_gl_texture_bytes(label, egl_ctx):
     assert got == m.texture_bytes, (levels, m.to_dict())
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="Renderer._set_pages keeps the texture when (w, h, n, dtype) match, so levels built by an "
-    "earlier mipmapped bake stay allocated after a bake with mipmaps=False (see docs/baking.md); "
-    "remove this marker once fixed",
-)
 def test_memory_report_equals_gl_bytes_after_switching_mipmaps_off(egl_ctx):
     from iat.render import Renderer
 
