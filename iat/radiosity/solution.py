@@ -159,7 +159,7 @@ class Solution:
         if not path.exists():
             raise SolutionFileError("file not found", path)
         if not zipfile.is_zipfile(path):
-            raise SolutionFileError("not an IAT solution file (not an .npz archive)", path)
+            raise SolutionFileError("damaged or not an IAT solution file (not an .npz archive)", path)
         try:
             with np.load(path, allow_pickle=False) as z:
                 names = set(z.files)
