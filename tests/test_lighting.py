@@ -87,12 +87,6 @@ def test_moving_a_light_then_resolve_matches_a_fresh_solve_in_less_time(bulb_sce
     assert rel_l1(before.vert_radiance, fresh.vert_radiance) > 5 * err
 
 
-@pytest.mark.xfail(
-    raises=ValueError,
-    strict=False,
-    reason="iat.radiosity.resolve removes matched lights with list.remove, which compares numpy arrays "
-    "(ValueError) unless the match is first in the list; fix there: remove by identity/index",
-)
 def test_resolve_moves_one_of_several_lights(bulb_scene):
     """Two lights, the first moved: the unchanged one cancels out of the difference."""
     two = L.add_light(bulb_scene, "point", [0.40, 0.45, 0.35], intensity=0.2, name="second")

@@ -1794,8 +1794,9 @@ def resolve(
             d = _light_from(_sources_light(lt))
             d.radiant_intensity = d.radiant_intensity - match.radiant_intensity
             added.append(d)
-        removed.remove(match)
-        added.remove(lt)
+        # by identity: Light holds numpy arrays, so list.remove's == comparison would raise
+        removed = [o for o in removed if o is not match]
+        added = [x for x in added if x is not lt]
     delta_power = float(np.pi * (np.abs(diff @ LUMINANCE) * area).sum())
     delta_power += sum(_light_power(lt) for lt in added + removed)
     new_power = float(np.pi * (emission @ LUMINANCE * area).sum())
