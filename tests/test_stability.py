@@ -314,11 +314,6 @@ def test_geometry_large_and_small_scales_keep_shadows_above_the_ray_offset():
     assert shadow[10.0] == pytest.approx(shadow[0.0], rel=0.25)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="DEFECT: ray offset RAY_EPS x scene diagonal (1.4 cm in a 141 m scene) "
-    "is larger than a 1 cm object: its shadow is lost (solver._Context eps_ray)",
-)
 def test_geometry_small_object_in_a_huge_scene_keeps_its_shadow():
     scene = ss.small_object_in_large_scene(big=100.0)
     area, eps = _cube_shadow_area(scene)
@@ -429,11 +424,6 @@ def test_geometry_nan_and_inf_coordinates_in_files(tmp_path):
     record("nan_inf", files_rejected=3, unused_nan_loaded=True)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="DEFECT: solve() does not validate an in-memory Scene: NaN/Inf "
-    "vertices give ValueError 'cannot convert float NaN to integer' (not an IATError)",
-)
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def test_geometry_nan_in_memory_scene_is_an_iat_error():
     scene = ss.floor_under_light()
@@ -628,11 +618,6 @@ def test_lighting_albedo_zero_and_albedo_above_one_is_clamped_at_load(tmp_path):
     assert np.isfinite(sol1.vert_radiance).all()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="DEFECT: solve() accepts albedo > 1 from an in-memory Scene; "
-    "the energy grows every shot (6e18 after 300 shots) instead of an OptionError",
-)
 def test_lighting_albedo_above_one_in_memory_is_rejected():
     scene = ss.room_with_light([0.5, 0.5, 0.5], albedo=1.5)
     try:

@@ -95,6 +95,8 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 ABS_FLOOR = 0.02
 #: ray-origin offset (normal and towards the patch centre), fraction of the scene diagonal
 RAY_EPS = 1e-4
+#: ... but at most this fraction of the radius of the patch the ray leaves (or aims at)
+RAY_EPS_PATCH = 0.02
 #: in-plane nudge of form-factor points off shared edges, fraction of the scene diagonal
 FF_EPS = 1e-6
 #: receivers per vectorised gather block (bounds the (n, samples) temporaries)
@@ -315,6 +317,11 @@ class _Context:
         lo, hi = scene.bounds if self.n_patches else (np.zeros(3), np.zeros(3))
         self.scale = max(float(np.linalg.norm(hi - lo)), 1e-12)
         self.eps_ray = RAY_EPS * self.scale
+        # per patch: no more than a fiftieth of the patch's radius (a 1 cm object in a 100 m scene
+        # keeps its shadow), no less than 32 float32 steps at the scene's extent (embree's precision)
+        extent = float(np.abs(np.stack([lo, hi])).max()) if self.n_patches else 1.0
+        floor = 32.0 * float(np.spacing(np.float32(max(extent, 1e-30))))
+        self.eps_patch = np.clip(RAY_EPS_PATCH * self.radius, min(floor, self.eps_ray), self.eps_ray)
         self.eps_ff = FF_EPS * self.scale
         mes = opts.min_element_size
         self.min_size = (
@@ -351,7 +358,8 @@ class _Context:
         tl = np.linalg.norm(t, axis=1)
         that = t / np.maximum(tl, 1e-300)[:, None]
         ff = pos + np.minimum(self.eps_ff, 0.5 * tl)[:, None] * that
-        origin = pos + self.eps_ray * nrm + np.minimum(self.eps_ray, 0.5 * tl)[:, None] * that
+        eps = self.eps_patch[p][:, None]
+        origin = pos + eps * nrm + np.minimum(eps, 0.5 * tl[:, None]) * that
         start = None
         if len(keys) == 0 or np.all(keys[1:] > keys[:-1]):
             start = np.searchsorted(keys, qt.make_key(np.arange(self.n_patches + 1), 0, 0, self.n))
@@ -366,7 +374,11 @@ class _Context:
     def shooter(self, s: int) -> _Shooter:
         if s not in self._shooters:
             self._shooters[s] = _Shooter(
-                self.corners[s], bool(self.is_quad[s]), self.normal[s], float(self.area[s]), self.eps_ray
+                self.corners[s],
+                bool(self.is_quad[s]),
+                self.normal[s],
+                float(self.area[s]),
+                float(self.eps_patch[s]),
             )
         return self._shooters[s]
 
@@ -576,7 +588,7 @@ class _Context:
             dr = sh.target_uv(lu, lv) - o
             r = np.sqrt(dr[:, 0] * dr[:, 0] + dr[:, 1] * dr[:, 1] + dr[:, 2] * dr[:, 2])
             vis = ~self.vis.occluded(
-                o, dr / np.maximum(r, 1e-300)[:, None], np.maximum(r - 0.5 * self.eps_ray, 0.0)
+                o, dr / np.maximum(r, 1e-300)[:, None], np.maximum(r - 0.5 * sh.eps, 0.0)
             )
             rp = geo.patch[ii][bi]
             rays_p += np.bincount(rp, minlength=self.n_patches)
@@ -663,7 +675,9 @@ class _Context:
             return e
         do = light.position[None, :] - geo.origin[ok]
         ro = np.linalg.norm(do, axis=1)
-        occ = self.vis.occluded(geo.origin[ok], do / ro[:, None], np.maximum(ro - 0.5 * self.eps_ray, 0.0))
+        occ = self.vis.occluded(
+            geo.origin[ok], do / ro[:, None], np.maximum(ro - 0.5 * self.eps_patch[geo.patch[ok]], 0.0)
+        )
         k = cos[ok] * att[ok] / (r[ok] * r[ok]) * ~occ
         e[ok] = k[:, None] * light.radiant_intensity[None, :]
         return e
@@ -1683,6 +1697,25 @@ def _options(options) -> SolveOptions:
     return opts.validate()
 
 
+def _check_scene(scene) -> None:
+    """Raise OptionError for a scene the solver cannot solve (an in-memory scene is not checked
+    by a loader): non-finite geometry or light, albedo outside [0, 1], negative emission."""
+    c = scene.corner_positions
+    if not np.isfinite(c).all():
+        raise OptionError("scene: non-finite vertex coordinates")
+    alb, em = scene.patch_albedo, scene.patch_emission
+    if not (np.isfinite(alb).all() and np.isfinite(em).all()):
+        raise OptionError("scene: non-finite albedo or emission")
+    if len(alb) and (alb.min() < 0 or alb.max() > 1):
+        raise OptionError(f"scene: albedo must be in [0, 1] (found {alb.min():g} .. {alb.max():g})")
+    if len(em) and em.min() < 0:
+        raise OptionError("scene: negative emission")
+    for lt in scene.lights:
+        vals = [lt.position, lt.direction, lt.radiant_intensity, [lt.inner_cone, lt.outer_cone]]
+        if not all(np.isfinite(np.asarray(v, dtype=np.float64)).all() for v in vals):
+            raise OptionError(f"scene: light {getattr(lt, 'name', '')!r} has non-finite values")
+
+
 def _check_mesh(sol: Solution, scene, what: str) -> None:
     """Raise OptionError unless ``sol`` was solved on the patches of ``scene``."""
     if not isinstance(sol, Solution):
@@ -1719,6 +1752,7 @@ def solve(
     Raises :class:`iat.errors.OptionError` for invalid options or a mesh of other patches.
     """
     opts = _options(options)
+    _check_scene(scene)
     if mesh is not None:
         _check_mesh(mesh, scene, "solve mesh")
         opts = replace(opts, max_depth=int(mesh.max_depth)).validate()
@@ -1767,6 +1801,7 @@ def resolve(
 
     options : None takes ``previous``'s options (``max_depth`` always comes from it).
     """
+    _check_scene(scene)
     _check_mesh(previous, scene, "resolve")
     opts = SolveOptions.from_dict(previous.options) if options is None else options
     opts = replace(_options(opts), max_depth=int(previous.max_depth)).validate()
@@ -1783,20 +1818,22 @@ def resolve(
         old_emission[int(row[0])] = row[1:4]
     diff = emission - old_emission
     changed_patches = np.flatnonzero((diff != 0).any(axis=1))
-    added = [lt for lt in scene.lights if lt.kind in ("point", "spot")]
+    new_lights = [lt for lt in scene.lights if lt.kind in ("point", "spot")]
     removed = [_light_from(d) for d in src.get("lights", [])]
-    for lt in list(added):  # equal lights cancel; a light whose intensity changed adds the difference
-        match = next((o for o in removed if _light_signature(o) == _light_signature(lt)), None)
-        if match is None:
-            match = next((o for o in removed if _light_signature(o)[:-1] == _light_signature(lt)[:-1]), None)
-            if match is None:
+    added = []
+    for lt in new_lights:  # equal lights cancel; a light whose intensity changed adds the difference
+        sig = _light_signature(lt)
+        sigs = [_light_signature(o) for o in removed]  # (lights hold arrays: match by index)
+        i = next((k for k, o in enumerate(sigs) if o == sig), None)
+        if i is None:
+            i = next((k for k, o in enumerate(sigs) if o[:-1] == sig[:-1]), None)
+            if i is None:
+                added.append(lt)
                 continue
             d = _light_from(_sources_light(lt))
-            d.radiant_intensity = d.radiant_intensity - match.radiant_intensity
+            d.radiant_intensity = d.radiant_intensity - removed[i].radiant_intensity
             added.append(d)
-        # by identity: Light holds numpy arrays, so list.remove's == comparison would raise
-        removed = [o for o in removed if o is not match]
-        added = [x for x in added if x is not lt]
+        del removed[i]
     delta_power = float(np.pi * (np.abs(diff @ LUMINANCE) * area).sum())
     delta_power += sum(_light_power(lt) for lt in added + removed)
     new_power = float(np.pi * (emission @ LUMINANCE * area).sum())
