@@ -2,7 +2,8 @@
 
 ``Baker(solution, scene).bake(policy)`` keeps what does not change between
 policies (flattened tiles per method and scale, padded and quantised boxes, the
-packing when the tile sizes are unchanged, the mesh part per textured set), so a
+packing when the tile sizes are unchanged, the pages per textured set, and the mesh
+sorted by patch depth, whose prefixes are the mesh parts of every threshold), so a
 slider change re-does only the page blit and the small vertex arrays.
 
 Threshold semantics (report §3.5): a patch whose tree depth is ``>= threshold``
@@ -34,18 +35,33 @@ shader multiplies by the material's detail texture (``detail_textures``) at
 from __future__ import annotations
 
 import dataclasses
+import mmap
+import os
+import sys
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from . import atlas
 from .errors import BakeError, Cancelled, OptionError
-from .flatten import METHODS, SCALE_MODES, SolutionIndex, TileCache, sample_tile, scaled_side, tile_side
+from .flatten import (
+    METHODS,
+    SCALE_MODES,
+    SolutionIndex,
+    TileCache,
+    extend_triangle,
+    populated_empty,
+    sample_tile,
+    scaled_side,
+    tile_side,
+)
 
 __all__ = [
     "BYTES_PER_TEXEL",
+    "GPU_DTYPES",
     "BakePolicy",
     "Baked",
     "BakedSet",
@@ -54,9 +70,13 @@ __all__ = [
     "bake",
     "choose_policy",
     "cost_model",
+    "from_gpu",
+    "host_bytes",
+    "host_memory_bytes",
     "quantise_rgb9e5",
     "quantise_rgba8",
     "seam_error",
+    "to_gpu",
 ]
 
 #: bytes per texel on the GPU for each pixel format
@@ -219,12 +239,19 @@ class Baked:
       tex_detail (K,) float32 (1.0: texel = incoming light, multiply by detail_textures[material]),
       tex_patch (K,) int32 (the patch of each vertex)
     pages : (n_pages, H, W, 3) float32 linear (quantised as pixel_format stores it: rgba8 and
-      rgb9e5 values are already rounded; the GPU value of rgba8 is sRGB8(page / page_scale));
-      (0, 1, 1, 3) when nothing is textured
+      rgb9e5 values are already rounded; the GPU value of rgba8 is sRGB8(page / page_scale);
+      rgba16f values are exact, the GPU holds them as float16); (0, 1, 1, 3) when nothing is
+      textured. Made on first access when the Baker baked it (read-only, cached)
     page_scale : float, 1.0 except rgba8, where the GPU texel is sRGB8(page / page_scale) and the
       shader multiplies by page_scale (one scale for all pages: the largest stored vertex value)
+    gpu_pages : (n_pages, H, W, 4) in ``GPU_DTYPES[gpu_format]``: the pages as uploaded (float16 for
+      rgba16f and rgb9e5, sRGB8 codes for rgba8), built by the Baker and written to GL as they are;
+      ``pages`` is then made on first access (``pages_source``). :meth:`gpu_form` says when it applies.
     mip_levels : mip levels the renderer may use (GL_TEXTURE_MAX_LEVEL = mip_levels - 1)
     detail_textures : {material index: (h, w, 3) float32 linear albedo}
+    mesh_patch : (M,) int32, the patch of each mesh-part vertex. The mesh part is sorted by patch
+      depth (stable), so each threshold's mesh part is a prefix of the same read-only arrays
+    patch_emissive : (P,) bool, patches whose material emits (empty when baked without a scene)
     patch_textured : (P,) bool; memory : MemoryReport; policy : the policy baked (budget resolved)
     timings : seconds per stage
     """
@@ -248,10 +275,48 @@ class Baked:
     page_scale: float = 1.0
     mip_levels: int = 1
     tex_patch: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    mesh_patch: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    patch_emissive: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    gpu_pages: np.ndarray | None = field(default=None, repr=False, compare=False)
+    gpu_format: str | None = field(default=None, repr=False, compare=False)
+    pages_source: Any = field(default=None, repr=False, compare=False)
 
     @property
     def n_pages(self) -> int:
         return int(self.memory.pages)
+
+    def gpu_form(self) -> np.ndarray | None:
+        """The pages as the GPU stores them, ``(n_pages, H, W, 4)`` in :data:`GPU_DTYPES`
+        ``[policy.pixel_format]`` (read-only, cached by the Baker), or None when there is none or
+        ``pages`` was given explicitly (then the renderer converts ``pages``)."""
+        g = self.gpu_pages
+        if g is None or self.__dict__.get("_pages_explicit"):
+            return None
+        fmt = getattr(self.policy, "pixel_format", None)
+        if self.gpu_format != fmt or fmt not in GPU_DTYPES or g.dtype != GPU_DTYPES[fmt] or g.ndim != 4:
+            return None
+        return g
+
+
+def _baked_pages_get(self) -> np.ndarray:
+    p = self.__dict__.get("_pages")
+    if p is None:
+        src = self.__dict__.get("pages_source")
+        if src is None:
+            return None
+        p = self.__dict__["_pages"] = src()
+    return p
+
+
+def _baked_pages_set(self, value) -> None:
+    # the Baker passes pages=None and a pages_source (float32 pages made on demand from its cache)
+    self.__dict__["_pages"] = value
+    self.__dict__["_pages_explicit"] = value is not None
+
+
+#: ``Baked.pages``: (n_pages, H, W, 3) float32, made on first access when the Baker left it to
+#: ``pages_source`` (the renderer uploads ``gpu_pages`` and never needs it)
+Baked.pages = property(_baked_pages_get, _baked_pages_set, doc=_baked_pages_get.__doc__)
 
 
 @dataclass
@@ -286,6 +351,8 @@ class BakedSet:
         "tex_indices",
         "tex_detail",
         "tex_patch",
+        "mesh_patch",
+        "patch_emissive",
         "patch_textured",
         "detail_textures",
         "page_scale",
@@ -326,7 +393,15 @@ class BakedSet:
         elif fmt == "rgb9e5":
             pages = quantise_rgb9e5(pages)
         mesh = ((1.0 - w) * base.mesh_radiance + w * other.mesh_radiance).astype(np.float32)
-        return dataclasses.replace(base, pages=pages, mesh_radiance=mesh, timings={})
+        return dataclasses.replace(
+            base,
+            pages=pages,
+            mesh_radiance=mesh,
+            timings={},
+            gpu_pages=None,
+            gpu_format=None,
+            pages_source=None,
+        )
 
     def at(self, t: float, times=None) -> Baked:
         """The blend at time ``t`` between the neighbouring key times (default: evenly spaced
@@ -351,8 +426,58 @@ def _srgb_decode(y):
 
 def quantise_rgba8(x: np.ndarray, scale: float) -> np.ndarray:
     """Round-trip through sRGB8 of ``x / scale`` (clamped to [0, 1]); float32."""
-    q = np.round(_srgb_encode(np.clip(np.asarray(x, np.float64) / scale, 0.0, 1.0)) * 255.0) / 255.0
-    return (_srgb_decode(q) * scale).astype(np.float32)
+    return (_srgb_decode(_rgba8_codes(x, scale) / 255.0) * scale).astype(np.float32)
+
+
+#: host dtype of each pixel format's GPU form: ``(..., 4)`` arrays the renderer writes as they are
+#: (rgba8: sRGB8 codes of ``page / page_scale``, alpha 255; rgb9e5: the 9e5-rounded values as half
+#: floats, which hold them exactly and which GL packs into GL_RGB9_E5; float formats: alpha 1)
+GPU_DTYPES = {"rgba16f": np.float16, "rgba32f": np.float32, "rgba8": np.uint8, "rgb9e5": np.float16}
+#: largest finite half float; brighter radiance is clamped to it, never turned into inf
+HALF_MAX = 65504.0
+
+
+def to_gpu(x: np.ndarray, pixel_format: str, page_scale: float = 1.0, out: np.ndarray | None = None) -> np.ndarray:
+    """``(..., 3)`` linear values -> their GPU form ``(..., 4)`` of dtype ``GPU_DTYPES[pixel_format]``.
+
+    rgba8: ``rint(sRGB(clip(x / page_scale, 0, 1)) x 255)`` (GL_SRGB8_ALPHA8 decodes it before
+    filtering); rgb9e5: :func:`quantise_rgb9e5` then float16 (exact); rgba16f: clamped to
+    +-:data:`HALF_MAX`; rgba32f: as is.
+    out : an array of that shape and dtype to write into (returned), or None for a new one.
+    """
+    if pixel_format not in GPU_DTYPES:
+        raise OptionError(f"unknown pixel format {pixel_format!r} (known: {', '.join(GPU_DTYPES)})")
+    x = np.asarray(x)[..., :3]
+    dt = GPU_DTYPES[pixel_format]
+    if out is None:
+        out = np.empty(x.shape[:-1] + (4,), dtype=dt)
+    if pixel_format == "rgba8":
+        out[..., 3] = 255
+        out[..., :3] = _rgba8_codes(x, page_scale)
+        return out
+    out[..., 3] = 1.0
+    if pixel_format == "rgb9e5":
+        out[..., :3] = quantise_rgb9e5(x)
+    elif pixel_format == "rgba16f":
+        np.clip(x, -HALF_MAX, HALF_MAX, out=out[..., :3], casting="unsafe")
+    else:
+        out[..., :3] = x
+    return out
+
+
+def from_gpu(g: np.ndarray, pixel_format: str, page_scale: float = 1.0) -> np.ndarray:
+    """Inverse of :func:`to_gpu`: ``(..., 4)`` GPU form -> ``(..., 3)`` float32 linear values
+    (what the shader reads, times ``page_scale`` for rgba8)."""
+    g = np.asarray(g)[..., :3]
+    if pixel_format == "rgba8":
+        return (_srgb_decode(g.astype(np.float64) / 255.0) * page_scale).astype(np.float32)
+    return g.astype(np.float32)
+
+
+def _rgba8_codes(x: np.ndarray, scale: float) -> np.ndarray:
+    return np.round(_srgb_encode(np.clip(np.asarray(x, np.float64) / scale, 0.0, 1.0)) * 255.0).astype(
+        np.uint8
+    )
 
 
 def quantise_rgb9e5(x: np.ndarray) -> np.ndarray:
@@ -469,19 +594,83 @@ def cost_model(solution, policy: BakePolicy | None = None, index: SolutionIndex 
 
 
 # ---------------------------------------------------------------------------
+# host memory
+
+
+def host_memory_bytes() -> int:
+    """Memory this process may still use: ``MemAvailable`` of /proc/meminfo, else the physical
+    memory (``os.sysconf``), else 2**62 (unknown: no refusal); at most the address-space limit
+    (``ulimit -v``) when one is set."""
+    have = 1 << 62
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    have = int(line.split()[1]) * 1024
+                    break
+    except (OSError, ValueError, IndexError):
+        try:
+            have = int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+        except (ValueError, OSError, AttributeError):
+            pass
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if soft != resource.RLIM_INFINITY and soft > 0:
+            have = min(have, int(soft))
+    except (ImportError, OSError, ValueError):
+        pass
+    return have
+
+
+def host_bytes(sides: np.ndarray, packing: atlas.Packing, policy: BakePolicy, align: int) -> int:
+    """Host bytes a bake allocates for its textures (estimate, made before any texel exists):
+    the tiles (float32), their padded boxes (float32 and GPU form), the GPU pages, and the
+    float64 temporaries of resampling the largest group of equal-sized tiles (two arrays)."""
+    sides = np.asarray(sides, dtype=np.int64)
+    if not len(sides):
+        return 0
+    isz = np.dtype(GPU_DTYPES[policy.pixel_format]).itemsize
+    box = -(-(sides + 2 * policy.gutter) // align) * align
+    tiles = int((sides.astype(np.float64) ** 2).sum()) * 12
+    boxes = int((box.astype(np.float64) ** 2).sum()) * (12 + 4 * isz)
+    pages = int(packing.n_pages) * int(packing.width) * int(packing.height) * 4 * isz
+    u, c = np.unique(sides, return_counts=True)
+    temporaries = int((c * u.astype(np.float64) ** 2).max()) * 3 * 8 * 2
+    return tiles + boxes + pages + temporaries
+
+
+# ---------------------------------------------------------------------------
 # baker
 
 
+#: most bytes the Baker keeps in cached pages (GPU form): enough for every threshold of a
+#: 2048 x 2048 rgba16f atlas, so a slider dragged back and forth re-bakes nothing
+CACHE_BYTES = 384 * MIB
+
+
 class _LRU(OrderedDict):
-    def __init__(self, size: int):
+    """Least-recently-used dict of at most ``size`` entries and (when ``nbytes`` is given) at most
+    ``max_bytes`` bytes (the newest entry is always kept); ``on_evict(value)`` sees each dropped value."""
+
+    def __init__(self, size: int, max_bytes: int | None = None, nbytes=None, on_evict=None):
         super().__init__()
         self.size = size
+        self.max_bytes, self.nbytes, self.on_evict = max_bytes, nbytes, on_evict
+
+    def _bytes(self) -> int:
+        return sum(self.nbytes(v) for v in self.values()) if self.nbytes is not None else 0
 
     def put(self, key, value):
         self[key] = value
         self.move_to_end(key)
-        while len(self) > self.size:
-            self.popitem(last=False)
+        while len(self) > 1 and (
+            len(self) > self.size or (self.max_bytes is not None and self._bytes() > self.max_bytes)
+        ):
+            _, old = self.popitem(last=False)
+            if self.on_evict is not None:
+                self.on_evict(old)
         return value
 
     def hit(self, key):
@@ -489,6 +678,53 @@ class _LRU(OrderedDict):
             self.move_to_end(key)
             return self[key]
         return None
+
+
+class _PageEntry:
+    """One cached set of pages: the GPU form (built by the bake) and the float32 pages, made on
+    first use (export, seams, tests) and kept: from the GPU form for the quantised formats (it
+    holds exactly the stored values), else blitted from the boxes' sources (:func:`_box_source`)."""
+
+    def __init__(self, gpu: np.ndarray, sources: list, packing: atlas.Packing, policy, align: int, scale8):
+        self.gpu = gpu
+        self._sources, self._packing, self._align = sources, packing, align
+        self._fmt, self._gutter, self._scale8 = policy.pixel_format, policy.gutter, scale8
+        self._float32: np.ndarray | None = None
+
+    def float32(self) -> np.ndarray:
+        if self._float32 is None:
+            n, h, w = self.gpu.shape[:3]
+            if self._fmt in ("rgba8", "rgb9e5"):
+                pages = np.ascontiguousarray(from_gpu(self.gpu, self._fmt, self._scale8))
+            else:
+                pages = np.zeros((n, h, w, 3), dtype=np.float32)
+                if self._sources:
+                    tiles = [_box_source_tile(src) for src in self._sources]
+                    atlas.blit(pages, tiles, self._packing.placements, self._gutter, self._align)
+            pages.flags.writeable = False
+            self._float32 = pages
+        return self._float32
+
+
+def _box_source_tile(src) -> np.ndarray:
+    """The float32 tile a box was padded from: ``src = (tile, ring or None, is_tri, factor or
+    None)`` (the scaled tile, its harmonised boundary ring, and the detail divisor)."""
+    tile, ring, is_tri, factor = src
+    t = np.array(tile, dtype=np.float32, copy=True)
+    if ring is not None:
+        from .seams import ring_index
+
+        rows, cols = ring_index(t.shape[0], is_tri)
+        t[rows, cols] = ring
+        if is_tri:
+            extend_triangle(t[None])
+    if factor is not None:
+        t *= factor
+    return t
+
+
+#: tiles per chunk when boxes are built (float32 temporaries of a few MB, reused)
+_BOX_CHUNK_BYTES = 2 << 20
 
 
 _QUAD_OX = np.array([0, 1, 1, 0])
@@ -534,15 +770,45 @@ class Baker:
             detail_ok[ok_m] = has[self._material[ok_m]]
             detail_ok &= (albedo > 1e-4).all(axis=1)
         self._detail_ok = detail_ok
+        self._emissive = np.zeros(0, bool)  # unknown without a scene
+        if scene is not None:
+            self._emissive = np.asarray(scene.patch_emission, dtype=np.float64).reshape(P, 3).max(axis=1) > 0
+            self._emissive.flags.writeable = False
         self._quant_scale: dict[bool, float] = {}
         self._boxes = _LRU(4)  # (tile key, fmt, gutter, align, detail) -> {patch: box}
         self._packs = _LRU(32)
-        self._pages = _LRU(2)
-        self._mesh = _LRU(4)
+        self._free_pages: list = []  # page arrays of evicted entries, reused once nothing else holds them
+        self._pages = _LRU(16, CACHE_BYTES, lambda e: e.gpu.nbytes, self._recycle)
+        self._mesh_sorted: tuple | None = None  # see _mesh_order
         self._set_bakers = _LRU(16)  # (id(solution), rgba8 shared) -> Baker of a set member
         self.stats = {"bakes": 0, "pack_hits": 0, "pages_hits": 0, "mesh_hits": 0}
 
     # -- pieces ------------------------------------------------------------------
+    def _recycle(self, entry) -> None:
+        """An evicted pages entry: keep its (large) page array for reuse by a later bake."""
+        if entry.gpu.nbytes >= 1 << 20:
+            self._free_pages = [entry.gpu] + self._free_pages[:2]
+
+    def _page_array(self, shape: tuple, dtype) -> np.ndarray:
+        """Zeroed pages of ``shape``: a recycled array when one of that shape is no longer referenced
+        by any Baked or renderer (fresh large arrays cost a page fault per 4 KiB on first write:
+        ~40 ms for 2048 x 2048 rgba16f here, against 3 ms to clear a recycled one)."""
+        for k in range(len(self._free_pages)):
+            a = self._free_pages[k]
+            # references: the list, `a` and getrefcount's argument; any other holder keeps it
+            if a.shape == shape and a.dtype == dtype and sys.getrefcount(a) <= 3:
+                del self._free_pages[k]
+                a.flags.writeable = True
+                a.fill(0)
+                return a
+        n = int(np.prod(shape)) * np.dtype(dtype).itemsize
+        if n >= 4 << 20 and hasattr(mmap, "MAP_POPULATE"):
+            # populated up front by the kernel: ~10 ms for 32 MiB here, against 70-100 ms of page faults
+            # when a fresh np.zeros is first written (each 4 KiB page faulting on its own)
+            buf = mmap.mmap(-1, n, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS | mmap.MAP_POPULATE)
+            return np.frombuffer(buf, dtype=dtype).reshape(shape)
+        return np.zeros(shape, dtype=dtype)
+
     def _detail_mask(self, policy: BakePolicy) -> np.ndarray:
         return self._detail_ok if policy.detail else np.zeros_like(self._detail_ok)
 
@@ -558,8 +824,9 @@ class Baker:
             self._quant_scale[detail] = s if s > 0 else 1.0
         return self._quant_scale[detail]
 
-    def _box_tiles(self, ps: np.ndarray, policy: BakePolicy, align: int) -> list:
-        """Padded (gutter + alignment), detail-divided, quantised boxes of patches ``ps``."""
+    def _box_tiles(self, ps: np.ndarray, policy: BakePolicy, align: int) -> tuple[list, list]:
+        """Padded (gutter + alignment), detail-divided, quantised boxes of patches ``ps``, cached:
+        ``(sources, GPU-form (h, w, 4) boxes)`` (:meth:`_build_boxes`)."""
         tkey = TileCache.key(policy.method, policy.scale, policy.scale_mode)
         key = (tkey, policy.pixel_format, policy.gutter, align, policy.detail)
         store = self._boxes.hit(key)
@@ -568,24 +835,72 @@ class Baker:
         missing = np.array([p for p in ps.tolist() if p not in store], dtype=np.int64)
         if len(missing):
             tiles = self.tiles.get(missing, policy.method, policy.scale, policy.scale_mode)
-            sides = np.array([t.shape[0] for t in tiles])
-            dmask = self._detail_mask(policy)[missing]
-            g = policy.gutter
-            scale8 = self._rgba8_scale(policy.detail) if policy.pixel_format == "rgba8" else 1.0
-            for n in np.unique(sides):
-                sel = np.flatnonzero(sides == n)
-                stack = np.stack([tiles[q] for q in sel])
-                after = int(atlas.align_up(n + 2 * g, align)) - n - g
-                box = np.pad(stack, ((0, 0), (g, after), (g, after), (0, 0)), mode="edge")
-                dm = dmask[sel]
-                if dm.any():
-                    box[dm] *= self._inv_albedo[missing[sel][dm]][:, None, None, :].astype(np.float32)
-                if policy.pixel_format == "rgba8":
-                    box = quantise_rgba8(box, scale8)
-                elif policy.pixel_format == "rgb9e5":
-                    box = quantise_rgb9e5(box)
-                store.update(zip(missing[sel].tolist(), box, strict=True))
-        return [store[p] for p in ps.tolist()]
+            store.update(zip(missing.tolist(), self._build_boxes(missing, tiles, None, policy, align), strict=True))
+        pairs = [store[p] for p in ps.tolist()]
+        return [a for a, _ in pairs], [b for _, b in pairs]
+
+    def _build_boxes(self, ps: np.ndarray, tiles: list, rings: dict | None, policy: BakePolicy, align: int) -> list:
+        """``[(source, GPU-form box)]`` of patches ``ps`` from their (scaled) ``tiles``.
+
+        A box is the tile with its boundary ring replaced by ``rings[p]`` when given (the seam
+        harmonisation; triangles re-extended), divided by the albedo on detail patches, padded
+        by edge replication to ``gutter`` + alignment and converted by :func:`to_gpu`. Tiles of
+        one side are done together, in chunks whose float32 temporary is reused; only the GPU
+        form is kept. ``source = (tile, ring, is_tri, factor)`` rebuilds the float32 box.
+        """
+        from .seams import ring_index
+
+        rings = rings or {}
+        out: list = [None] * len(ps)
+        if not len(ps):
+            return out
+        sides = np.array([t.shape[0] for t in tiles], dtype=np.int64)
+        dmask = self._detail_mask(policy)[ps]
+        is_tri = ~self.index.is_quad[ps]
+        g = policy.gutter
+        fmt = policy.pixel_format
+        scale8 = self._rgba8_scale(policy.detail) if fmt == "rgba8" else 1.0
+        gdt = GPU_DTYPES[fmt]
+        factors = [
+            self._inv_albedo[p].astype(np.float32) if dm else None
+            for p, dm in zip(ps.tolist(), dmask.tolist(), strict=True)
+        ]
+        has_ring = np.array([p in rings for p in ps.tolist()], dtype=bool)
+        for n in np.unique(sides).tolist():
+            sel = np.flatnonzero(sides == n)
+            bs = int(atlas.align_up(n + 2 * g, align))
+            gpu = populated_empty((len(sel), bs, bs, 4), gdt)
+            step = max(1, _BOX_CHUNK_BYTES // (bs * bs * 12))
+            buf = np.empty((min(step, len(sel)), bs, bs, 3), dtype=np.float32)
+            for c0 in range(0, len(sel), step):
+                chunk = sel[c0 : c0 + step]
+                b = buf[: len(chunk)]
+                inner = b[:, g : g + n, g : g + n]
+                for j, q in enumerate(chunk.tolist()):
+                    inner[j] = tiles[q]
+                for tri in (False, True):  # harmonised rings, one scatter per kind
+                    js = [j for j, q in enumerate(chunk.tolist()) if is_tri[q] == tri and has_ring[q]]
+                    if not js:
+                        continue
+                    rows, cols = ring_index(n, tri)
+                    inner[np.array(js)[:, None], rows[None], cols[None]] = np.stack(
+                        [rings[int(ps[chunk[j]])] for j in js]
+                    )
+                    if tri:
+                        inner[js] = extend_triangle(inner[js])
+                dj = [j for j, q in enumerate(chunk.tolist()) if factors[q] is not None]
+                if dj:
+                    inner[dj] *= np.stack([factors[chunk[j]] for j in dj])[:, None, None, :]
+                if g or bs > n:  # edge replication, as np.pad(mode="edge")
+                    b[:, :g, g : g + n] = inner[:, :1]
+                    b[:, g + n :, g : g + n] = inner[:, -1:]
+                    b[:, :, :g] = b[:, :, g : g + 1]
+                    b[:, :, g + n :] = b[:, :, g + n - 1 : g + n]
+                to_gpu(b, fmt, scale8, out=gpu[c0 : c0 + len(chunk)])
+            for j, q in enumerate(sel.tolist()):
+                p = int(ps[q])
+                out[q] = ((tiles[q], rings.get(p), bool(is_tri[q]), factors[q]), gpu[j])
+        return out
 
     def _pack(self, ps, sides, policy: BakePolicy, align: int) -> atlas.Packing:
         key = (sides.tobytes(), policy.page_size, policy.gutter, align)
@@ -596,24 +911,41 @@ class Baker:
         pk = atlas.pack(np.stack([sides, sides], axis=1), policy.page_size, policy.gutter, align, names=ps)
         return self._packs.put(key, pk)
 
-    def _mesh_part(self, textured: np.ndarray):
-        key = textured.tobytes()
-        hit = self._mesh.hit(key)
-        if hit is not None:
-            self.stats["mesh_hits"] += 1
-            return hit
-        idx = self.index
-        vm = ~textured[idx.vert_patch]
-        remap = np.cumsum(vm) - 1
-        tm = ~textured[idx.tri_patch]
-        part = (
-            np.ascontiguousarray(self._vert_pos[vm]),
-            np.ascontiguousarray(idx.radiance[vm]),
-            remap[idx.tri[tm]].astype(np.uint32).reshape(-1, 3),
-        )
-        for a in part:
-            a.flags.writeable = False  # shared by every Baked with this textured set
-        return self._mesh.put(key, part)
+    def _mesh_order(self):
+        """The solution's vertices and triangles sorted by their patch's tree depth (stable, so
+        vertex-table order within a depth): ``(positions, radiance, indices, vertex patch, vertex
+        depth, triangle depth)``, read-only. The mesh part of threshold ``t`` (patches of depth
+        ``< t``) is then a prefix of each: views, no copy, and the renderer keeps one upload of
+        the whole arrays for every threshold."""
+        if self._mesh_sorted is None:
+            idx = self.index
+            vdepth = idx.depth[idx.vert_patch]
+            order_v = np.argsort(vdepth, kind="stable")
+            tdepth = idx.depth[idx.tri_patch] if len(idx.tri) else np.zeros(0, np.int64)
+            order_t = np.argsort(tdepth, kind="stable")
+            new_of_old = np.empty(len(order_v), dtype=np.int64)
+            new_of_old[order_v] = np.arange(len(order_v))
+            parts = (
+                np.ascontiguousarray(self._vert_pos[order_v]),
+                np.ascontiguousarray(idx.radiance[order_v], dtype=np.float32),
+                new_of_old[idx.tri[order_t]].astype(np.uint32).reshape(-1, 3),
+                idx.vert_patch[order_v].astype(np.int32),
+                vdepth[order_v],
+                tdepth[order_t],
+            )
+            for a in parts:
+                a.flags.writeable = False  # shared by every Baked (as prefixes)
+            self._mesh_sorted = parts
+        return self._mesh_sorted
+
+    def _mesh_part(self, threshold: int):
+        """Mesh part of the patches of depth < threshold: positions (M, 3), radiance (M, 3),
+        indices (Tm, 3) uint32, vertex patch (M,): prefixes of :meth:`_mesh_order`."""
+        self.stats["mesh_hits"] += self._mesh_sorted is not None
+        pos, rad, tri, vpatch, vdepth, tdepth = self._mesh_order()
+        nv = int(np.searchsorted(vdepth, threshold, side="left"))
+        nt = int(np.searchsorted(tdepth, threshold, side="left"))
+        return pos[:nv], rad[:nv], tri[:nt], vpatch[:nv]
 
     def _textured_part(self, ps, sides, packing: atlas.Packing, dmask):
         k = len(ps)
@@ -691,27 +1023,46 @@ class Baker:
             policy.page_size,
             textured.tobytes(),
         )
-        pages = self._pages.hit(pkey)
-        if pages is not None:
+        entry = self._pages.hit(pkey)
+        if entry is not None:
             self.stats["pages_hits"] += 1
             tm["tiles"] = 0.0
         else:
-            boxes = self._box_tiles(ps, policy, align)
-            tm["tiles"] = time.perf_counter() - t0
-            step(0.8, "blit")
-            t1 = time.perf_counter()
-            if len(ps):
-                pages = np.zeros((packing.n_pages, packing.height, packing.width, 3), dtype=np.float32)
-                atlas.blit_boxes(pages, boxes, packing.placements, policy.gutter)
-            else:
-                pages = np.zeros((0, 1, 1, 3), dtype=np.float32)
-            pages.flags.writeable = False
-            self._pages.put(pkey, pages)
+            need = host_bytes(sides, packing, policy, align) if len(ps) else 0
+            have = host_memory_bytes()
+            if need > have:
+                raise BakeError(
+                    f"this bake needs {need / 2**30:.1f} GiB of texture memory ({len(ps)} tiles of up to "
+                    f"{int(sides.max())}x{int(sides.max())} texels on {packing.n_pages} page(s) of "
+                    f"{packing.width}x{packing.height}, with their scaling temporaries), more than this "
+                    f"machine's {have / 2**30:.1f} GiB; lower the scale, raise the threshold or set a budget"
+                )
+            try:
+                from .seams import harmonised_boxes  # neighbours' tile edges matched (iat/seams.py)
+
+                boxes, gpu_boxes = harmonised_boxes(self, ps, policy, align, tm)
+                tm["tiles"] = time.perf_counter() - t0
+                step(0.8, "blit")
+                t1 = time.perf_counter()
+                gdt = GPU_DTYPES[policy.pixel_format]
+                if len(ps):
+                    gpu = self._page_array((packing.n_pages, packing.height, packing.width, 4), gdt)
+                    atlas.blit_boxes(gpu, gpu_boxes, packing.placements, policy.gutter)
+                else:
+                    gpu = np.zeros((0, 1, 1, 4), dtype=gdt)
+            except MemoryError as e:
+                raise BakeError(
+                    f"out of memory while baking {len(ps)} textures ({need / 2**30:.1f} GiB estimated, "
+                    f"{have / 2**30:.1f} GiB available): lower the scale, raise the threshold or set a budget"
+                ) from e
+            gpu.flags.writeable = False
+            scale8 = self._rgba8_scale(policy.detail) if policy.pixel_format == "rgba8" else 1.0
+            entry = self._pages.put(pkey, _PageEntry(gpu, boxes, packing, policy, align, scale8))
             tm["blit"] = time.perf_counter() - t1
 
         step(0.9, "geometry")
         t0 = time.perf_counter()
-        mesh_pos, mesh_rad, mesh_idx = self._mesh_part(textured)
+        mesh_pos, mesh_rad, mesh_idx, mesh_patch = self._mesh_part(policy.threshold)
         tm["mesh"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         tpos, tuv, tlayer, tduv, tmat, tdet, tpatch, tidx = self._textured_part(ps, sides, packing, dmask)
@@ -722,7 +1073,7 @@ class Baker:
         if self.scene is not None and len(ps):
             for mi in np.unique(self._material[ps[dmask[ps]]]).tolist():
                 detail_textures[int(mi)] = self.scene.materials[mi].detail
-        n_pages = int(pages.shape[0])
+        n_pages = int(entry.gpu.shape[0])
         page_scale = self._rgba8_scale(policy.detail) if policy.pixel_format == "rgba8" else 1.0
 
         # memory
@@ -777,7 +1128,7 @@ class Baker:
             tex_detail_uv=tduv,
             tex_material=tmat,
             tex_indices=tidx,
-            pages=pages,
+            pages=None,
             patch_textured=textured,
             memory=mem,
             policy=policy,
@@ -787,6 +1138,11 @@ class Baker:
             page_scale=float(page_scale),
             mip_levels=levels,
             tex_patch=tpatch,
+            mesh_patch=mesh_patch,
+            patch_emissive=self._emissive,
+            gpu_pages=entry.gpu,
+            gpu_format=policy.pixel_format,
+            pages_source=entry.float32,
         )
 
     # -- sets of solutions -----------------------------------------------------------------------

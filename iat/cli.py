@@ -1,6 +1,9 @@
 """The ``iat`` command line (names and flags are a contract: see docs/architecture.md).
 
 Every IATError is printed on one line and exits 2 (``--debug`` shows the traceback).
+Every :class:`~iat.errors.IATWarning` (an albedo clamped at load, ...) is printed on one
+line, ``iat CMD: warning: ...``, on stderr. Loads and solves draw a progress bar on a
+terminal.
 """
 
 from __future__ import annotations
@@ -8,11 +11,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
-from .errors import IATError, OptionError
+from .errors import IATError, IATWarning, OptionError
 
 EXIT_USER_ERROR = 2
 
@@ -21,9 +26,10 @@ EXIT_USER_ERROR = 2
 class ProgressBar:
     """A ``progress(fraction, message) -> bool`` callback drawn as a tqdm bar with ETA on stderr."""
 
-    def __init__(self, desc: str, enabled: bool = True):
+    def __init__(self, desc: str, enabled: bool = True, close_when_done: bool = False):
         self.enabled = bool(enabled) and sys.stderr.isatty()
         self.desc = desc
+        self.close_when_done = close_when_done  # a stage followed by another: clear the bar at 1.0
         self._bar = None
 
     def __call__(self, fraction: float, message: str = "") -> bool:
@@ -36,12 +42,32 @@ class ProgressBar:
         self._bar.n = int(1000 * min(max(fraction, 0.0), 1.0))
         self._bar.set_postfix_str(message[:40], refresh=False)
         self._bar.refresh()
+        if self.close_when_done and fraction >= 1.0:
+            self.close()
         return True
 
     def close(self):
         if self._bar is not None:
             self._bar.close()
             self._bar = None
+
+
+@contextmanager
+def _progress_bar(args, desc: str, close_when_done: bool = False):
+    """A :class:`ProgressBar` (none with ``--json``), closed on the way out."""
+    bar = ProgressBar(desc, enabled=not getattr(args, "json", False), close_when_done=close_when_done)
+    try:
+        yield bar
+    finally:
+        bar.close()
+
+
+def _load(args, path, max_edge=None):
+    """:func:`iat.scene.load_scene` with a progress bar."""
+    from .scene import load_scene
+
+    with _progress_bar(args, f"load {Path(path).name}") as bar:
+        return load_scene(path, max_edge=max_edge, progress=bar)
 
 
 def _parse_vec(text: str, name: str) -> np.ndarray:
@@ -89,18 +115,17 @@ def _bake_policy(args):
 def _open(args, what: str):
     from .inputs import open_solution
 
-    bar = ProgressBar(f"solve {Path(args.input).name}", enabled=not getattr(args, "json", False))
-    try:
-        return open_solution(args.input, _solve_options(args), progress=bar)
-    finally:
-        bar.close()
+    name = Path(args.input).name
+    with (
+        _progress_bar(args, f"load {name}", close_when_done=True) as load_bar,
+        _progress_bar(args, f"solve {name}") as bar,
+    ):
+        return open_solution(args.input, _solve_options(args), progress=bar, load_progress=load_bar)
 
 
 # -- commands --------------------------------------------------------------------
 def cmd_info(args) -> int:
-    from .scene import load_scene
-
-    scene = load_scene(args.input)
+    scene = _load(args, args.input)
     q = scene.patch_is_quad
     info = {
         "file": str(args.input),
@@ -127,18 +152,14 @@ def _set_output(out: Path, name: str) -> Path:
 
 def cmd_solve(args) -> int:
     from .radiosity import solve
-    from .scene import load_scene
 
     opts = _solve_options(args)
-    scene = load_scene(args.input, max_edge=opts.max_edge)
+    scene = _load(args, args.input, max_edge=opts.max_edge)
     if getattr(args, "states", False):
         from .solution_set import solve_set
 
-        bar = ProgressBar(f"solve states of {Path(args.input).name}", enabled=not args.json)
-        try:
+        with _progress_bar(args, f"solve states of {Path(args.input).name}") as bar:
             sset = solve_set(scene, None, opts, progress=bar, mesh=args.states_mesh)
-        finally:
-            bar.close()
         out = Path(args.output)
         written = []
         for name, t, sol in zip(sset.names, sset.times, sset.solutions, strict=True):
@@ -151,11 +172,8 @@ def cmd_solve(args) -> int:
             )
         _emit(args, {"states": written, "vertices": int(len(sset.first.vert_key))})
         return 0
-    bar = ProgressBar(f"solve {Path(args.input).name}", enabled=not args.json)
-    try:
+    with _progress_bar(args, f"solve {Path(args.input).name}") as bar:
         sol = solve(scene, opts, progress=bar)
-    finally:
-        bar.close()
     sol.model_path = str(Path(args.input).resolve())
     sol.save(args.output)
     stats = dict(sol.stats)
@@ -176,7 +194,8 @@ def _open_set(args):
         except ValueError:
             raise OptionError(f"--times must be comma-separated numbers, got {args.times!r}") from None
     sset = load_set(args.set, times=times)
-    scene, _ = open_solution(args.set[0])
+    with _progress_bar(args, f"load {Path(args.set[0]).name}") as bar:
+        scene, _ = open_solution(args.set[0], load_progress=bar)
     return scene, sset
 
 
@@ -248,15 +267,15 @@ def cmd_render(args) -> int:
         scene, sset = _open_set(args)
         sol = sset.first
     elif Path(args.input).suffix.lower() in (".glb", ".gltf") and mode == "preview":
-        from .scene import load_scene
-
-        scene, sol = load_scene(Path(args.input)), None
+        scene, sol = _load(args, args.input), None
     else:
         scene, sol = _open(args, "render")
     if args.eye or args.target:
         if not (args.eye and args.target):
             raise OptionError("--eye and --target go together")
-        cam = Camera(eye=_parse_vec(args.eye, "--eye"), target=_parse_vec(args.target, "--target"), yfov=args.fov)
+        cam = Camera(
+            eye=_parse_vec(args.eye, "--eye"), target=_parse_vec(args.target, "--target"), yfov=args.fov
+        )
         lo, hi = scene.bounds
         r = float(np.linalg.norm(hi - lo))
         cam.znear, cam.zfar = r * 1e-3, r * 10
@@ -321,7 +340,9 @@ def cmd_view(args) -> int:
         if not path.is_file():
             raise LoadError("file not found" if not path.exists() else "not a regular file", path)
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        raise RenderError("no display (DISPLAY is not set): run under xvfb-run or on a desktop, or use 'iat render'")
+        raise RenderError(
+            "no display (DISPLAY is not set): run under xvfb-run or on a desktop, or use 'iat render'"
+        )
     from viewer.app import main as view_main
 
     return view_main(args.input)
@@ -373,7 +394,9 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--threshold", type=int, help="tree depth from which a patch becomes a texture")
         sp.add_argument("--scale", type=float, help="texture scale factor (1 = a texel per mesh vertex)")
         sp.add_argument("--method", choices=["bilinear", "scan", "bicubic"])
-        sp.add_argument("--budget-mb", type=float, dest="budget_mb", help="texture budget; chooses threshold/scale")
+        sp.add_argument(
+            "--budget-mb", type=float, dest="budget_mb", help="texture budget; chooses threshold/scale"
+        )
 
     s = sub.add_parser("info", help="counts: triangles, patches, materials, lights, cameras")
     s.add_argument("input", metavar="MODEL")
@@ -447,19 +470,37 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _warning_printer(command: str):
+    """A :func:`warnings.showwarning` that prints an IATWarning as one line on stderr."""
+    default = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if not issubclass(category, IATWarning):
+            return default(message, category, filename, lineno, file, line)
+        text = " ".join(str(message).split())
+        from tqdm import tqdm
+
+        tqdm.write(f"iat {command}: warning: {text}", file=sys.stderr)  # above a progress bar, if any
+
+    return show
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    try:
-        return int(args.func(args) or 0)
-    except IATError as e:
-        if args.debug:
-            raise
-        print(f"iat {args.command}: error: {e}", file=sys.stderr)
-        return EXIT_USER_ERROR
-    except KeyboardInterrupt:
-        print(f"iat {args.command}: interrupted", file=sys.stderr)
-        return 130
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", IATWarning)
+        warnings.showwarning = _warning_printer(args.command)
+        try:
+            return int(args.func(args) or 0)
+        except IATError as e:
+            if args.debug:
+                raise
+            print(f"iat {args.command}: error: {e}", file=sys.stderr)
+            return EXIT_USER_ERROR
+        except KeyboardInterrupt:
+            print(f"iat {args.command}: interrupted", file=sys.stderr)
+            return 130
 
 
 if __name__ == "__main__":

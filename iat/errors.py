@@ -49,3 +49,11 @@ class RenderError(IATError):
 
 class Cancelled(IATError):
     """A long operation was cancelled through its progress callback."""
+
+
+class IATWarning(UserWarning):
+    """Something IAT repaired on the way in (an albedo above 1 clamped, ...).
+
+    Issued with :func:`warnings.warn`; the message names the file (when there is
+    one) and what was changed, in one line. The CLI prints it as ``warning: ...``.
+    """

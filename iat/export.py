@@ -4,9 +4,11 @@ What is written (``export_glb(baked, path, scene=None, layered=False)``):
 
 - **Exposure.** glTF colours are at most 1 and base-colour textures are sRGB 8-bit,
   so every colour is ``radiance / radiance_scale`` (clamped to [0, 1]);
-  ``radiance_scale`` is the 99.5th percentile of the non-zero stored values
-  (mesh vertices and page texels), recorded as ``extras.iat.radiance_scale``
-  at the root and on every material: radiance = decoded colour x radiance_scale.
+  ``radiance_scale`` is the 99.5th percentile of the non-zero stored values of
+  the patches that do not emit (mesh vertices and page texels): walls use the
+  8-bit range and **emitters clip to white** in the file (as in a tone-mapped
+  render). Recorded as ``extras.iat.radiance_scale`` at the root and on every
+  material: radiance = decoded colour x radiance_scale (below the clip).
 - **Mesh part** (node ``iat_mesh``): POSITION, COLOR_0 = linear ``radiance /
   radiance_scale`` (float VEC3), material ``iat_mesh`` = white, KHR_materials_unlit.
 - **Textured part**, ``layered=False`` (default): one PNG image per atlas page
@@ -103,16 +105,75 @@ def _png(rgb_linear01: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def radiance_scale(baked) -> float:
-    """The exposure scale export uses: 99.5th percentile of non-zero stored values (1.0 if none)."""
-    parts = []
-    if len(baked.mesh_radiance):
-        parts.append(np.asarray(baked.mesh_radiance, dtype=np.float32).max(axis=1))
-    if baked.pages.size:
-        m = baked.pages.max(axis=-1).ravel()
-        parts.append(m[m > 0])
-    v = np.concatenate(parts) if parts else np.zeros(0)
-    v = v[np.isfinite(v) & (v > 0)]
+def _emissive_patches(baked, scene=None) -> np.ndarray | None:
+    """(P,) bool of patches whose material emits, from the Baked (its Baker had the scene) or the
+    scene; None when neither says."""
+    e = getattr(baked, "patch_emissive", None)
+    if e is not None and len(e):
+        return np.asarray(e, dtype=bool)
+    if scene is not None:
+        return np.asarray(scene.patch_emission, dtype=np.float64).reshape(-1, 3).max(axis=1) > 0
+    return None
+
+
+def _tile_values(baked, drop: np.ndarray | None) -> np.ndarray:
+    """Max-channel values of the textured patches' own texels: each tile once (no gutter or
+    alignment padding, which repeat its edges), triangles' lower-left half only (the other half
+    is extrapolated, never shown); patches with ``drop[patch]`` left out. (k,) float."""
+    tp = np.asarray(getattr(baked, "tex_patch", np.zeros(0)), dtype=np.int64)
+    pages = np.asarray(baked.pages)
+    if not pages.size:
+        return np.zeros(0, np.float32)
+    if not len(tp):  # no layout to read: every texel
+        return pages.max(axis=-1).ravel()
+    _, H, W, _ = pages.shape
+    ps, first, nv = np.unique(tp, return_index=True, return_counts=True)
+    if drop is not None:
+        ok = (ps < len(drop)) & ~drop[np.minimum(ps, len(drop) - 1)]
+        first, nv = first[ok], nv[ok]
+    uv = np.asarray(baked.tex_uv, dtype=np.float64)
+    layer = np.asarray(baked.tex_layer, dtype=np.int64)
+    # a patch's vertices are consecutive from `first`; slots 0, 1, 2 span the tile's first row and column
+    span = np.stack([uv[first + k] for k in range(3)], axis=1)  # (k, 3, 2)
+    x0 = np.rint(span[:, :, 0].min(axis=1) * W - 0.5).astype(np.int64)
+    y0 = np.rint(span[:, :, 1].min(axis=1) * H - 0.5).astype(np.int64)
+    side = np.rint(np.ptp(span[:, :, 0], axis=1) * W).astype(np.int64) + 1
+    out = []
+    for m in np.unique(side).tolist():  # a few distinct tile sides: one gather each
+        sel = side == m
+        a = np.arange(m)
+        lay = layer[first[sel]][:, None, None]
+        vals = pages[lay, y0[sel][:, None, None] + a[None, :, None], x0[sel][:, None, None] + a].max(axis=-1)
+        tri = (nv[sel] == 3)[:, None, None]  # (k, m, m), row b, column a: triangles keep a + b <= m - 1
+        inside = ~tri | ((a[:, None] + a[None, :]) <= m - 1)[None]
+        out.append(vals[inside])
+    return np.concatenate(out) if out else np.zeros(0, np.float32)
+
+
+def radiance_scale(baked, scene=None) -> float:
+    """The exposure scale export uses (1.0 if nothing is lit): the 99.5th percentile of the non-zero
+    stored values of the patches that do not emit -- mesh-part vertices and each tile's own texels
+    once (gutters and padding, copies of tile edges, left out) -- so that walls use the 8-bit range
+    and a bright light's many texels do not decide it; emitters then clip to white in the file, as
+    in a tone-mapped render. Emitters are known from ``baked.patch_emissive`` (baked with a scene)
+    or ``scene``; without either, or when only emitters are stored, every stored value counts."""
+    emissive = _emissive_patches(baked, scene)
+    mesh = np.asarray(baked.mesh_radiance, dtype=np.float32).reshape(-1, 3).max(axis=1)
+    keep_mesh = None
+    if emissive is not None and emissive.any():
+        mp = np.asarray(getattr(baked, "mesh_patch", np.zeros(0)), dtype=np.int64)
+        if len(mp) == len(mesh) and (not len(mp) or mp.max() < len(emissive)):
+            keep_mesh = ~emissive[mp]
+    else:
+        emissive = None
+
+    def values(km, drop):
+        v = np.concatenate([mesh if km is None else mesh[km], _tile_values(baked, drop)])
+        return v[np.isfinite(v) & (v > 0)]
+
+    v = values(keep_mesh, emissive)
+    if not len(v):
+        v = values(None, None)
     if not len(v):
         return 1.0
     s = float(np.percentile(v, _PERCENTILE))
@@ -132,7 +193,7 @@ def export_glb(baked, path, scene=None, layered: bool = False) -> Path:
     layered : write detail (albedo) on TEXCOORD_0 and illumination on TEXCOORD_1 (see above)
     """
     path = Path(path)
-    s = radiance_scale(baked)
+    s = radiance_scale(baked, scene)
     g = _IatGlb()
     common = {"radiance_scale": s}
     g.extras = {

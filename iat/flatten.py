@@ -51,13 +51,19 @@ tile's own interpolant (bilinear for bilinear/scan, Catmull-Rom for bicubic) at
 depend on edge texels only, so corners stay exact and neighbours with equal
 edges still agree. ``mode="naive"`` is a PIL image resize of the whole tile
 (texel centres move by a fraction of a texel: the report's correspondence
-errors), kept for comparison.
+errors), kept for comparison. Neighbours of *different* sizes describe a shared edge
+by different polylines (and sample it at different points once scaled); the baker
+matches them after scaling (:mod:`iat.seams`: the coarser side's edge polyline is
+copied onto the finer side's edge texels, exact when sides are ``2**k + 1``), for
+clamped scaling and scale 1 only.
 
 Every fill is vectorised over groups of leaves / triangles of equal size; no
 Python loop runs per leaf or per texel.
 """
 
 from __future__ import annotations
+
+import mmap
 
 import numpy as np
 
@@ -437,14 +443,101 @@ def _axis_weights(n: int, pos: np.ndarray, kernel: str) -> tuple[np.ndarray, np.
     return idx, ww
 
 
-def _resample_axis(x: np.ndarray, axis: int, pos: np.ndarray, kernel: str) -> np.ndarray:
-    idx, w = _axis_weights(x.shape[axis], pos, kernel)
-    x = np.moveaxis(x, axis, 0)
-    out = np.zeros((len(pos),) + x.shape[1:], dtype=np.float64)
-    ext = (slice(None),) + (None,) * (x.ndim - 1)
-    for t in range(idx.shape[1]):
-        out += w[:, t][ext] * x[idx[:, t]]
-    return np.moveaxis(out, 0, axis)
+def _clamped_weights(n: int, m: int, kernel: str) -> np.ndarray:
+    """(m, n) float64 weights of the clamped resample of a row of ``n`` samples to ``m``.
+
+    Row ``k`` interpolates at ``k (n - 1) / (m - 1)`` (:func:`_axis_weights`): rows 0 and
+    ``m - 1`` are unit vectors, so edge texels are copied exactly.
+    """
+    pos = np.arange(m) * ((n - 1) / (m - 1))
+    pos[-1] = n - 1
+    idx, w = _axis_weights(n, pos, kernel)
+    W = np.zeros((m, n))
+    np.add.at(W, (np.repeat(np.arange(m), idx.shape[1]), idx.ravel()), w.ravel())
+    return W
+
+
+def _pil_filter(x: np.ndarray, kernel: str) -> np.ndarray:
+    x = np.abs(x)
+    if kernel == "bilinear":
+        return np.where(x < 1.0, 1.0 - x, 0.0)
+    a = -0.5  # Pillow's bicubic
+    return np.where(
+        x < 1.0, ((a + 2.0) * x - (a + 3.0)) * x * x + 1, np.where(x < 2.0, (((x - 5) * x + 8) * x - 4) * a, 0.0)
+    )
+
+
+def _naive_weights(n: int, m: int, kernel: str) -> np.ndarray:
+    """(m, n) float64 weights of Pillow's ``Image.resize`` (BILINEAR / BICUBIC) of ``n`` -> ``m``
+    samples: ``precompute_coeffs`` of Pillow's ``Resample.c`` (support widened by the
+    reduction factor, taps normalised), so the naive mode is a matrix product too."""
+    scale = n / m
+    fs = max(scale, 1.0)
+    support = (1.0 if kernel == "bilinear" else 2.0) * fs
+    center = (np.arange(m) + 0.5) * scale
+    xmin = np.maximum(np.trunc(center - support + 0.5).astype(np.int64), 0)
+    xmax = np.minimum(np.trunc(center + support + 0.5).astype(np.int64), n)
+    x = np.arange(n)[None, :]
+    inside = (x >= xmin[:, None]) & (x < xmax[:, None])
+    W = np.where(inside, _pil_filter((x - center[:, None] + 0.5) / fs, kernel), 0.0)
+    ww = W.sum(axis=1, keepdims=True)
+    return np.where(ww != 0.0, W / np.where(ww != 0.0, ww, 1.0), W)
+
+
+def populated_empty(shape, dtype=np.float32) -> np.ndarray:
+    """``np.empty(shape, dtype)`` whose memory the kernel has already mapped (``MAP_POPULATE``),
+    for large arrays that are written once and kept (scaled tiles, GPU boxes). numpy asks for
+    transparent huge pages on large allocations (``madvise``); where the kernel cannot provide
+    them (this VM: ``AnonHugePages`` 0) every first touch then faults at ~2 ms per MB, 4x the
+    cost of plain pages and 6x that of a populated mapping (18 MB: 37 ms, 9 ms, 6 ms)."""
+    shape = tuple(int(x) for x in np.atleast_1d(shape))
+    dtype = np.dtype(dtype)
+    n = int(np.prod(shape)) * dtype.itemsize
+    if n < 1 << 20 or not hasattr(mmap, "MAP_POPULATE"):
+        return np.empty(shape, dtype=dtype)
+    buf = mmap.mmap(-1, n, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS | mmap.MAP_POPULATE)
+    return np.frombuffer(buf, dtype=dtype).reshape(shape)
+
+
+_WEIGHTS: dict = {}
+
+
+def _weights(n: int, m: int, kernel: str, mode: str) -> np.ndarray:
+    """(m, n) float32 resampling matrix, cached per (n, m, kernel, mode); read-only."""
+    key = (int(n), int(m), kernel, mode)
+    W = _WEIGHTS.get(key)
+    if W is None:
+        W = (_clamped_weights if mode == "clamped" else _naive_weights)(n, m, kernel).astype(np.float32)
+        W.flags.writeable = False
+        if len(_WEIGHTS) > 256:
+            _WEIGHTS.clear()
+        _WEIGHTS[key] = W
+    return W
+
+
+def _resample_stack(tiles, W: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``W @ tile @ W.T`` per tile and channel: (k, n, n, C) -> (k, m, m, C) float32.
+
+    Two batched float32 matrix products, no transposed copies: rows (``W`` times each tile
+    seen as ``(n, n C)``), then columns (``W`` times each resampled row seen as ``(n, C)``).
+    ``tiles`` is an array or a list of equal tiles (stacked a chunk at a time); chunks keep
+    the temporaries near 2 MB (below numpy's huge-page threshold, so the heap reuses them).
+    One big GEMM for the columns (``kron(W, I_C)``) was faster on an idle machine but several
+    times slower when another process holds a core (OpenBLAS threads wait for each other).
+    """
+    k, n, ch = len(tiles), tiles[0].shape[0], tiles[0].shape[2]
+    m = W.shape[0]
+    if out is None:
+        out = populated_empty((k, m, m, ch), np.float32)
+    step = max(1, (2 << 20) // max(1, max(m, n) * n * ch * 4))
+    for c0 in range(0, k, step):
+        t = tiles[c0 : c0 + step]
+        t = np.stack(t).astype(np.float32, copy=False) if isinstance(t, (list, tuple)) else t
+        t = np.ascontiguousarray(t, dtype=np.float32)
+        kk = len(t)
+        rows = np.matmul(W, t.reshape(kk, n, n * ch)).reshape(kk * m, n, ch)  # (k m, n, C)
+        np.matmul(W, rows, out=out[c0 : c0 + kk].reshape(kk * m, m, ch))
+    return out
 
 
 def _kernel(method: str) -> str:
@@ -454,13 +547,15 @@ def _kernel(method: str) -> str:
 def scale_tiles(
     tiles: np.ndarray, scale: float, mode: str = "clamped", method: str = "bilinear", triangle=False
 ) -> np.ndarray:
-    """Resample a stack of tiles, (k, n, n, 3) -> (k, m, m, 3) float32.
+    """Resample a stack of tiles, (k, n, n, 3) (an array or a list of equal tiles) -> (k, m, m, 3) float32.
 
     scale : > 0; ``m = max(2, floor((n - 1) * scale + 0.5) + 1)``
     mode : "clamped" resamples the tile's interpolant (bilinear for bilinear/scan,
       Catmull-Rom for bicubic) at ``k (n-1)/(m-1)``: corners exact, edges from
-      edge texels only; "naive" resizes each tile as an image with PIL (BILINEAR,
-      or BICUBIC for bicubic), moving the texel centres.
+      edge texels only; "naive" resizes each tile as an image as PIL does (BILINEAR,
+      or BICUBIC for bicubic: Pillow's weights, :func:`_naive_weights`), moving the texel centres.
+    Both are one (m, n) float32 weight matrix ``W`` per (n, m) applied as ``W @ tile @ W.T``
+    to all tiles at once (batched matrix products, :func:`_resample_stack`).
     triangle : bool or (k,) bools: triangle tiles get their outer half refilled
       (:func:`extend_triangle`) after a clamped resample.
     """
@@ -468,31 +563,21 @@ def scale_tiles(
     _check_method(method)
     if not scale > 0:
         raise OptionError(f"scale must be > 0, got {scale}")
-    tiles = np.asarray(tiles)
-    k, n = tiles.shape[:2]
+    if not isinstance(tiles, (list, tuple)):
+        tiles = np.asarray(tiles)
+    k, n = len(tiles), tiles[0].shape[0]
     m = scaled_side(n, scale)
     if m == n:
-        return tiles.astype(np.float32, copy=True)
-    if mode == "naive":
-        from PIL import Image
-
-        res = Image.Resampling.BICUBIC if method == "bicubic" else Image.Resampling.BILINEAR
-        out = np.empty((k, m, m, 3), dtype=np.float32)
-        for q in range(k):  # naive comparison path: one PIL call per tile and channel
-            for ch in range(3):
-                img = Image.fromarray(np.ascontiguousarray(tiles[q, :, :, ch], dtype=np.float32))
-                out[q, :, :, ch] = np.asarray(img.resize((m, m), res), dtype=np.float32)
-        return out
-    pos = np.arange(m) * ((n - 1) / (m - 1))
-    pos[-1] = n - 1
+        return np.array(np.stack(tiles) if isinstance(tiles, (list, tuple)) else tiles, dtype=np.float32)
     kern = _kernel(method)
-    r = _resample_axis(tiles.astype(np.float64), 2, pos, kern)
-    r = _resample_axis(r, 1, pos, kern)
+    out = _resample_stack(tiles, _weights(n, m, kern, mode))
+    if mode == "naive":
+        return out
     tri = np.broadcast_to(np.asarray(triangle, dtype=bool), (k,))
     if tri.any():
         sel = np.flatnonzero(tri)
-        r[sel] = extend_triangle(r[sel])
-    return r.astype(np.float32)
+        out[sel] = extend_triangle(out[sel].astype(np.float64))
+    return out
 
 
 def scale_tile(
@@ -591,8 +676,7 @@ class TileCache:
                         g = np.flatnonzero((sides == n) & (tri == is_tri))
                         if not len(g):
                             continue
-                        stack = np.stack([base[q] for q in g])
-                        out = scale_tiles(stack, key[1], key[2], method, triangle=is_tri)
+                        out = scale_tiles([base[q] for q in g], key[1], key[2], method, triangle=is_tri)
                         out.flags.writeable = False
                         store.update(zip(miss[g].tolist(), out, strict=True))
         return [store[p] for p in patches.tolist()]

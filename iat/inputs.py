@@ -18,12 +18,15 @@ def is_solution_path(path: str | Path) -> bool:
     return Path(path).suffix.lower() in SOLUTION_SUFFIXES
 
 
-def open_solution(path: str | Path, options=None, progress=None):
+def open_solution(path: str | Path, options=None, progress=None, load_progress=None):
     """(scene, solution) from a solution file or a model file.
 
     A solution's model is reloaded from ``solution.model_path`` (for materials
     and detail textures); when that file is gone the scene is rebuilt from the
     solution's own patches, without detail textures.
+
+    progress : the solve's ``progress(fraction, message) -> bool`` (a model only).
+    load_progress : the model load's (:func:`iat.scene.load_scene`); False cancels.
     """
     from .radiosity import Solution, SolveOptions, solve
 
@@ -34,7 +37,7 @@ def open_solution(path: str | Path, options=None, progress=None):
         if model is not None and not model.is_absolute():
             model = (path.parent / model).resolve() if not model.exists() else model
         if model is not None and model.exists():
-            scene = load_scene(model, max_edge=sol.options.get("max_edge"))
+            scene = load_scene(model, max_edge=sol.options.get("max_edge"), progress=load_progress)
             if scene.n_patches != len(sol.patch_is_quad):
                 raise SolutionFileError(
                     f"solution has {len(sol.patch_is_quad)} patches but {model} has {scene.n_patches};"
@@ -47,7 +50,7 @@ def open_solution(path: str | Path, options=None, progress=None):
     if not path.exists():
         raise LoadError("file not found", path)
     options = options or SolveOptions()
-    scene = load_scene(path, max_edge=getattr(options, "max_edge", None))
+    scene = load_scene(path, max_edge=getattr(options, "max_edge", None), progress=load_progress)
     return scene, solve(scene, options, progress=progress)
 
 

@@ -48,7 +48,6 @@ import math
 import os
 import struct
 import tempfile
-import threading
 import time
 import traceback
 from dataclasses import dataclass
@@ -59,6 +58,7 @@ import numpy as np
 
 from .errors import IATError, LoadError, OptionError
 from .scene import Light, Material, Scene
+from .worker import LatestWorker
 
 log = logging.getLogger(__name__)
 
@@ -144,28 +144,24 @@ def copy_lighting(
     return dataclasses.replace(scene, lights=lights, materials=materials)
 
 
-def _light_index(scene: Scene, index: int | str) -> int:
+def _named_index(names: list[str], index: int | str, what: str) -> int:
+    """Position of ``index`` (a name, or a position) among ``names``; an OptionError naming ``what``."""
     if isinstance(index, str):
-        names = [lt.name for lt in scene.lights]
         if index not in names:
-            raise OptionError(f"no light named {index!r} (lights: {', '.join(names) or 'none'})")
+            raise OptionError(f"no {what} named {index!r} ({what}s: {', '.join(names) or 'none'})")
         return names.index(index)
     i = int(index)
-    if not 0 <= i < len(scene.lights):
-        raise OptionError(f"light {i} does not exist (the scene has {len(scene.lights)})")
+    if not 0 <= i < len(names):
+        raise OptionError(f"{what} {i} does not exist (the scene has {len(names)})")
     return i
+
+
+def _light_index(scene: Scene, index: int | str) -> int:
+    return _named_index([lt.name for lt in scene.lights], index, "light")
 
 
 def _material_index(scene: Scene, material: int | str) -> int:
-    if isinstance(material, str):
-        names = [m.name for m in scene.materials]
-        if material not in names:
-            raise OptionError(f"no material named {material!r}")
-        return names.index(material)
-    i = int(material)
-    if not 0 <= i < len(scene.materials):
-        raise OptionError(f"material {i} does not exist (the scene has {len(scene.materials)})")
-    return i
+    return _named_index([m.name for m in scene.materials], material, "material")
 
 
 def edit_light(scene: Scene, index: int | str, **changes) -> Scene:
@@ -762,7 +758,7 @@ class RelightResult:
         return self.step == self.steps and self.error is None
 
 
-class Relighter:
+class Relighter(LatestWorker):
     """Re-solves on a worker thread as lights change; the UI polls the newest improvement.
 
     solution, scene : the converged solution on screen and the scene it was solved for
@@ -790,129 +786,77 @@ class Relighter:
                 options = SolveOptions(max_depth=int(solution.max_depth))
         self.options = options
         self.schedule = tuple(float(c) for c in schedule)
-        self._cv = threading.Condition()
-        self._pending: tuple | None = None
-        self._result: RelightResult | None = None
-        self._running = False
-        self._stop = False
         self._version = 0
-        self.steps_done = 0
-        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
-        self._thread.start()
+        self._hold = False  # the step under way finishes even when a newer edit arrives
+        super().__init__(name)
+
+    @property
+    def steps_done(self) -> int:
+        """Steps published so far."""
+        return self.published
 
     # -- UI side ---------------------------------------------------------------------------------
     def submit(self, scene, version: int | None = None, remesh: bool = False) -> None:
         with self._cv:
             self._version = self._version + 1 if version is None else int(version)
-            self._pending = (scene, self._version, bool(remesh))
-            self._cv.notify_all()
-
-    def poll(self) -> RelightResult | None:
-        with self._cv:
-            r, self._result = self._result, None
-            return r
-
-    @property
-    def busy(self) -> bool:
-        with self._cv:
-            return self._running or self._pending is not None
-
-    def wait(self, timeout: float = 60.0) -> bool:
-        end = time.monotonic() + timeout
-        with self._cv:
-            while self._running or self._pending is not None:
-                left = end - time.monotonic()
-                if left <= 0:
-                    return False
-                self._cv.wait(left)
-        return True
-
-    def close(self, timeout: float = 30.0) -> None:
-        with self._cv:
-            self._stop = True
-            self._pending = None
-            self._cv.notify_all()
-        self._thread.join(timeout)
+            self._request((scene, self._version, bool(remesh)))
 
     # -- worker ----------------------------------------------------------------------------------
-    def _publish(self, r: RelightResult) -> None:
-        with self._cv:
-            self._result = r
-            self.steps_done += 1
-            self._cv.notify_all()
+    def _progress(self, fraction, message) -> bool:
+        # the first (coarse) step always finishes, so a light dragged without pause still
+        # shows a new solution every step's time; later steps give way to a newer edit
+        if self._hold:
+            with self._cv:
+                return not self._stop
+        return not self._superseded()
 
-    def _cancel_requested(self) -> bool:
-        with self._cv:
-            return self._pending is not None or self._stop
-
-    def _loop(self) -> None:
+    def _work(self, request) -> None:
         from .radiosity import resolve, solve
 
-        current = {"hold": False}
-
-        def progress(fraction, message):
-            # the first (coarse) step always finishes, so a light dragged without pause still
-            # shows a new solution every step's time; later steps give way to a newer edit
-            if current["hold"]:
-                with self._cv:
-                    return not self._stop
-            return not self._cancel_requested()
-
-        while True:
-            with self._cv:
-                while self._pending is None and not self._stop:
-                    self._cv.wait()
-                if self._stop:
-                    return
-                (scene, version, remesh), self._pending = self._pending, None
-                self._running = True
-            t_job = time.perf_counter()
-            current["hold"] = False
-
-            try:
-                final_conv = float(self.options.convergence)
-                if remesh or not lights_only_changed(self.base_scene, scene):
-                    plan = [("solve", final_conv)]
+        scene, version, remesh = request
+        t_job = time.perf_counter()
+        self._hold = False
+        progress = self._progress
+        try:
+            final_conv = float(self.options.convergence)
+            if remesh or not lights_only_changed(self.base_scene, scene):
+                plan = [("solve", final_conv)]
+            else:
+                coarse = sorted({min(0.5, final_conv * m) for m in self.schedule}, reverse=True)
+                plan = [("resolve", c) for c in coarse if c > final_conv] + [("resolve", final_conv)]
+            for k, (how, conv) in enumerate(plan, 1):
+                self._hold = k == 1 and len(plan) > 1
+                if k > 1 and self._superseded():
+                    break
+                opts = dataclasses.replace(self.options, convergence=conv)
+                t0 = time.perf_counter()
+                if how == "solve":
+                    sol = solve(scene, opts, progress)
                 else:
-                    coarse = sorted({min(0.5, final_conv * m) for m in self.schedule}, reverse=True)
-                    plan = [("resolve", c) for c in coarse if c > final_conv] + [("resolve", final_conv)]
-                for k, (how, conv) in enumerate(plan, 1):
-                    current["hold"] = k == 1 and len(plan) > 1
-                    if k > 1 and self._cancel_requested():
-                        break
-                    opts = dataclasses.replace(self.options, convergence=conv)
-                    t0 = time.perf_counter()
-                    if how == "solve":
-                        sol = solve(scene, opts, progress)
-                    else:
-                        try:
-                            sol = resolve(self.base, scene, opts, progress)
-                        except IATError:
-                            raise
-                        except Exception:  # a solver bug: solve afresh on the mesh, slower but right
-                            log.warning("resolve failed, solving on the mesh instead", exc_info=True)
-                            sol = solve(scene, opts, progress, mesh=self.base)
-                    if sol.stats.get("cancelled"):
-                        break
-                    now = time.perf_counter()
-                    r = RelightResult(
-                        sol,
-                        scene,
-                        k,
-                        len(plan),
-                        version,
-                        now - t0,
-                        now - t_job,
-                        str(sol.stats.get("mode", how)),
-                    )
-                    if k == len(plan):
-                        self.base, self.base_scene = sol, scene
-                    self._publish(r)
-            except Exception as e:  # reported to the UI; the last good solution stays
-                log.debug("relight failed:\n%s", traceback.format_exc())
-                msg = str(e) if isinstance(e, IATError) else f"{type(e).__name__}: {e}"
-                self._publish(RelightResult(None, scene, 0, 0, version, error=msg))
-            finally:
-                with self._cv:
-                    self._running = False
-                    self._cv.notify_all()
+                    try:
+                        sol = resolve(self.base, scene, opts, progress)
+                    except IATError:
+                        raise
+                    except Exception:  # a solver bug: solve afresh on the mesh, slower but right
+                        log.warning("resolve failed, solving on the mesh instead", exc_info=True)
+                        sol = solve(scene, opts, progress, mesh=self.base)
+                if sol.stats.get("cancelled"):
+                    break
+                now = time.perf_counter()
+                r = RelightResult(
+                    sol,
+                    scene,
+                    k,
+                    len(plan),
+                    version,
+                    now - t0,
+                    now - t_job,
+                    str(sol.stats.get("mode", how)),
+                )
+                if k == len(plan):
+                    self.base, self.base_scene = sol, scene
+                self._publish(r)
+        except Exception as e:  # reported to the UI; the last good solution stays
+            log.debug("relight failed:\n%s", traceback.format_exc())
+            msg = str(e) if isinstance(e, IATError) else f"{type(e).__name__}: {e}"
+            self._publish(RelightResult(None, scene, 0, 0, version, error=msg))

@@ -34,7 +34,10 @@ GL memory: every GL object the renderer creates is kept in one registry and
 released by :meth:`Renderer.release`. Re-setting data writes buffers and
 textures in place when the size allows (a buffer is orphaned with a new size
 when the data grows, or shrinks below a quarter, keeping its name and its
-vertex arrays), so re-baking every frame does not grow GL memory.
+vertex arrays), so re-baking every frame does not grow GL memory. Data that is a
+prefix of a read-only array (the Baker's mesh parts) is written as the whole
+array once, then drawn by count; the Baker's page arrays already on the GPU are
+not written again.
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ from typing import Any
 
 import numpy as np
 
+from .bake import GPU_DTYPES, HALF_MAX, to_gpu  # noqa: F401  (HALF_MAX re-exported)
 from .errors import RenderError
 
 log = logging.getLogger(__name__)
@@ -86,11 +90,17 @@ except ImportError:  # pragma: no cover - depends on the order modules land in
 MODES = ("preview", "mesh", "iat", "split", "diff")
 #: constant standing in for lighting in preview mode: colour = emission + PREVIEW_AMBIENT x albedo
 PREVIEW_AMBIENT = 0.5
-#: baker pixel format -> GL upload dtype; rgb9e5 pages hold values already quantised to
-#: 9-bit mantissas with a shared exponent, which half floats represent exactly
-PIXEL_FORMATS = {"rgba16f": "f2", "rgba32f": "f4", "rgba8": "f1", "rgb9e5": "f2"}
-#: largest finite half float; brighter radiance is clamped to it, never turned into inf
-HALF_MAX = 65504.0
+#: baker pixel format -> (moderngl dtype of the upload, GL internal format or 0 for moderngl's own).
+#: rgba8 is GL_SRGB8_ALPHA8 (decoded to linear before filtering and mipmapping); rgb9e5 is
+#: GL_RGB9_E5, written from half floats that hold the baker's 9e5-rounded values exactly
+PIXEL_FORMATS = {
+    "rgba16f": ("f2", 0),
+    "rgba32f": ("f4", 0),
+    "rgba8": ("f1", 0x8C43),
+    "rgb9e5": ("f2", 0x8C3D),
+}
+_GL_TEXTURE_2D_ARRAY = 0x8C1A
+_GL_FORMAT_TYPE = {"f1": (0x1908, 0x1401), "f2": (0x1908, 0x140B)}  # GL_RGBA + UNSIGNED_BYTE / HALF_FLOAT
 _MIN_BUFFER = 64  # bytes; GL buffers are never created empty
 
 
@@ -124,6 +134,33 @@ def shader_source(name: str, stage: str) -> str:
     except OSError as e:
         raise RenderError(f"cannot read shader: {e}", path) from e
     return f"#version 330 core\n#define {stage}\n#line 1\n{text}"
+
+
+_LIBGL = None
+
+
+def _libgl():
+    """The process's GL entry points (glvnd's libOpenGL, else libGL), for the one call moderngl
+    lacks: glTexImage3D with an internal format (sRGB8 and RGB9_E5 texture arrays)."""
+    global _LIBGL
+    if _LIBGL is None:
+        import ctypes
+
+        for name in ("libOpenGL.so.0", "libGL.so.1", "libGL.so", "opengl32"):
+            try:
+                lib = ctypes.CDLL(name)
+                f = lib.glTexImage3D
+            except (OSError, AttributeError):
+                continue
+            f.argtypes = (
+                [ctypes.c_uint] + [ctypes.c_int] * 6 + [ctypes.c_uint, ctypes.c_uint, ctypes.c_void_p]
+            )
+            f.restype = None
+            _LIBGL = lib
+            break
+        else:
+            raise RenderError("cannot load libOpenGL/libGL to create an sRGB8 or RGB9_E5 texture array")
+    return _LIBGL
 
 
 # -- GL object bookkeeping --------------------------------------------------------------------
@@ -160,17 +197,42 @@ class _Registry:
         return out
 
 
+def _frozen_root(raw: np.ndarray) -> np.ndarray | None:
+    """The read-only, contiguous array ``raw`` is a prefix of (same dtype, same start), or None."""
+    root = raw.base
+    if (
+        isinstance(root, np.ndarray)
+        and not root.flags.writeable
+        and root.flags.c_contiguous
+        and root.dtype == raw.dtype
+        and raw.nbytes <= root.nbytes
+        and raw.__array_interface__["data"][0] == root.__array_interface__["data"][0]
+    ):
+        return root
+    return None
+
+
 def _upload(ctx, reg: _Registry, buf, data: np.ndarray):
     """Write ``data`` into ``buf`` in place; orphan it with a new size when the data grows
-    (or shrinks below a quarter). Creates the buffer when ``buf`` is None. Returns the buffer."""
+    (or shrinks below a quarter). Creates the buffer when ``buf`` is None. Returns the buffer.
+
+    A prefix of a read-only array (the Baker's mesh parts are prefixes of one depth-sorted mesh)
+    is written as the whole array, once: while the buffer holds that array, later prefixes of it
+    write nothing (the draw call's count selects the prefix). Written from the array's memory
+    (no ``tobytes`` copy)."""
     raw = np.ascontiguousarray(data)
-    nbytes = raw.nbytes
+    root = _frozen_root(raw)
+    src = raw if root is None else root
+    if buf is not None and root is not None and getattr(buf, "iat_source", None) is root:
+        return buf  # already holds the whole frozen array
+    nbytes = src.nbytes
     if buf is None:
         buf = reg.add(ctx.buffer(reserve=max(nbytes, _MIN_BUFFER), dynamic=True))
     elif nbytes > buf.size or (buf.size > _MIN_BUFFER and nbytes < buf.size // 4):
         buf.orphan(max(nbytes, _MIN_BUFFER))
     if nbytes:
-        buf.write(raw.tobytes())
+        buf.write(memoryview(src.reshape(-1)).cast("B"))
+    buf.iat_source = root  # the frozen array it now holds whole (None: anything else)
     return buf
 
 
@@ -301,6 +363,7 @@ class Renderer:
         self._has = {"preview": False, "mesh": False, "iat": False}
         self._pages = None  # texture array
         self._pages_key: tuple | None = None
+        self._pages_src: np.ndarray | None = None  # the array last written to the page texture
         self._page_scale = 1.0
         # solution sets: per-state vertex colours (CPU) of the solution mesh and of the baked mesh
         # part, the (a, b) pair uploaded as color / color_b, the states and pages per state in IAT mode
@@ -384,18 +447,36 @@ class Renderer:
                 raise RenderError(f"detail texture of material {m} has shape {img.shape}, expected (h, w, 3)")
             cur[int(m)] = self._texture2d(cur.get(int(m)), img)
 
-    def _set_pages(
-        self, pages: np.ndarray, pixel_format: str, mipmaps: bool, page_scale: float | None, mip_levels: int | None = None
-    ) -> None:
-        """Upload atlas pages; with mipmaps, only the ``mip_levels`` the atlas gutters allow are built,
-        so coarse levels never blend neighbouring tiles (None: the full chain)."""
-        mgl = self._moderngl
-        pages = np.asarray(pages, dtype=np.float32)
-        if pages.ndim != 4 or pages.shape[3] < 3:
-            raise RenderError(f"baked pages have shape {pages.shape}, expected (n_pages, H, W, 3)")
+    def _gpu_pages(self, baked, pages: np.ndarray | None, pixel_format: str, scale: float) -> np.ndarray:
+        """The ``(n, H, W, 4)`` array to write for ``baked``: its ``gpu_form()`` when the baker made
+        one for this format (no conversion), else ``pages`` (float, ``(n, H, W, 3)``) converted."""
         if pixel_format not in PIXEL_FORMATS:
             raise RenderError(f"unknown pixel format {pixel_format!r} (known: {', '.join(PIXEL_FORMATS)})")
-        n, h, w = pages.shape[:3]
+        if pages is None:
+            gpu_form = getattr(baked, "gpu_form", None)
+            g = gpu_form() if gpu_form is not None else None
+            if g is not None:
+                return g
+            pages = np.asarray(baked.pages)
+        pages = np.asarray(pages)
+        if pages.ndim != 4 or pages.shape[3] < 3:
+            raise RenderError(f"baked pages have shape {pages.shape}, expected (n_pages, H, W, 3)")
+        return to_gpu(pages, pixel_format, scale)
+
+    def _set_pages(
+        self, data: np.ndarray, pixel_format: str, mipmaps: bool, mip_levels: int | None = None
+    ) -> None:
+        """Upload atlas pages in their GPU form ``(n, H, W, 4)`` (:func:`iat.bake.to_gpu`), written
+        from the array itself (no copy); the same read-only array as last time is not written again.
+        With mipmaps, only the ``mip_levels`` the atlas gutters allow are built, so coarse levels
+        never blend neighbouring tiles (None: the full chain)."""
+        mgl = self._moderngl
+        dtype, internal = PIXEL_FORMATS[pixel_format]
+        if data.ndim != 4 or data.shape[3] != 4 or data.dtype != GPU_DTYPES[pixel_format]:
+            raise RenderError(
+                f"{pixel_format} pages have shape {data.shape} {data.dtype}, expected (n, H, W, 4)"
+            )
+        n, h, w = data.shape[:3]
         max_layers = int(self.ctx.info["GL_MAX_ARRAY_TEXTURE_LAYERS"])
         max_size = int(self.ctx.info["GL_MAX_TEXTURE_SIZE"])
         if n > max_layers or max(w, h) > max_size:
@@ -403,30 +484,37 @@ class Renderer:
                 f"the atlas has {n} page(s) of {w}x{h}; this GL allows {max_layers} layers of at most"
                 f" {max_size}x{max_size}: lower the scale, raise the threshold or set a budget"
             )
-        dtype = PIXEL_FORMATS[pixel_format]
-        if pixel_format == "rgba8":
-            scale = float(page_scale) if page_scale else float(max(pages[..., :3].max(initial=0.0), 1e-30))
-            data = np.full((n, h, w, 4), 255, dtype=np.uint8)
-            data[..., :3] = np.rint(np.clip(pages[..., :3] / scale, 0.0, 1.0) * 255.0)
-            self._page_scale = scale
-        else:
-            data = np.ones((n, h, w, 4), dtype=np.float16 if dtype == "f2" else np.float32)
-            data[..., :3] = np.minimum(pages[..., :3], HALF_MAX) if dtype == "f2" else pages[..., :3]
-            self._page_scale = 1.0
         # the mip levels are part of the key: a texture that once held a mip chain keeps it allocated
-        key = (w, h, n, dtype, (mip_levels or 0) if mipmaps else 1)
+        key = (w, h, n, pixel_format, (mip_levels or 0) if mipmaps else 1)
         if self._pages is not None and self._pages_key == key:
-            self._pages.write(data.tobytes())
-        else:
+            if data is self._pages_src and not data.flags.writeable:
+                return  # the baker's cached pages, already on the GPU with their mip levels
+        for _ in range(8):  # GL error flags are sticky: clear what others left, so ours is ours
+            stale = self.ctx.error
+            if stale == "GL_NO_ERROR":
+                break
+            log.debug("GL error before uploading pages (not ours): %s", stale)
+        if self._pages is None or self._pages_key != key:
             self._reg.release(self._pages)
-            self._pages = self._reg.add(self.ctx.texture_array((w, h, n), 4, data.tobytes(), dtype=dtype))
-            self._pages.repeat_x = self._pages.repeat_y = False
-            self._pages_key = key
+            self._pages = None
+            tex = self._reg.add(self.ctx.texture_array((w, h, n), 4, None, dtype=dtype))
+            if internal:  # re-specify level 0 with the internal format moderngl cannot ask for
+                fmt, typ = _GL_FORMAT_TYPE[dtype]
+                tex.use(0)
+                _libgl().glTexImage3D(_GL_TEXTURE_2D_ARRAY, 0, internal, w, h, n, 0, fmt, typ, None)
+            tex.repeat_x = tex.repeat_y = False
+            self._pages, self._pages_key = tex, key
+        self._pages_src = None
+        self._pages.write(memoryview(np.ascontiguousarray(data)))
         if mipmaps and (mip_levels is None or mip_levels > 1):
             self._pages.build_mipmaps(0, 1000 if mip_levels is None else mip_levels - 1)
             self._pages.filter = (mgl.LINEAR_MIPMAP_LINEAR, mgl.LINEAR)
         else:
             self._pages.filter = (mgl.LINEAR, mgl.LINEAR)
+        err = self.ctx.error
+        if err != "GL_NO_ERROR":
+            raise RenderError(f"uploading {pixel_format} pages of {w}x{h}x{n} failed: {err}")
+        self._pages_src = data
 
     # -- data -------------------------------------------------------------------------------
     def set_scene(self, scene) -> None:
@@ -562,9 +650,13 @@ class Renderer:
         one call per detail material (``baked.detail_textures: {material: (h,w,3)}``,
         applied where ``tex_detail`` is 1, or on every vertex of that material when the
         field is absent). Pages go into one texture array, rewritten in place when the
-        shape and ``policy.pixel_format`` are unchanged, mipmapped when ``policy.mipmaps``.
+        shape and ``policy.pixel_format`` are unchanged, mipmapped when ``policy.mipmaps``:
+        ``baked.gpu_form()`` (the Baker's pages in their GPU dtype) is written as it is and not
+        at all when the texture already holds that very array; other Baked-likes' float
+        ``pages`` are converted (:func:`iat.bake.to_gpu`). rgba8 pages are GL_SRGB8_ALPHA8,
+        rgb9e5 pages GL_RGB9_E5 (4 bytes a texel, as the memory report counts).
         """
-        self._set_baked(baked, [baked.mesh_radiance], np.asarray(baked.pages), 1)
+        self._set_baked(baked, [baked.mesh_radiance], None, 1)
 
     def set_baked_set(self, baked_set) -> None:
         """IAT-mode data of a :class:`~iat.bake.BakedSet`: the shared geometry once, every state's
@@ -581,7 +673,9 @@ class Renderer:
             raise RenderError(f"baked set mesh_radiance has shape {rad.shape}, expected ({n}, M, 3)")
         self._set_baked(baked_set, list(rad), pages.reshape(-1, *pages.shape[2:]), n)
 
-    def _set_baked(self, baked, mesh_colors: list, all_pages: np.ndarray, n_states: int) -> None:
+    def _set_baked(self, baked, mesh_colors: list, all_pages: np.ndarray | None, n_states: int) -> None:
+        """all_pages : (n_states x n_pages, H, W, 3) float pages, or None: ``baked``'s own (its
+        GPU form when it has one)."""
         self._alive()
         policy = getattr(baked, "policy", None)
         pixel_format = str(getattr(policy, "pixel_format", "rgba16f") or "rgba16f")
@@ -627,16 +721,22 @@ class Renderer:
             use = (tdetail[v0] > 0.5) & np.isin(tmat[v0], list(details))
             tri_key[use] = tmat[v0][use]
 
-        pages = all_pages
-        per_state = pages.shape[0] // max(n_states, 1) if pages.ndim == 4 else 0
+        per_state = 0
         if len(tidx):
-            if pages.ndim != 4 or pages.shape[0] == 0:
+            scale = 1.0
+            if pixel_format == "rgba8":  # GPU texel = sRGB8(page / page_scale); the shader multiplies back
+                scale = getattr(baked, "page_scale", None)
+                if not scale:
+                    p = np.asarray(all_pages if all_pages is not None else baked.pages, np.float64)
+                    scale = max(p[..., :3].max(initial=0.0), 1e-30)
+            pages = self._gpu_pages(baked, all_pages, pixel_format, float(scale))
+            per_state = pages.shape[0] // max(n_states, 1)
+            if pages.shape[0] == 0:
                 raise RenderError(f"baked has textured triangles but its pages have shape {pages.shape}")
             if tlayer.size and (tlayer.min() < 0 or tlayer.max() > per_state - 1):
                 raise RenderError(f"baked tex_layer refers to page {int(tlayer.max())} of {per_state}")
-            self._set_pages(
-                pages, pixel_format, mipmaps, getattr(baked, "page_scale", None), getattr(baked, "mip_levels", None)
-            )
+            self._set_pages(pages, pixel_format, mipmaps, getattr(baked, "mip_levels", None))
+            self._page_scale = float(scale)
         self._set_details("iat", {int(m): v for m, v in details.items()})
         self._iat_states, self._iat_pages = int(n_states), max(int(per_state), 1)
         self._colors["iat"] = colors

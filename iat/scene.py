@@ -22,6 +22,10 @@ Loading (:func:`load_scene`)
   OBJ: ``Kd`` (x mean of ``map_Kd``) and ``Ke``. ``Material.detail`` is the
   base colour texture times its factor, so its mean is the albedo; row 0 is the
   image's top. Geometry without a material gets one default material (albedo 0.5).
+  An albedo outside [0, 1] is clamped (its detail texture scaled to match) with an
+  :class:`iat.errors.IATWarning` naming the file and the materials.
+- ``progress(fraction, message)`` is called between the stages (parse, weld, quad
+  merge, pre-split); returning False raises :class:`iat.errors.Cancelled`.
 - ``Scene.patch_uv`` is TEXCOORD_0 in the glTF convention (``(0, 0)`` is the
   top-left of the image, ``v`` grows downwards): texel ``detail[int(v h), int(u w)]``.
   OBJ ``vt`` is converted (``v -> 1 - v``).
@@ -38,13 +42,16 @@ import logging
 import re
 import urllib.parse
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .camera import Camera
-from .errors import LoadError, OptionError
+from .errors import Cancelled, IATWarning, LoadError, OptionError
+
+Progress = Callable[[float, str], "bool | None"]
 
 
 @dataclass
@@ -410,7 +417,7 @@ class _Gltf:
                 emission = emission * img.reshape(-1, 3).mean(axis=0, dtype=np.float64)
         mat = Material(
             name=m.name or f"material_{index}",
-            albedo=np.clip(albedo, 0.0, 1.0),
+            albedo=albedo,  # clamped by load_scene, which warns
             emission=emission,
             detail=detail,
         )
@@ -631,7 +638,7 @@ def _trimesh_material(mat, path: Path) -> Material:
         img = _decode_image(image, path, name or "image")
         detail = (img * albedo.astype(np.float32)).astype(np.float32)
         albedo = albedo * img.reshape(-1, 3).mean(axis=0, dtype=np.float64)
-    return Material(name=name, albedo=np.clip(albedo, 0.0, 1.0), emission=emission, detail=detail)
+    return Material(name=name, albedo=albedo, emission=emission, detail=detail)  # clamped by load_scene
 
 
 def _check_obj_textures(path: Path):
@@ -1213,20 +1220,64 @@ def split_patches(
     return allV, corners, material[o], uv[o]
 
 
-def load_scene(path: str | Path, max_edge: float | None = None) -> Scene:
+_MAX_NAMED = 5  # materials named in the clamped-albedo warning
+
+# fraction of load_scene's progress reached at the end of each stage (measured on a 1 M-triangle STL:
+# parse 0.6 s, placing 1.7 s, weld 1.8 s, quad merge 2.9 s)
+_STAGES = {"parse": 0.1, "collect": 0.33, "weld": 0.58, "merge": 0.95, "split": 0.98}
+
+
+def _clamp_albedo(materials: list[Material], path: Path) -> None:
+    """Clamp each material's albedo to [0, 1] in place, scaling its detail texture to match.
+
+    Warns once (:class:`iat.errors.IATWarning`) naming the file and the clamped materials
+    with their albedo as read.
+    """
+    clamped = []
+    for m in materials:  # a handful of materials: no hot path
+        clipped = np.clip(m.albedo, 0.0, 1.0)
+        if np.array_equal(clipped, m.albedo, equal_nan=True):  # NaN is the solver's to refuse
+            continue
+        clamped.append(f"{m.name or '(unnamed)'!r} ({', '.join(f'{a:g}' for a in m.albedo)})")
+        if m.detail is not None:
+            ratio = np.divide(clipped, m.albedo, out=np.ones(3), where=m.albedo != 0)
+            m.detail = (m.detail * ratio.astype(np.float32)).astype(np.float32)
+        m.albedo = clipped
+    if clamped:
+        shown = ", ".join(clamped[:_MAX_NAMED])
+        if len(clamped) > _MAX_NAMED:
+            shown += f" and {len(clamped) - _MAX_NAMED} more"
+        noun = "material" if len(clamped) == 1 else "materials"
+        warnings.warn(
+            f"{path}: albedo outside [0, 1] clamped in {len(clamped)} {noun}: {shown}",
+            IATWarning,
+            stacklevel=3,
+        )
+
+
+def load_scene(path: str | Path, max_edge: float | None = None, progress: Progress | None = None) -> Scene:
     """Load a model file (glTF/GLB, OBJ+MTL, PLY, STL, OFF) into a :class:`Scene`.
 
     Geometry is read by trimesh (each node's transform applied here, winding
     flipped under mirroring), vertices are welded, zero-area triangles dropped,
     and coplanar triangle pairs merged back into quads (:func:`merge_quads`).
     glTF materials, ``KHR_lights_punctual`` lights, cameras and the
-    ``iat_camera_paths`` root extras are read with pygltflib.
+    ``iat_camera_paths`` root extras are read with pygltflib. An albedo outside
+    [0, 1] is clamped with an :class:`iat.errors.IATWarning`.
 
     max_edge : pre-split patches longer than this (scene units) into a regular grid
       (:func:`split_patches`); None keeps the root patches as they are.
+    progress : ``progress(fraction, message) -> bool``, called at the start of each
+      stage (parse, weld, quad merge, pre-split) and with 1.0 at the end, fractions
+      non-decreasing; returning False raises :class:`iat.errors.Cancelled`.
     Raises :class:`iat.errors.LoadError` naming the file and the cause.
     """
     path = Path(path)
+
+    def report(fraction: float, message: str) -> None:
+        if progress is not None and progress(fraction, message) is False:
+            raise Cancelled("load cancelled", path)
+
     if max_edge is not None and not (max_edge > 0 and np.isfinite(max_edge)):
         raise OptionError(f"max_edge must be a positive number, got {max_edge!r}")
     if not path.exists():
@@ -1240,13 +1291,18 @@ def load_scene(path: str | Path, max_edge: float | None = None) -> Scene:
     if path.stat().st_size == 0:
         raise LoadError("empty file", path)
 
+    report(0.0, f"reading {path.name}")
     gl = _Gltf(path) if ext in (".gltf", ".glb") else None
     if ext == ".obj":
         _check_obj_textures(path)
     tscene = _load_trimesh(path, ext)
+    report(_STAGES["parse"], "placing geometry")
     world = gl.node_world() if gl is not None else None
     V, F, M, UV, materials = _collect(tscene, path, gl, world)
+    del tscene
+    _clamp_albedo(materials, path)
 
+    report(_STAGES["collect"], "welding vertices")
     V, F = weld_vertices(V, F)
     bad = degenerate_faces(V, F)
     if bad.all():
@@ -1254,8 +1310,10 @@ def load_scene(path: str | Path, max_edge: float | None = None) -> Scene:
     if bad.any():
         log.info("%s: dropped %d zero-area faces of %d", path, int(bad.sum()), len(F))
         F, M, UV = F[~bad], M[~bad], UV[~bad]
+    report(_STAGES["weld"], "merging quads")
     corners, pmat, puv = merge_quads(V, F, M, UV)
     if max_edge is not None:
+        report(_STAGES["merge"], "splitting patches")
         V, corners, pmat, puv = split_patches(V, corners, pmat, puv, max_edge)
     else:
         V, corners = compact_vertices(V, corners)  # dropped faces may leave vertices unused
@@ -1269,9 +1327,11 @@ def load_scene(path: str | Path, max_edge: float | None = None) -> Scene:
         path=str(path),
     )
     if gl is not None:
+        report(_STAGES["split"], "reading lights and cameras")
         scene.lights = gl.lights(world)
         scene.cameras = gl.cameras(world, scene)
         scene.camera_paths = gl.camera_paths()
+    report(1.0, "loaded")
     log.info(
         "%s: %d triangles -> %d patches (%d quads), %d materials, %d lights, %d cameras",
         path,

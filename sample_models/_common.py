@@ -1,4 +1,4 @@
-"""Shared helpers for the sample model scripts (house, cave, lavapit, pool).
+"""Shared helpers for the sample model scripts (house, cave, lavapit, pool; Cornell box: the command line).
 
 - :class:`ModelBuilder` wraps :class:`iat.glb.GlbBuilder`: it collects planar
   quads (written as the triangles ``[0, 1, 2], [2, 3, 0]``) and triangles per
@@ -14,6 +14,8 @@
   generator, so the same numbers on every machine and numpy version).
 - :func:`tile_texture` and :func:`png_bytes`: procedural tile textures as PNG
   bytes (sRGB, stored deflate blocks: identical bytes whatever zlib is installed).
+- :func:`assemble` puts a model together (geometry, lights, meshes, cameras, extras);
+  :func:`script_main` is every script's ``python sample_models/NAME.py [-o PATH]``.
 
 Orientation conventions (as ``iat.scene``): a quad's corners run counter-clockwise
 seen from its front, its normal is ``cross(c2 - c0, c3 - c1)``; radiosity uses
@@ -23,6 +25,7 @@ Everything is deterministic: the same calls give the same bytes.
 
 from __future__ import annotations
 
+import argparse
 import math
 import struct
 import sys
@@ -402,6 +405,34 @@ def add_cameras(mb: ModelBuilder, cameras: list[Camera], path: list[dict], aspec
     for cam in cameras:
         mb.glb.add_camera_node(cam, aspect=aspect)
     mb.glb.extras["iat_camera_paths"] = {"default": path}
+
+
+# -- a whole model ------------------------------------------------------------------------------------
+
+
+def assemble(
+    geometry, lights, cameras: list[Camera], path: list[dict], panel: float = 1.25, extras: dict | None = None
+) -> ModelBuilder:
+    """A :class:`ModelBuilder` holding a whole model, not yet written: ``geometry(mb)`` and
+    ``lights(mb)`` add their parts, then the meshes, the ``cameras``, the default camera ``path``
+    and the root ``extras`` (after ``iat_camera_paths``) follow, in that order."""
+    mb = ModelBuilder(panel=panel)
+    geometry(mb)
+    lights(mb)
+    mb.emit_meshes()
+    add_cameras(mb, cameras, path)
+    mb.glb.extras.update(extras or {})
+    return mb
+
+
+def script_main(build, default_path: Path, description: str, argv: list[str] | None = None) -> int:
+    """A sample script's command line: ``-o PATH`` (default ``default_path``); writes the model with
+    ``build(path)`` and prints the path written."""
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("-o", "--output", default=str(default_path), help="output .glb (default: %(default)s)")
+    args = ap.parse_args(argv)
+    print(build(args.output))
+    return 0
 
 
 # -- noise --------------------------------------------------------------------------------------------

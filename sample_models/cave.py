@@ -19,7 +19,6 @@ Output is deterministic: the same script gives the same bytes.
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
@@ -27,12 +26,10 @@ from pathlib import Path
 import numpy as np
 
 _HERE = Path(__file__).resolve().parent
-if __package__:  # imported as sample_models.cave
-    from ._common import Camera, ModelBuilder, add_cameras, fbm3, walk_path
-else:  # run as a script
-    if str(_HERE) not in sys.path:
-        sys.path.insert(0, str(_HERE))
-    from _common import Camera, ModelBuilder, add_cameras, fbm3, walk_path  # noqa: I001
+if __package__ in (None, ""):  # run as a script: make `sample_models` and `iat` importable
+    sys.path.insert(0, str(_HERE.parent))
+
+from sample_models._common import Camera, ModelBuilder, assemble, fbm3, script_main, walk_path  # noqa: E402
 
 DEFAULT_PATH = _HERE / "cave.glb"
 
@@ -245,30 +242,12 @@ def cameras() -> list[Camera]:
     ]
 
 
-def make_builder() -> ModelBuilder:
-    """A :class:`ModelBuilder` holding the whole cave (meshes, lights, cameras; not yet written)."""
-    mb = ModelBuilder()
-    build_geometry(mb)
-    lights(mb)
-    mb.emit_meshes()
-    add_cameras(mb, cameras(), camera_path())
-    return mb
-
-
 def build(path: str | Path = DEFAULT_PATH) -> Path:
     """Write the cave GLB to ``path`` (atomically); returns the path."""
-    return make_builder().glb.write(path)
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        description="Write the cave sample scene (after the report's cave) as a GLB."
-    )
-    ap.add_argument("-o", "--output", default=str(DEFAULT_PATH), help="output .glb (default: %(default)s)")
-    args = ap.parse_args(argv)
-    print(build(args.output))
-    return 0
+    return assemble(build_geometry, lights, cameras(), camera_path()).glb.write(path)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(
+        script_main(build, DEFAULT_PATH, "Write the cave sample scene (after the report's cave) as a GLB.")
+    )

@@ -26,7 +26,6 @@ Output is deterministic: the same script gives the same bytes.
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
@@ -184,13 +183,7 @@ def build(path: str | Path = DEFAULT_PATH) -> Path:
     return make_builder().write(path)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description="Write the Cornell box sample scene as a GLB.")
-    ap.add_argument("-o", "--output", default=str(DEFAULT_PATH), help="output .glb (default: %(default)s)")
-    args = ap.parse_args(argv)
-    print(build(args.output))
-    return 0
-
-
 if __name__ == "__main__":
-    sys.exit(main())
+    from sample_models._common import script_main
+
+    sys.exit(script_main(build, DEFAULT_PATH, "Write the Cornell box sample scene as a GLB."))

@@ -31,19 +31,16 @@ Output is deterministic: the same script gives the same bytes.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
 _HERE = Path(__file__).resolve().parent
-if __package__:  # imported as sample_models.house
-    from ._common import Camera, ModelBuilder, add_cameras, walk_path
-else:  # run as a script
-    if str(_HERE) not in sys.path:
-        sys.path.insert(0, str(_HERE))
-    from _common import Camera, ModelBuilder, add_cameras, walk_path  # noqa: I001
+if __package__ in (None, ""):  # run as a script: make `sample_models` and `iat` importable
+    sys.path.insert(0, str(_HERE.parent))
+
+from sample_models._common import Camera, ModelBuilder, assemble, script_main, walk_path  # noqa: E402
 
 DEFAULT_PATH = _HERE / "house.glb"
 
@@ -366,31 +363,19 @@ def cameras() -> list[Camera]:
     ]
 
 
-def make_builder() -> ModelBuilder:
-    """A :class:`ModelBuilder` holding the whole house (meshes, lights, cameras; not yet written)."""
-    mb = ModelBuilder(panel=1.25)
-    build_geometry(mb)
-    lights(mb)
-    mb.emit_meshes()
-    add_cameras(mb, cameras(), camera_path())
-    mb.glb.extras["iat_lighting_states"] = LIGHTING_STATES
-    return mb
-
-
 def build(path: str | Path = DEFAULT_PATH) -> Path:
     """Write the house GLB to ``path`` (atomically); returns the path."""
-    return make_builder().glb.write(path)
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        description="Write the house sample scene (after the report's maus) as a GLB."
-    )
-    ap.add_argument("-o", "--output", default=str(DEFAULT_PATH), help="output .glb (default: %(default)s)")
-    args = ap.parse_args(argv)
-    print(build(args.output))
-    return 0
+    return assemble(
+        build_geometry,
+        lights,
+        cameras(),
+        camera_path(),
+        panel=1.25,
+        extras={"iat_lighting_states": LIGHTING_STATES},
+    ).glb.write(path)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(
+        script_main(build, DEFAULT_PATH, "Write the house sample scene (after the report's maus) as a GLB.")
+    )

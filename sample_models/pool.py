@@ -25,19 +25,17 @@ Output is deterministic: the same script gives the same bytes.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 import numpy as np
 
 _HERE = Path(__file__).resolve().parent
-if __package__:  # imported as sample_models.pool
-    from ._common import Camera, ModelBuilder, add_cameras, loop_waypoints, png_bytes, tile_texture, walk_path
-else:  # run as a script
-    if str(_HERE) not in sys.path:
-        sys.path.insert(0, str(_HERE))
-    from _common import Camera, ModelBuilder, add_cameras, loop_waypoints, png_bytes, tile_texture, walk_path  # noqa: I001
+if __package__ in (None, ""):  # run as a script: make `sample_models` and `iat` importable
+    sys.path.insert(0, str(_HERE.parent))
+
+from sample_models import _common  # noqa: E402
+from sample_models._common import Camera, ModelBuilder, assemble, loop_waypoints, script_main, walk_path  # noqa: E402
 
 DEFAULT_PATH = _HERE / "pool.glb"
 
@@ -70,8 +68,8 @@ LAMP_COLOR = (1.0, 0.93, 0.82)
 def textures() -> dict[str, bytes]:
     """The three detail textures as PNG bytes (deterministic)."""
     return {
-        "floor_tiles": png_bytes(
-            tile_texture(
+        "floor_tiles": _common.png_bytes(
+            _common.tile_texture(
                 TEX,
                 FLOOR_TILES,
                 (0.62, 0.55, 0.44),
@@ -81,8 +79,8 @@ def textures() -> dict[str, bytes]:
                 seed=11,
             )
         ),
-        "wall_tiles": png_bytes(
-            tile_texture(
+        "wall_tiles": _common.png_bytes(
+            _common.tile_texture(
                 TEX,
                 WALL_TILES,
                 (0.80, 0.81, 0.80),
@@ -92,8 +90,8 @@ def textures() -> dict[str, bytes]:
                 seed=12,
             )
         ),
-        "pool_tiles": png_bytes(
-            tile_texture(
+        "pool_tiles": _common.png_bytes(
+            _common.tile_texture(
                 TEX,
                 POOL_TILES,
                 (0.10, 0.38, 0.62),
@@ -221,30 +219,14 @@ def cameras() -> list[Camera]:
     ]
 
 
-def make_builder() -> ModelBuilder:
-    """A :class:`ModelBuilder` holding the whole pool hall (meshes, lights, cameras; not yet written)."""
-    mb = ModelBuilder(panel=1.5)
-    build_geometry(mb)
-    lights(mb)
-    mb.emit_meshes()
-    add_cameras(mb, cameras(), camera_path())
-    return mb
-
-
 def build(path: str | Path = DEFAULT_PATH) -> Path:
     """Write the pool hall GLB to ``path`` (atomically); returns the path."""
-    return make_builder().glb.write(path)
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        description="Write the pool hall sample scene (after the report's pool) as a GLB."
-    )
-    ap.add_argument("-o", "--output", default=str(DEFAULT_PATH), help="output .glb (default: %(default)s)")
-    args = ap.parse_args(argv)
-    print(build(args.output))
-    return 0
+    return assemble(build_geometry, lights, cameras(), camera_path(), panel=1.5).glb.write(path)
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(
+        script_main(
+            build, DEFAULT_PATH, "Write the pool hall sample scene (after the report's pool) as a GLB."
+        )
+    )

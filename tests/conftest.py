@@ -5,16 +5,26 @@
 - ``--regen-refs``: rewrite reference images under ``tests/refs/`` instead of
   comparing against them (never edit a reference by hand); ``reference_image``
   is the fixture that does either.
+- GUI end-to-end tests (``@pytest.mark.gui``) skip without a display; the
+  ``gui_child`` fixture re-runs such a test alone in a child process (Mesa aborts
+  when a GLX window context is made in a process that holds ``egl_ctx``), and
+  :func:`run_gui`, :func:`wait_until` drive the app under imgui-bundle's test engine.
 """
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 REFS = Path(__file__).parent / "refs"
+HAS_DISPLAY = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+GUI_CHILD_ENV = "IAT_GUI_CHILD"  # set to "1" in the child process of a GUI test
 
 
 def pytest_addoption(parser):
@@ -32,6 +42,66 @@ def pytest_configure(config):
         import os
 
         os.environ["IAT_REGEN_REFS"] = "1"
+
+
+def pytest_runtest_setup(item):
+    if item.get_closest_marker("gui") is not None and not HAS_DISPLAY:
+        pytest.skip("no DISPLAY: run under xvfb-run (make test does)")
+
+
+@pytest.fixture
+def gui_child(request):
+    """``run() -> bool``: in the test process, run this test alone in a child process, assert it
+    passed and return True (the test then returns at once); in that child, return False (the test
+    runs its body). Mesa aborts when a GLX window context is made in a process that already holds
+    the session's EGL context (``egl_ctx``), so a window test must not run beside it."""
+
+    def run() -> bool:
+        if os.environ.get(GUI_CHILD_ENV) == "1":
+            return False
+        r = subprocess.run(
+            [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", request.node.nodeid],
+            cwd=request.config.rootpath,
+            env={**os.environ, GUI_CHILD_ENV: "1"},
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
+        assert r.returncode == 0, r.stdout[-6000:] + r.stderr[-3000:]
+        assert " passed" in r.stdout, r.stdout[-3000:]
+        return True
+
+    return run
+
+
+def wait_until(ctx, cond, seconds: float, what: str) -> None:
+    """Yield frames of the imgui test engine's ``ctx`` until ``cond()``; fail after ``seconds``."""
+    end = time.monotonic() + seconds
+    while not cond():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out after {seconds} s waiting for {what}")
+        ctx.yield_()
+
+
+def _relaxed_watchdog() -> None:
+    """The engine stops a test after 60 s; a loaded machine (llvmpipe) can be slower than that."""
+    from imgui_bundle import hello_imgui, imgui
+
+    io = imgui.test_engine.get_io(hello_imgui.get_imgui_test_engine())
+    io.config_watchdog_warning = 300.0
+    io.config_watchdog_kill_test = 600.0
+
+
+def run_gui(app, drive) -> float:
+    """Run the viewer ``app`` with ``drive(ctx)`` as the test engine's test (relaxed watchdog);
+    returns the seconds it took."""
+    from imgui_bundle.immapp import testing
+
+    params = app.runner_params()
+    params.callbacks.register_tests = _relaxed_watchdog
+    t0 = time.monotonic()
+    testing.run(test_function=drive, runner_params=params, add_ons_params=app.addons())
+    return time.monotonic() - t0
 
 
 @pytest.fixture(scope="session")

@@ -92,7 +92,11 @@ def test_threshold_semantics(grid_sol):
     assert not none.patch_textured.any()
     assert none.pages.shape == (0, 1, 1, 3) and none.memory.texture_bytes == 0
     assert len(none.mesh_indices) == len(grid_sol.tri_vertices)
-    np.testing.assert_array_equal(none.mesh_radiance, grid_sol.vert_radiance)
+    # every vertex once, in patch-depth order (stable: vertex-table order within a depth)
+    P, _, _ = qt.decode_key(grid_sol.vert_key, grid_sol.n)
+    order = np.argsort(depth[P], kind="stable")
+    np.testing.assert_array_equal(none.mesh_radiance, grid_sol.vert_radiance[order])
+    np.testing.assert_array_equal(none.mesh_patch, P[order])
 
     for t in range(int(depth.max()) + 1):
         bk = b.bake(BakePolicy(threshold=t))
@@ -101,16 +105,31 @@ def test_threshold_semantics(grid_sol):
 
 
 def test_mesh_part_is_the_anchored_mesh_of_meshed_patches(grid_sol):
-    bk = Baker(grid_sol).bake(BakePolicy(threshold=3))
+    """The mesh part: the meshed patches' vertices and triangles, sorted by patch depth (stable),
+    so that every threshold's mesh part is a prefix of one array (views, uploaded once)."""
+    b = Baker(grid_sol)
+    bk = b.bake(BakePolicy(threshold=3))
     P, _, _ = qt.decode_key(grid_sol.vert_key, grid_sol.n)
-    keep_v = ~bk.patch_textured[P]
+    depth = grid_sol.patch_depth()
+    order_v = np.argsort(depth[P], kind="stable")
+    keep_v = order_v[~bk.patch_textured[P[order_v]]]
     np.testing.assert_array_equal(bk.mesh_positions, grid_sol.vert_position[keep_v].astype(np.float32))
     np.testing.assert_array_equal(bk.mesh_radiance, grid_sol.vert_radiance[keep_v])
-    keep_t = ~bk.patch_textured[P[grid_sol.tri_vertices[:, 0]]]
+    np.testing.assert_array_equal(bk.mesh_patch, P[keep_v])
+    tp = P[grid_sol.tri_vertices[:, 0]]
+    order_t = np.argsort(depth[tp], kind="stable")
+    keep_t = order_t[~bk.patch_textured[tp[order_t]]]
     got = bk.mesh_positions[bk.mesh_indices.astype(int)]
     want = grid_sol.vert_position[grid_sol.tri_vertices[keep_t]].astype(np.float32)
     np.testing.assert_array_equal(got, want)
     assert bk.mesh_indices.dtype == np.uint32 and bk.tex_indices.dtype == np.uint32
+    # another threshold's mesh part is a longer (or shorter) prefix of the same memory
+    more = b.bake(BakePolicy(threshold=int(depth.max()) + 1))
+    assert len(more.mesh_indices) > len(bk.mesh_indices) > 0
+    for name in ("mesh_positions", "mesh_radiance", "mesh_indices"):
+        a, full = getattr(bk, name), getattr(more, name)
+        assert np.shares_memory(a, full) and not a.flags.writeable
+        np.testing.assert_array_equal(full[: len(a)], a)
 
 
 # -- atlas uv / texture content -------------------------------------------------------------
@@ -372,7 +391,10 @@ def test_cost_model_gain_grows_with_depth(budget_sol):
 # -- cache ----------------------------------------------------------------------------------
 
 
-def test_rebake_reuses_tiles_and_packing(grid_sol):
+def test_rebake_reuses_tiles_and_packing():
+    grid_sol = grid_scene_solution()
+    # one material per patch: no seam pairs, so the only tiles flattened are the textured ones
+    grid_sol.patch_material[:] = np.arange(len(grid_sol.patch_material))
     b = Baker(grid_sol)
     depth = grid_sol.patch_depth()
     lo, mid, hi = 2, 4, 5
@@ -471,3 +493,65 @@ def test_gpu_iat_image_matches_the_mesh_image_on_a_linear_field(egl_ctx):
     finally:
         r.release()
     assert egl_ctx.error == "GL_NO_ERROR"
+
+
+# -- GPU form of the pages, host memory -------------------------------------------------------------
+
+
+@pytest.mark.parametrize("fmt", ["rgba16f", "rgba8", "rgb9e5"])
+def test_gpu_pages_are_the_stored_pages_in_the_gpu_dtype(grid_sol, fmt):
+    """The Baker blits pages straight in their GPU form (rgba16f: float16, rgba8: sRGB8 codes of
+    page / page_scale, rgb9e5: the 9e5 values as float16, exact), read-only and cached; ``pages``
+    (float32, exact for rgba16f) is made on first access and equals the GPU form decoded within
+    the format's rounding."""
+    from iat.bake import GPU_DTYPES, from_gpu, to_gpu
+
+    b = Baker(grid_sol)
+    bk = b.bake(BakePolicy(threshold=0, pixel_format=fmt))
+    g = bk.gpu_form()
+    assert g is not None and g.dtype == GPU_DTYPES[fmt] and g.shape[3] == 4 and not g.flags.writeable
+    assert "_pages" not in bk.__dict__ or bk.__dict__["_pages"] is None  # not made yet
+    pages = bk.pages
+    assert pages.dtype == np.float32 and pages.shape == g.shape[:3] + (3,)
+    dec = from_gpu(g, fmt, bk.page_scale)
+    if fmt == "rgba16f":
+        np.testing.assert_array_equal(dec, pages.astype(np.float16).astype(np.float32))
+        assert (g[..., 3][pages.max(axis=-1) > 0] == 1).all()
+    else:  # already rounded as the format stores it: exact
+        np.testing.assert_array_equal(dec, pages)
+        np.testing.assert_array_equal(to_gpu(pages, fmt, bk.page_scale)[..., :3], g[..., :3])
+    # a re-bake hits the cache: the very same arrays
+    again = b.bake(BakePolicy(threshold=0, pixel_format=fmt))
+    assert again.gpu_form() is g
+    # pages given explicitly (a blend, a test): the GPU form no longer applies
+    import dataclasses
+
+    other = dataclasses.replace(bk, pages=np.zeros_like(pages))
+    assert other.gpu_form() is None and bk.gpu_form() is g
+
+
+def test_to_gpu_clamps_half_floats_and_rounds_srgb():
+    from iat.bake import from_gpu, quantise_rgba8, to_gpu
+
+    x = np.array([[1e5, 1.0, 0.0], [2.0**-20, 0.5, 3.0]], np.float32)
+    h = to_gpu(x, "rgba16f")
+    assert h.dtype == np.float16 and np.isfinite(h).all() and h[0, 0] == 65504.0 and (h[:, 3] == 1).all()
+    c = to_gpu(x, "rgba8", 4.0)
+    assert c.dtype == np.uint8 and (c[:, 3] == 255).all()
+    np.testing.assert_array_equal(c[0, :3], [255, 137, 0])  # sRGB8 of 1 (clipped), 0.25, 0
+    np.testing.assert_array_equal(from_gpu(c, "rgba8", 4.0), quantise_rgba8(x, 4.0))
+
+
+def test_host_bytes_counts_pages_boxes_tiles_and_temporaries():
+    from iat import atlas
+    from iat.bake import host_bytes, host_memory_bytes
+
+    sides = np.array([5, 5, 9])
+    pk = atlas.pack(np.stack([sides, sides], axis=1), 64, 2, 2)
+    pol = BakePolicy(gutter=2, page_size=64)
+    box = np.array([10, 10, 14])  # sides + 2 gutter, aligned to 2
+    want = (
+        (25 + 25 + 81) * 12 + (box**2).sum() * (12 + 8) + pk.n_pages * pk.width * pk.height * 8 + 81 * 24 * 2
+    )  # largest group: the 9 x 9 tile
+    assert host_bytes(sides, pk, pol, 2) == want
+    assert host_memory_bytes() > 1 << 26  # this machine has some memory

@@ -116,3 +116,42 @@ def test_render_rejects_bad_options(tmp_path, cornell_solution):
     assert r.returncode == 2 and ".png or .npy" in r.stderr
     r = iat("render", cornell_solution, "-o", tmp_path / "x.png", "--eye", "1,2")
     assert r.returncode == 2 and "--eye" in r.stderr
+
+
+def _bright_obj(tmp_path) -> Path:
+    (tmp_path / "bright.mtl").write_text("newmtl bright\nKd 1.5 0.5 0.25\n")
+    obj = tmp_path / "bright.obj"
+    obj.write_text("mtllib bright.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl bright\nf 1 2 3\n")
+    return obj
+
+
+def test_clamped_albedo_is_one_warning_line_on_stderr(tmp_path):
+    """G6: the loader's IATWarning comes out as one line, like errors, and the command still runs."""
+    obj = _bright_obj(tmp_path)
+    r = iat("info", obj, "--json")
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.splitlines() == [
+        f"iat info: warning: {obj}: albedo outside [0, 1] clamped in 1 material: 'bright' (1.5, 0.5, 0.25)"
+    ]
+    assert json.loads(r.stdout)["patches"] == 1
+
+
+def test_load_draws_a_progress_bar_on_a_terminal(tmp_path, monkeypatch, capsys):
+    """G2: ``iat info`` (and solve, bake, render through the same helper) draws the load's bar."""
+    import io
+
+    from iat import cli
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    err = Terminal()
+    monkeypatch.setattr(sys, "stderr", err)
+    assert cli.main(["info", str(CORNELL)]) == 0
+    text = err.getvalue()
+    assert "load cornell_box.glb" in text and "merging quads" in text and "1000/1000" in text
+    assert "patches" in capsys.readouterr().out
+    err.truncate(0)
+    assert cli.main(["info", str(CORNELL), "--json"]) == 0
+    assert err.getvalue() == ""  # --json: no bar

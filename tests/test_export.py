@@ -165,3 +165,49 @@ def test_khronos_validator_finds_no_errors(tmp_path, layered):
     report = json.loads(r.stdout)
     assert report["issues"]["numErrors"] == 0, report["issues"]["messages"]
     assert report["issues"]["numWarnings"] == 0, report["issues"]["messages"]
+
+
+def test_radiance_scale_leaves_out_emitters_and_gutters(tmp_path):
+    """One patch 1000x brighter and marked emissive: without that mark it decides the scale (its
+    texels are many); with it, the scale is the 99.5th percentile of the other patches' own tile
+    texels (each once: gutters and padding repeat edges; triangles' lower-left half) and mesh
+    vertices, recomputed here from the tile cache; the emitter clips to white in the file."""
+    import dataclasses
+
+    sol = grid_scene_solution(wavy_field, seed=2)
+    hot = int(np.argmax(sol.patch_depth()[:9]))  # a deep quad: many texels
+    patch_of_vertex = sol.vert_key // (sol.n + 1) ** 2
+    sol.vert_radiance[patch_of_vertex == hot] *= 1000.0
+    sol.patch_material[hot] = 1  # the light's own material: its edges are not matched to the walls'
+    baker = Baker(sol)
+    bk = baker.bake(BakePolicy(threshold=2, gutter=4))
+    assert bk.patch_textured[hot] and len(bk.mesh_radiance) and len(bk.patch_emissive) == 0
+    hot_value = float(sol.vert_radiance[patch_of_vertex == hot].max(axis=1).min())
+    assert radiance_scale(bk) >= hot_value  # today's behaviour without a scene: the emitter decides
+    emissive = np.zeros(len(sol.patch_is_quad), bool)
+    emissive[hot] = True
+    marked = dataclasses.replace(bk, patch_emissive=emissive)
+    # each tile read back at its atlas placement (the packer's, not the uv)
+    ps = np.flatnonzero(bk.patch_textured)
+    sides = (2 ** sol.patch_depth()[ps] + 1).astype(np.int64)
+    packing = baker._pack(ps, sides, bk.policy, 2 ** (bk.mip_levels - 1))
+    own = []
+    for p, m, (layer, x, y) in zip(ps, sides, packing.placements.tolist(), strict=True):
+        if emissive[p]:
+            continue
+        t = bk.pages[layer, y : y + m, x : x + m].max(axis=2)
+        keep = np.ones((m, m), bool) if sol.patch_is_quad[p] else np.add.outer(np.arange(m), np.arange(m)) < m
+        own.append(t[keep])
+    mesh = bk.mesh_radiance.max(axis=1)[~emissive[bk.mesh_patch]]
+    want = np.percentile(np.concatenate([mesh, *own]), 99.5)
+    s = radiance_scale(marked)
+    assert s == pytest.approx(want, rel=1e-6)
+    assert s < hot_value / 100
+    # in the file the emitter's texels are white, the others below it
+    g = GLTF2().load(str(export_glb(marked, tmp_path / "hot.glb")))
+    assert g.extras["iat"]["radiance_scale"] == pytest.approx(s)
+    page = read_image(g, 0)
+    k = np.flatnonzero(bk.tex_patch == hot)
+    _, H, W, _ = bk.pages.shape
+    x = int(round(bk.tex_uv[k, 0].mean() * W)), int(round(bk.tex_uv[k, 1].mean() * H))
+    assert (page[x[1], x[0]] == 255).all()

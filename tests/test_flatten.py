@@ -373,6 +373,66 @@ def test_scale_one_is_identity_and_errors(lin_sol):
         scale_tiles(t[None], 0.5, "fancy")
 
 
+# the previous per-tile scaling (float64 per-tap gathers; PIL per tile and channel), kept here
+# as the reference the batched matrix products must reproduce
+def _reference_scale(tile, scale, mode, method, triangle):
+    from PIL import Image
+
+    from iat.flatten import _axis_weights
+
+    n = tile.shape[0]
+    m = scaled_side(n, scale)
+    if m == n:
+        return tile.astype(np.float32)
+    if mode == "naive":
+        res = Image.Resampling.BICUBIC if method == "bicubic" else Image.Resampling.BILINEAR
+        out = np.empty((m, m, 3), dtype=np.float32)
+        for ch in range(3):
+            img = Image.fromarray(np.ascontiguousarray(tile[:, :, ch], dtype=np.float32))
+            out[:, :, ch] = np.asarray(img.resize((m, m), res), dtype=np.float32)
+        return out
+    pos = np.arange(m) * ((n - 1) / (m - 1))
+    pos[-1] = n - 1
+    kern = "cubic" if method == "bicubic" else "bilinear"
+    r = np.asarray(tile, dtype=np.float64)
+    for axis in (1, 0):
+        idx, w = _axis_weights(r.shape[axis], pos, kern)
+        x = np.moveaxis(r, axis, 0)
+        acc = np.zeros((m,) + x.shape[1:])
+        for t in range(idx.shape[1]):
+            acc += w[:, t][:, None, None] * x[idx[:, t]]
+        r = np.moveaxis(acc, 0, axis)
+    if triangle:
+        r = extend_triangle(r[None])[0]
+    return r.astype(np.float32)
+
+
+@pytest.mark.parametrize("mode", ["clamped", "naive"])
+@pytest.mark.parametrize("method", METHODS)
+def test_batched_scaling_equals_per_tile_scaling(wavy_sol, mode, method):
+    rng = np.random.default_rng(3)
+    for n in (2, 3, 5, 9, 17, 33, 65):
+        stack = (1.0 + rng.random((7, n, n, 3)) * 10.0 ** rng.uniform(-2, 2, (7, 1, 1, 1))).astype(np.float32)
+        tri = np.arange(7) % 3 == 0
+        for scale in [2.0 ** (-q / 4) for q in range(1, 9)] + [0.37, 1.6]:
+            got = scale_tiles(stack, scale, mode, method, triangle=tri)
+            for q in range(len(stack)):
+                want = _reference_scale(stack[q], scale, mode, method, bool(tri[q]) and mode == "clamped")
+                assert got[q].shape == want.shape and got.dtype == np.float32
+                # within float32 rounding of the values (PIL's and the reference's float64 sums)
+                np.testing.assert_allclose(got[q], want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
+                if mode == "clamped":  # corners are copies
+                    for b, a in ((0, 0), (0, -1), (-1, 0)):
+                        np.testing.assert_array_equal(got[q][b, a], stack[q][b, a])
+    # real tiles too (triangles and quads of a solution)
+    tiles = flatten(wavy_sol, None, method)
+    for p, t in tiles.items():
+        is_tri = not wavy_sol.patch_is_quad[p]
+        got = scale_tile(t, 0.59, mode, method, triangle=is_tri)
+        want = _reference_scale(t, 0.59, mode, method, is_tri and mode == "clamped")
+        np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
+
+
 # -- cache ----------------------------------------------------------------------------------
 
 

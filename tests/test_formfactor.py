@@ -139,3 +139,36 @@ def test_finite_and_bounded_for_any_receiver(point, normal, tilt):
     poly = np.array([[0, 0, 0], [1, 0, tilt], [1, 1, tilt], [0, 1, 0]], dtype=float)
     f = point_polygon([point], [n], poly)
     assert np.isfinite(f).all() and 0.0 <= f[0] <= 1.0
+
+
+def test_solid_angles_of_elements():
+    """iat.radiosity.pointlight: the six faces of a cube seen from inside sum to 4 pi, from its centre
+    each is 4 pi / 6, a face seen from a point on its own plane or from behind counts 0, and an
+    element touched by the point subtends at most 2 pi."""
+    from iat.radiosity.pointlight import element_solid_angle
+
+    c = np.array([[[0, 0, 0], [0, 1, 0], [1, 1, 0], [1, 0, 0]]], dtype=float)  # z = 0, inward normal +z
+    faces, normals = [], []
+    for axis in range(3):
+        for side in (0.0, 1.0):
+            f = np.zeros((4, 3))
+            f[:, axis] = side
+            f[:, (axis + 1) % 3] = [0, 1, 1, 0]
+            f[:, (axis + 2) % 3] = [0, 0, 1, 1]
+            faces.append(f)
+            nrm = np.zeros(3)
+            nrm[axis] = 1.0 if side == 0.0 else -1.0
+            normals.append(nrm)
+    faces, normals, quad = np.array(faces), np.array(normals), np.ones(6, dtype=bool)
+    for p in ([0.5, 0.5, 0.5], [0.1, 0.2, 0.7], [0.5, 0.5, 1e-6]):
+        om = element_solid_angle(np.array(p), faces, normals, quad)
+        assert om.sum() == pytest.approx(4 * np.pi, rel=1e-9)
+    assert element_solid_angle(np.array([0.5, 0.5, 0.5]), faces, normals, quad) == pytest.approx(
+        np.full(6, 4 * np.pi / 6)
+    )
+    assert element_solid_angle(np.array([0.0, 2.0, 0.5]), faces[:1], normals[:1], quad[:1])[0] == 0.0
+    up = np.array([[0, 0, 1.0]])
+    assert element_solid_angle(np.array([0.5, 0.5, -1.0]), c, up, quad[:1])[0] == 0.0
+    assert element_solid_angle(np.array([0.5, 0.5, 1e-9]), c, up, quad[:1])[0] == pytest.approx(
+        2 * np.pi, rel=1e-6
+    )

@@ -257,6 +257,35 @@ def test_uniformly_lit_floor_stays_shallow():
     assert sol.stats["elements"] == 4
 
 
+def test_uniform_criterion_splits_every_element_to_max_depth():
+    """criterion="uniform" (the benchmark's uniform subdivision): every leaf at max_depth, even
+    under light that is exactly linear (which the adaptive criteria never split)."""
+    scene = floor_scene(occluder=False, light_height=30.0)
+    sol = solve(scene, SolveOptions(max_depth=3, max_shots=0, criterion="uniform", min_element_size=0.0))
+    assert (sol.forest.leaf_level == 3).all() and sol.stats["elements"] == len(scene.patch_area) * 4**3
+
+
+def test_point_light_touching_a_wall_shoots_what_the_wall_received():
+    """D3: the power the floor shoots for a point light 0.1 mm above it is what it received (I x the
+    solid angle the floor subtends, 2 pi at the limit), not the 1/d^2 vertex peak spread over its
+    elements (10^4 times more before the fix)."""
+    from iat.radiosity.solver import _Run
+    from iat.radiosity.visibility import Visibility
+
+    scene = floor_scene(occluder=False, light_height=1.0)
+    scene.lights = [Light(kind="point", position=[0.0, 1e-4, 0.0], intensity=1.0)]  # over a vertex
+    opts = SolveOptions(max_depth=4, min_element_size=0.0)
+    with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
+        run = _Run(scene, opts, None, vis, 0.0)
+        run.mesh_by_direct_light()
+        shot = run.patch_power(run.unshot).sum()
+        peak = run.patch_power(run.reflected).sum()
+    light = scene.lights[0]
+    received = float(light.radiant_intensity @ LUMINANCE) * 2 * np.pi * 0.6  # rho = 0.6, d << floor
+    assert shot == pytest.approx(received, rel=0.01)
+    assert peak > 100 * received  # the exact vertex values, which the mesh would have shot
+
+
 def test_vertex_values_are_exact_not_interpolated():
     """Every vertex, however late it was created, holds its own direct evaluation."""
     scene = floor_scene(occluder=True, light_height=2.0)

@@ -40,7 +40,7 @@ def test_cornell_box_against_mitsuba(egl_ctx):
     scene = load_scene(MODEL)
     camera = scene.default_camera()
     ref = render_reference_cached(scene, camera, SIZE, spp=512, cache_dir=REFS, seed=1)
-    sol = solve(scene, SolveOptions(max_depth=5))
+    sol = solve(scene, SolveOptions())  # the defaults: issue 4 asks for 5 % within 5 s on 2 cores
     renderer = Renderer(egl_ctx)
     try:
         renderer.set_solution(sol)
@@ -61,7 +61,9 @@ def test_cornell_box_against_mitsuba(egl_ctx):
     bl = a > 0.05
     rel_blocks = np.abs(a - b)[bl].sum() / a[bl].sum()
     print(f"relative error: smooth lit pixels {rel_smooth:.4f}, 8x8 blocks {rel_blocks:.4f}")
-    assert rel_smooth < 0.06  # measured 0.043 (0.035 against a 4096 spp reference)
-    assert rel_blocks < 0.10  # measured 0.076
+    # measured 0.0446 (seeds 1, 2: 0.0440, 0.0466; 0.0524 before elements longer than 1/24 of the
+    # square root of the scene's area split on a quarter of the tolerance); solver_bench.py cornell
+    assert rel_smooth < 0.05
+    assert rel_blocks < 0.09  # measured 0.0753
     # no overall bias in the light: mean over the smooth pixels within 3 %
-    assert img[mask].mean() == pytest.approx(ref[mask].mean(), rel=0.04)  # measured -2 % (1 % left unshot)
+    assert img[mask].mean() == pytest.approx(ref[mask].mean(), rel=0.03)  # measured -1.8 %

@@ -457,3 +457,115 @@ def test_failed_write_leaves_old_file(tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["img.png"]  # no temp file left
     with pytest.raises(ValueError, match=r"\(h, w, 3\)"):
         save_png(target, np.ones((2, 2), np.float32))
+
+
+# -- pixel formats on the GPU -----------------------------------------------------------------
+
+
+def _internal_format(renderer) -> int:
+    """GL_TEXTURE_INTERNAL_FORMAT of level 0 of the page texture (read with glGetTexLevelParameteriv)."""
+    import ctypes
+
+    from iat.render import _libgl
+
+    gl = _libgl()
+    gl.glGetTexLevelParameteriv.argtypes = [
+        ctypes.c_uint,
+        ctypes.c_int,
+        ctypes.c_uint,
+        ctypes.POINTER(ctypes.c_int),
+    ]
+    renderer._pages.use(0)
+    v = ctypes.c_int()
+    gl.glGetTexLevelParameteriv(0x8C1A, 0, 0x1003, ctypes.byref(v))
+    return v.value
+
+
+@pytest.mark.parametrize("mipmaps", [False, True])
+def test_rgba8_pages_are_srgb_and_dark_texels_survive(renderer, mipmaps):
+    """rgba8 texels are sRGB8 of page / page_scale in a GL_SRGB8_ALPHA8 texture: decoded to linear
+    before filtering, so a texel at 0.125 % of the scale (sRGB code 4; linear UNORM8 would round it
+    to 0, black) renders as the value the baker stored; mipmaps are built in linear space."""
+    from iat.bake import quantise_rgba8
+
+    scale = 8.0
+    page = np.empty((4, 4, 3), np.float32)
+    page[:] = [0.01, 0.4, 5.0]  # 0.125 %, 5 % and 62 % of the scale
+    q = quantise_rgba8(page, scale)
+    assert abs(q[0, 0, 0] / 0.01 - 1) < 0.05  # the baker's own rounding is fine
+    renderer.set_baked(baked_of(page, "rgba8", mipmaps, page_scale=scale, mip_levels=2))
+    assert _internal_format(renderer) == 0x8C43  # GL_SRGB8_ALPHA8
+    img = renderer.render(CAM, (W, H), "iat")
+    lit = img[(img > 0).any(axis=2)]
+    assert len(lit) > 500
+    # llvmpipe's sRGB decode is approximate (2.5 % at code 4, 0.4 % at code 89; exact on GPUs'
+    # tables); the linear upload this replaces showed the dark channel as 0
+    np.testing.assert_allclose(lit, np.broadcast_to(q[0, 0], lit.shape), rtol=0.03)
+    assert renderer.ctx.error == "GL_NO_ERROR"
+
+
+def test_rgb9e5_pages_upload_as_rgb9e5_and_render_the_stored_values(renderer):
+    from iat.bake import quantise_rgb9e5
+
+    page = page_from_field(5, 5) * np.float32([3.0, 0.01, 700.0])  # channels 5 decades apart
+    q = quantise_rgb9e5(page)
+    renderer.set_baked(baked_of(q, "rgb9e5"))
+    assert _internal_format(renderer) == 0x8C3D  # GL_RGB9_E5: 4 bytes a texel
+    got = renderer.render(CAM, (W, H), "iat")
+    renderer.set_baked(baked_of(q, "rgba32f"))  # the same stored values, exactly
+    want = renderer.render(CAM, (W, H), "iat")
+    assert (want > 0).any(axis=2).sum() > 500
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-7)
+    assert renderer.ctx.error == "GL_NO_ERROR"
+
+
+def test_same_baked_pages_are_not_uploaded_twice(renderer):
+    """The Baker's cached pages (read-only) already on the GPU are not written again; other pages are.
+    Shown with real GL: texels overwritten behind the renderer's back stay until other pages come."""
+    from iat.bake import BakePolicy, Baker
+    from tests.test_bake import grid_scene_solution
+
+    b = Baker(grid_scene_solution())
+    cam = Camera(eye=[2.0, 1.5, 5.0], target=[2.0, 1.5, 0.0], yfov=60.0)
+    bk = b.bake(BakePolicy(threshold=0, mipmaps=False))
+    assert bk.gpu_form() is not None and not bk.gpu_form().flags.writeable
+    renderer.set_baked(bk)
+    first = renderer.render(cam, (W, H), "iat")
+    assert (first > 0).any(axis=2).sum() > 500
+    tex = renderer._pages
+    tex.write(
+        np.zeros((tex.height, tex.width, 4), np.float16).tobytes(),
+        viewport=(0, 0, 0, tex.width, tex.height, 1),
+    )
+    renderer.set_baked(b.bake(BakePolicy(threshold=0, mipmaps=False)))  # cache hit: the same array
+    assert renderer.render(cam, (W, H), "iat").max() == 0.0
+    renderer.set_baked(b.bake(BakePolicy(threshold=0, mipmaps=False, scale=0.5)))  # other pages
+    renderer.set_baked(bk)
+    np.testing.assert_array_equal(renderer.render(cam, (W, H), "iat"), first)
+
+
+def test_threshold_walk_on_one_renderer_matches_fresh_renderers(renderer, egl_ctx):
+    """Mesh parts are prefixes of one depth-sorted mesh, written once and drawn by count; pages are
+    written without conversion. A threshold walk down and up on one renderer draws, at every step,
+    exactly what a fresh renderer draws for that bake."""
+    from iat.bake import BakePolicy, Baker
+    from tests.test_bake import grid_scene_solution
+
+    sol = grid_scene_solution()
+    b = Baker(sol)
+    cam = Camera(eye=[2.0, 1.5, 5.0], target=[2.0, 1.5, 0.0], yfov=60.0)
+    deepest = int(sol.patch_depth().max())
+    walk = list(range(deepest + 1, -1, -1)) + list(range(1, deepest + 2))
+    for t in walk:
+        bk = b.bake(BakePolicy(threshold=t))
+        renderer.set_baked(bk)
+        got = renderer.render(cam, (W, H), "iat")
+        fresh = Renderer(egl_ctx)
+        try:
+            fresh.set_baked(bk)
+            want = fresh.render(cam, (W, H), "iat")
+        finally:
+            fresh.release()
+        assert (want > 0).any(axis=2).sum() > 500
+        np.testing.assert_array_equal(got, want, err_msg=f"threshold {t}")
+        assert renderer.stats()["triangles"] == len(bk.mesh_indices) + len(bk.tex_indices)

@@ -21,7 +21,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
-from iat.errors import LoadError, OptionError
+from iat.errors import Cancelled, IATWarning, LoadError, OptionError
 from iat.scene import (
     Light,
     Scene,
@@ -152,6 +152,7 @@ class Gltf:
         return Path(path)
 
 
+ROOT = Path(__file__).resolve().parents[1]
 QUAD = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)  # faces +Z
 QUAD_TRIS = [[0, 1, 2], [2, 3, 0]]  # trimesh's own split of a quad
 
@@ -362,6 +363,87 @@ def test_external_texture_in_gltf(tmp_path):
     s = load_scene(g.save(tmp_path / "ext.gltf"))
     np.testing.assert_allclose(s.materials[0].albedo, [0.25, 0.5, 0.75], rtol=1e-6)
     assert s.materials[0].detail.shape == (4, 4, 3)
+
+
+def test_albedo_above_one_is_clamped_with_a_warning(tmp_path):
+    """G6: an albedo outside [0, 1] in a file is clamped, and a warning names the file and materials."""
+    write(tmp_path / "bright.mtl", "newmtl bright\nKd 1.5 0.5 0.25\nnewmtl fine\nKd 0.5 0.5 0.5\n")
+    obj = write(
+        tmp_path / "bright.obj",
+        "mtllib bright.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+        "usemtl bright\nf 1 2 3\nusemtl fine\nf 1 3 4\n",
+    )
+    with pytest.warns(IATWarning) as rec:
+        s = load_scene(obj)
+    assert [str(w.message) for w in rec] == [
+        f"{obj}: albedo outside [0, 1] clamped in 1 material: 'bright' (1.5, 0.5, 0.25)"
+    ]
+    assert rec[0].filename == __file__  # reported at the caller of load_scene
+    by_name = {m.name: m for m in s.materials}
+    np.testing.assert_array_equal(by_name["bright"].albedo, [1.0, 0.5, 0.25])
+    np.testing.assert_array_equal(by_name["fine"].albedo, [0.5, 0.5, 0.5])
+
+    # glTF: baseColorFactor above 1, with a texture: the detail texture keeps mean == albedo
+    g = Gltf()
+    white = g.texture_png(np.full((2, 2, 3), 255, dtype=np.uint8))
+    a = g.material(base=(2.0, 0.5, 3.0, 1.0), texture=white, name="hot")
+    b = g.material(base=(1.25, 1.0, 1.0, 1.0), name="warm")
+    g.node(mesh=g.mesh(QUAD, QUAD_TRIS, material=a, uv=QUAD[:, :2]))
+    g.node(mesh=g.mesh(QUAD + [0, 0, 1], QUAD_TRIS, material=b))
+    path = g.save(tmp_path / "hot.glb")
+    with pytest.warns(IATWarning) as rec:
+        s = load_scene(path)
+    assert [str(w.message) for w in rec] == [
+        f"{path}: albedo outside [0, 1] clamped in 2 materials: 'hot' (2, 0.5, 3), 'warm' (1.25, 1, 1)"
+    ]
+    hot = {m.name: m for m in s.materials}["hot"]
+    np.testing.assert_allclose(hot.albedo, [1.0, 0.5, 1.0])
+    np.testing.assert_allclose(hot.detail.reshape(-1, 3).mean(axis=0), hot.albedo, rtol=1e-6)
+
+
+def test_albedo_in_range_gives_no_warning(tmp_path):
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", IATWarning)
+        s = load_scene(quad_gltf(tmp_path / "one.glb", base=(1.0, 0.0, 1.0, 1.0)))
+    np.testing.assert_array_equal(s.materials[0].albedo, [1.0, 0.0, 1.0])
+
+
+def test_load_progress_is_monotone_and_ends_at_one(tmp_path):
+    """G2: progress(fraction, message) at every stage, non-decreasing from 0 to 1; None continues."""
+    calls = []
+    path = ROOT / "sample_models" / "cornell_box.glb"
+    s = load_scene(path, progress=lambda f, m: calls.append((f, m)))
+    f = [c[0] for c in calls]
+    assert f[0] == 0.0 and f[-1] == 1.0 and all(b >= a for a, b in zip(f, f[1:], strict=False))
+    assert [m for _, m in calls] == [
+        "reading cornell_box.glb",
+        "placing geometry",
+        "welding vertices",
+        "merging quads",
+        "reading lights and cameras",
+        "loaded",
+    ]
+    calls.clear()
+    split = load_scene(path, max_edge=0.5, progress=lambda f, m: calls.append((f, m)) or True)
+    assert "splitting patches" in [m for _, m in calls] and calls[-1] == (1.0, "loaded")
+    assert split.n_patches > s.n_patches
+
+
+@pytest.mark.parametrize("stop_at", ["reading cornell_box.glb", "welding vertices", "loaded"])
+def test_load_progress_returning_false_cancels(stop_at):
+    path = ROOT / "sample_models" / "cornell_box.glb"
+    seen = []
+
+    def progress(f, m):
+        seen.append(m)
+        return m != stop_at
+
+    with pytest.raises(Cancelled) as e:
+        load_scene(path, progress=progress)
+    assert str(e.value) == f"{path}: load cancelled"
+    assert seen[-1] == stop_at
 
 
 def test_obj_materials_kd_ke(tmp_path):

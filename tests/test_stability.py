@@ -443,8 +443,10 @@ path = write_binary_stl(sys.argv[1], V, F)
 del V, F
 tracemalloc.start()
 t0 = time.perf_counter()
-scene = load_scene(path)
+load_calls = []
+scene = load_scene(path, progress=lambda f, m: load_calls.append((time.perf_counter(), f, m)))
 t_load = time.perf_counter() - t0
+load_stamps = [t0] + [c[0] for c in load_calls] + [t0 + t_load]
 _, peak_load = tracemalloc.get_traced_memory()
 tracemalloc.stop()  # the solve's memory: ru_maxrss below
 scene.lights = [point_light(0.5, 0.5, 1.0, 1.0)]
@@ -462,6 +464,8 @@ print(json.dumps(dict(
     max_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
     progress_calls=len(calls), progress_fractions=[c[1] for c in calls],
     progress_max_gap_s=float(np.diff(stamps).max()),
+    load_progress_calls=len(load_calls), load_progress_fractions=[c[1] for c in load_calls],
+    load_progress_max_gap_s=float(np.diff(load_stamps).max()),
     finite=bool(np.isfinite(sol.vert_radiance).all()), vertices=int(len(sol.vert_key)),
 )))
 """
@@ -485,7 +489,9 @@ def test_geometry_a_million_triangles(tmp_path):
     record(
         "million_triangles",
         **{
-            k: (round(v, 2) if isinstance(v, float) else v) for k, v in m.items() if k != "progress_fractions"
+            k: (round(v, 2) if isinstance(v, float) else v)
+            for k, v in m.items()
+            if k not in ("progress_fractions", "load_progress_fractions")
         },
     )
     assert m["patches"] == 501264 and m["quads"] == 501264 and m["finite"]
@@ -493,6 +499,9 @@ def test_geometry_a_million_triangles(tmp_path):
     assert m["load_s"] + m["solve_s"] < 240
     f = m["progress_fractions"]
     assert f and f[-1] == 1.0 and all(b >= a for a, b in zip(f, f[1:], strict=False))
+    f = m["load_progress_fractions"]  # G2: the load reports progress at each stage, 0 to 1
+    assert len(f) >= 5 and f[0] == 0.0 and f[-1] == 1.0
+    assert all(b >= a for a, b in zip(f, f[1:], strict=False))
 
 
 # =================================================================================================
@@ -523,15 +532,11 @@ def test_lighting_point_light_almost_touching_a_wall():
     assert (f.leaf_level[centre] == depth).all()
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="DEFECT: the mesh interpolates the 1/d^2 peak of a point light "
-    "near a wall over whole elements, so the wall re-emits ~10^4 x the light it receives "
-    "(solver._Context.light_irradiance + patch_power)",
-)
 def test_lighting_point_light_near_a_wall_conserves_energy():
     """Physically the indirect light in a closed room barely depends on how close the light is to a
-    wall (the wall catches about half the light either way)."""
+    wall (the wall catches about half the light either way). Fixed D3: an element shoots the power it
+    received (intensity x its solid angle from the light x visible fraction, finite as d -> 0), not
+    its interpolated vertex irradiance (gain 0.95 at depth 3; it was ~1.5e4)."""
     far_wall = {}
     for d in (0.1, 1e-4):
         sol = solve(ss.room_with_light([0.5, 0.5, d]), opts(max_depth=3))
@@ -543,7 +548,7 @@ def test_lighting_point_light_near_a_wall_conserves_energy():
         far_wall_radiance_d_1e_4=far_wall[1e-4],
         energy_gain=far_wall[1e-4] / far_wall[0.1],
     )
-    assert far_wall[1e-4] < 3 * far_wall[0.1]
+    assert far_wall[0.1] / 3 < far_wall[1e-4] < 3 * far_wall[0.1]
 
 
 def test_lighting_emitter_facing_away_and_no_light():
@@ -589,8 +594,8 @@ def test_lighting_no_light_renders_black(renderer):
 
 def test_lighting_albedo_zero_and_albedo_above_one_is_clamped_at_load(tmp_path):
     """Albedo 0: non-emitters are exactly black. Albedo > 1 in a file is clamped to 1 at load
-    (Kd 1.5 -> 1.0); albedo 1 in a closed box never converges: the solve stops at max_shots and
-    reports the unshot light instead of looping."""
+    (Kd 1.5 -> 1.0) with an IATWarning naming the file and the material; albedo 1 in a closed box
+    never converges: the solve stops at max_shots and reports the unshot light instead of looping."""
     sol = solve(ss.room_with_light([0.5, 0.5, 0.5], albedo=0.0), opts(max_depth=2))
     assert sol.vert_radiance.max() == 0.0 and sol.stats["shots"] == 0
     mtl = tmp_path / "bright.mtl"
@@ -601,7 +606,11 @@ def test_lighting_albedo_zero_and_albedo_above_one_is_clamped_at_load(tmp_path):
         [[0, 1, 2]],
         extra="mtllib bright.mtl\nusemtl bright",
     )
-    scene = load_scene(obj)
+    from iat.errors import IATWarning
+
+    clamped = r"bright.obj: albedo outside \[0, 1\] clamped in 1 material: 'bright' \(1.5, 0.5, 0.25\)$"
+    with pytest.warns(IATWarning, match=clamped):
+        scene = load_scene(obj)
     assert np.allclose(scene.materials[0].albedo, [1.0, 0.5, 0.25])
     t0 = time.perf_counter()
     sol1 = solve(ss.room_with_light([0.5, 0.5, 0.5], albedo=1.0), opts(max_depth=2, max_shots=200))
@@ -618,14 +627,26 @@ def test_lighting_albedo_zero_and_albedo_above_one_is_clamped_at_load(tmp_path):
     assert np.isfinite(sol1.vert_radiance).all()
 
 
-def test_lighting_albedo_above_one_in_memory_is_rejected():
+def test_lighting_albedo_above_one_in_memory_is_clamped_with_a_warning():
+    """An in-memory scene with albedo 1.5 (no loader clamped it): the solve clamps it to 1 with an
+    IATWarning naming the material, so the result equals the albedo-1 solve (finite, stops at
+    max_shots); a negative albedo is clamped to 0 the same way; NaN stays an OptionError."""
+    from iat.errors import IATWarning
+
     scene = ss.room_with_light([0.5, 0.5, 0.5], albedo=1.5)
-    try:
+    clamped = r"albedo outside \[0, 1\] clamped in 1 material: 'wall' \(1.5, 1.5, 1.5\)"
+    with pytest.warns(IATWarning, match=clamped):
         sol = solve(scene, opts(max_depth=2, max_shots=300))
-    except OptionError:
-        return
+    one = solve(ss.room_with_light([0.5, 0.5, 0.5], albedo=1.0), opts(max_depth=2, max_shots=300))
     record("albedo", albedo1_5_max_radiance_after_300_shots=float(sol.vert_radiance.max()))
-    raise AssertionError("albedo 1.5 accepted")
+    assert np.isfinite(sol.vert_radiance).all()
+    assert np.allclose(sol.patch_albedo, 1.0)
+    assert np.allclose(sol.vert_radiance, one.vert_radiance)
+    with pytest.warns(IATWarning, match="'wall' \\(-0.5"):
+        dark = solve(ss.room_with_light([0.5, 0.5, 0.5], albedo=-0.5), opts(max_depth=2))
+    assert dark.vert_radiance.max() == 0.0
+    with pytest.raises(OptionError, match="albedo"):
+        solve(ss.room_with_light([0.5, 0.5, 0.5], albedo=float("nan")), opts(max_depth=2))
 
 
 def _format_figures(renderer, sol, scene):
@@ -687,11 +708,6 @@ def test_lighting_rgb9e5_bake_renders(renderer):
     renderer.set_baked(Baker(sol, scene).bake(BakePolicy(threshold=0, pixel_format="rgb9e5")))
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="DEFECT: rgba8 pages are sRGB-quantised by the baker but "
-    "uploaded as linear 8-bit (render._set_pages, dtype f1): dim texels shown 30-100 % off",
-)
 def test_lighting_rgba8_gpu_matches_the_baked_pages(renderer):
     scene = ss.floor_under_light(height=0.3)
     sol = solve(scene, opts(max_depth=4))
@@ -930,12 +946,6 @@ except MemoryError as e:
 """
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="DEFECT: a scale whose tiles still fit a 16384 page but not in memory "
-    "(12 tiles of 16001^2: 12 GiB of pages, a 69 GiB float64 temporary) is not refused: the "
-    "bake allocates until MemoryError or the OOM killer (bake.Baker.bake, flatten.scale_tiles)",
-)
 def test_baking_texture_memory_beyond_the_host_is_a_bake_error(tmp_path):
     script = tmp_path / "huge.py"
     script.write_text(_HUGE_BAKE)

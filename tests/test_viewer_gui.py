@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tests.conftest import run_gui, wait_until
+
 ROOT = Path(__file__).resolve().parent.parent
-HAS_DISPLAY = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-needs_display = pytest.mark.skipif(not HAS_DISPLAY, reason="no DISPLAY: run under xvfb-run (make test does)")
 
 # Tolerances, in 8-bit sRGB levels over the 3D view (about 700 x 780 pixels at 1280 x 800):
 # mesh (Gouraud on the leaf triangles) and IAT (bilinear texels at the lattice points) agree at
@@ -36,39 +36,10 @@ DIFF_BRIGHT = 0.02  # fraction of pixels above 64 levels (a quarter of full scal
 SPLIT_EXACT = 1.0  # each side of the split equals the single-mode image there
 
 
-def wait_until(ctx, cond, seconds: float, what: str) -> None:
-    end = time.monotonic() + seconds
-    while not cond():
-        if time.monotonic() > end:
-            raise AssertionError(f"timed out after {seconds} s waiting for {what}")
-        ctx.yield_()
-
-
-def relaxed_watchdog() -> None:
-    """The engine stops a test after 60 s; a loaded machine (llvmpipe) can be slower than that."""
-    from imgui_bundle import hello_imgui, imgui
-
-    io = imgui.test_engine.get_io(hello_imgui.get_imgui_test_engine())
-    io.config_watchdog_warning = 300.0
-    io.config_watchdog_kill_test = 600.0
-
-
 @pytest.mark.gui
-@needs_display
 @pytest.mark.filterwarnings("ignore:Ignoring chunk:UserWarning")  # pygltflib on the broken file
-def test_viewer_end_to_end(tmp_path, monkeypatch):
-    if os.environ.get("IAT_GUI_CHILD") != "1":
-        # Mesa aborts when a GLX window context is made in a process that already holds the
-        # session's EGL context (tests/conftest.py): run this test alone in a child process.
-        r = subprocess.run(
-            [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", f"{__file__}::test_viewer_end_to_end"],
-            env={**os.environ, "IAT_GUI_CHILD": "1"},
-            capture_output=True,
-            text=True,
-            timeout=900,
-        )
-        assert r.returncode == 0, r.stdout[-6000:] + r.stderr[-3000:]
-        assert " passed" in r.stdout, r.stdout[-3000:]
+def test_viewer_end_to_end(tmp_path, monkeypatch, gui_child):
+    if gui_child():  # ran alone in a child process (see tests/conftest.py)
         return
     from imgui_bundle import ImVec2, imgui
     from imgui_bundle.immapp import testing
@@ -201,11 +172,7 @@ def test_viewer_end_to_end(tmp_path, monkeypatch):
         ctx.yield_(2)
         got["error_cleared"] = s.error
 
-    params = app.runner_params()
-    params.callbacks.register_tests = relaxed_watchdog
-    t0 = time.monotonic()
-    testing.run(test_function=drive, runner_params=params, add_ons_params=app.addons())
-    got["seconds"] = time.monotonic() - t0
+    got["seconds"] = run_gui(app, drive)
 
     deepest = got["deepest"]
     mesh_tris = s.mesh_triangles
@@ -379,3 +346,34 @@ def test_open_job_cancel_stops_the_solve(tmp_path, monkeypatch):
     assert time.monotonic() - t0 < 30  # far less than a depth-8 solve
     assert job.result is None and "cancelled" in job.error
     assert not list((tmp_path / "cache").glob("*.npz"))  # a cancelled solve is not cached
+
+
+def test_open_job_reports_the_load_and_cancels_it(tmp_path, monkeypatch):
+    """G2: the open job shows the model load's progress (``loading: ...``) and a cancel stops the load."""
+    from iat.bake import BakePolicy
+    from iat.radiosity import SolveOptions
+    from viewer.state import OpenJob, default_model
+
+    monkeypatch.setenv("IAT_CACHE_DIR", str(tmp_path / "cache"))
+    seen = []
+    original = OpenJob._load_progress
+
+    def spy(self, fraction, message):
+        seen.append((fraction, message))
+        if message == "welding vertices":
+            self.cancel()  # as the Cancel button would, mid-load
+        keep_going = original(self, fraction, message)
+        seen.append((self.fraction, self.message, self.eta is None or self.eta >= 0))
+        return keep_going
+
+    monkeypatch.setattr(OpenJob, "_load_progress", spy)
+    job = OpenJob(default_model(), SolveOptions(max_depth=2), BakePolicy())
+    assert job.join(60)
+    assert job.result is None and job.error == f"{default_model()}: cancelled"
+    fraction = seen[-2][0]
+    assert 0 < fraction < 1 and seen[-2:] == [
+        (fraction, "welding vertices"),
+        (fraction, "loading: welding vertices", True),
+    ]
+    assert [m for _, m in seen[0::2]] == ["reading cornell_box.glb", "placing geometry", "welding vertices"]
+    assert not job.solving and not list((tmp_path / "cache").glob("*.npz"))

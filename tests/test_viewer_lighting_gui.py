@@ -18,18 +18,14 @@ when a GLX window context is made in a process holding the EGL context of confte
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.conftest import run_gui, wait_until
+
 ROOT = Path(__file__).resolve().parent.parent
-HAS_DISPLAY = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-needs_display = pytest.mark.skipif(not HAS_DISPLAY, reason="no DISPLAY: run under xvfb-run (make test does)")
 
 #: mean |before - after| in 8-bit levels over the 3D view that counts as "the picture changed";
 #: moving the bulb across the box or going from day to night changes it by tens of levels
@@ -46,22 +42,6 @@ STATES = {
 }
 
 
-def wait_until(ctx, cond, seconds: float, what: str) -> None:
-    end = time.monotonic() + seconds
-    while not cond():
-        if time.monotonic() > end:
-            raise AssertionError(f"timed out after {seconds} s waiting for {what}")
-        ctx.yield_()
-
-
-def relaxed_watchdog() -> None:
-    from imgui_bundle import hello_imgui, imgui
-
-    io = imgui.test_engine.get_io(hello_imgui.get_imgui_test_engine())
-    io.config_watchdog_warning = 300.0
-    io.config_watchdog_kill_test = 600.0
-
-
 def make_model(path: Path) -> Path:
     from iat import lighting
     from iat.scene import load_scene
@@ -72,26 +52,8 @@ def make_model(path: Path) -> Path:
 
 
 @pytest.mark.gui
-@needs_display
-def test_viewer_lighting_end_to_end(tmp_path, monkeypatch):
-    if os.environ.get("IAT_GUI_CHILD") != "1":
-        r = subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "pytest",
-                "-q",
-                "-p",
-                "no:cacheprovider",
-                f"{__file__}::test_viewer_lighting_end_to_end",
-            ],
-            env={**os.environ, "IAT_GUI_CHILD": "1"},
-            capture_output=True,
-            text=True,
-            timeout=900,
-        )
-        assert r.returncode == 0, r.stdout[-6000:] + r.stderr[-3000:]
-        assert " passed" in r.stdout, r.stdout[-3000:]
+def test_viewer_lighting_end_to_end(tmp_path, monkeypatch, gui_child):
+    if gui_child():  # ran alone in a child process (see tests/conftest.py)
         return
     from imgui_bundle import ImVec2, imgui
     from imgui_bundle.immapp import testing
@@ -207,11 +169,7 @@ def test_viewer_lighting_end_to_end(tmp_path, monkeypatch):
         settle(ctx)
         got["day_off_baked"] = type(s.baked).__name__
 
-    params = app.runner_params()
-    params.callbacks.register_tests = relaxed_watchdog
-    t0 = time.monotonic()
-    testing.run(test_function=drive, runner_params=params, add_ons_params=app.addons())
-    got["seconds"] = time.monotonic() - t0
+    got["seconds"] = run_gui(app, drive)
     assert not s.error, s.error
 
     # 1. the drag: the bulb was picked (not a look-around), moved at its height, and re-solved

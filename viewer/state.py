@@ -44,6 +44,7 @@ from iat.bake import BakePolicy, Baker
 from iat.camera import Camera
 from iat.errors import Cancelled, IATError, LoadError
 from iat.radiosity import SolveOptions
+from iat.worker import LatestWorker
 
 from .navigation import CameraPath, Navigator, PathPlayer, PathRecorder
 
@@ -144,7 +145,7 @@ class BakeSource:
         return Baker(self.solution, self.scene)
 
 
-class BakeWorker:
+class BakeWorker(LatestWorker):
     """Bakes on one worker thread; :meth:`submit` never blocks, :meth:`poll` returns the newest result.
 
     baker : the :class:`~iat.bake.Baker` (used by this thread only: a Baker is not thread-safe)
@@ -154,15 +155,13 @@ class BakeWorker:
         self.baker = baker
         self.solutions = None  # the set baked with bake_set, or None
         self.source = 0  # generation of the source baked from (0: the one given here)
-        self._cv = threading.Condition()
-        self._pending: BakePolicy | None = None
         self._pending_source: tuple[int, BakeSource] | None = None
-        self._result: BakeResult | None = None
-        self._running = False
-        self._stop = False
-        self.bakes = 0
-        self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
-        self._thread.start()
+        super().__init__(name)
+
+    @property
+    def bakes(self) -> int:
+        """Bakes finished so far (failed ones included)."""
+        return self.published
 
     def submit(
         self, policy: BakePolicy, source: BakeSource | None = None, generation: int | None = None
@@ -170,113 +169,49 @@ class BakeWorker:
         """Ask for a bake of ``policy``; replaces a request not started yet. ``source`` switches
         to another solution (or set) first; its ``generation`` comes back in the result."""
         with self._cv:
-            self._pending = policy
             if source is not None:
                 gen = self.source + 1 if generation is None else int(generation)
                 self._pending_source = (gen, source)
-            self._cv.notify()
+            self._request(policy)
 
-    def poll(self) -> BakeResult | None:
-        """The newest finished result not yet returned, or None."""
-        with self._cv:
-            r, self._result = self._result, None
-            return r
+    def _take(self) -> tuple[BakePolicy, tuple[int, BakeSource] | None]:
+        source, self._pending_source = self._pending_source, None
+        return super()._take(), source
 
-    @property
-    def busy(self) -> bool:
-        """A bake is running or waiting to run."""
-        with self._cv:
-            return self._running or self._pending is not None
-
-    def wait(self, timeout: float = 30.0) -> bool:
-        """Block until idle (tests and the benchmark); True when idle."""
-        end = time.monotonic() + timeout
-        with self._cv:
-            while self._running or self._pending is not None:
-                left = end - time.monotonic()
-                if left <= 0:
-                    return False
-                self._cv.wait(left)
-        return True
-
-    def close(self, timeout: float = 10.0) -> None:
-        """Stop the thread (after the bake in progress, if any)."""
-        with self._cv:
-            self._stop = True
-            self._pending = None
-            self._cv.notify_all()
-        self._thread.join(timeout)
-
-    def _loop(self) -> None:
-        while True:
-            with self._cv:
-                while self._pending is None and not self._stop:
-                    self._cv.wait()
-                if self._stop:
-                    return
-                policy, self._pending = self._pending, None
-                source, self._pending_source = self._pending_source, None
-                self._running = True
-            t0 = time.perf_counter()
-            try:
-                if source is not None:
-                    gen, src = source
-                    self.baker, self.solutions, self.source = src.baker(), src.solutions, gen
-                if self.solutions is not None:
-                    r = BakeResult(policy, baked=self.baker.bake_set(self.solutions, policy))
-                else:
-                    r = BakeResult(policy, baked=self.baker.bake(policy))
-            except Exception as e:  # shown in the window; the viewer keeps the last good bake
-                log.debug("bake failed", exc_info=True)
-                r = BakeResult(policy, error=error_text(e))
-            r.seconds = time.perf_counter() - t0
-            r.source = self.source
-            with self._cv:
-                self._result = r
-                self._running = False
-                self.bakes += 1
-                self._cv.notify_all()
+    def _work(self, request) -> None:
+        policy, source = request
+        t0 = time.perf_counter()
+        try:
+            if source is not None:
+                gen, src = source
+                self.baker, self.solutions, self.source = src.baker(), src.solutions, gen
+            if self.solutions is not None:
+                r = BakeResult(policy, baked=self.baker.bake_set(self.solutions, policy))
+            else:
+                r = BakeResult(policy, baked=self.baker.bake(policy))
+        except Exception as e:  # shown in the window; the viewer keeps the last good bake
+            log.debug("bake failed", exc_info=True)
+            r = BakeResult(policy, error=error_text(e))
+        r.seconds = time.perf_counter() - t0
+        r.source = self.source
+        self._publish(r)
 
 
-@dataclass
-class Opened:
-    """A model or solution ready to show (made by :class:`OpenJob`)."""
+class _Job:
+    """One piece of work on a daemon thread: progress (``fraction``, ``message``), :meth:`cancel`,
+    then ``result`` or ``error`` (one line). Subclasses set their fields, call
+    ``super().__init__(label, thread_name)`` (it starts the thread) and implement :meth:`_work`."""
 
-    path: str
-    scene: Any
-    solution: Any
-    baker: Baker
-    baked: Any
-    policy: BakePolicy
-    solve_seconds: float = 0.0
-    from_cache: str = ""
-    bake_seconds: float = 0.0
-    bake_error: str | None = None
-
-
-class OpenJob:
-    """Open ``path`` (model or ``.npz`` solution) on a worker thread.
-
-    A model is solved with ``options`` unless a cached solution of the same file and options
-    exists (``use_cache``); the solve reports progress (``fraction``, ``message``, :attr:`eta`)
-    and stops when :meth:`cancel` is called. Then the Baker is built and ``policy`` baked.
-    When done, ``result`` (an :class:`Opened`) or ``error`` (one line) is set.
-    """
-
-    def __init__(self, path: str | os.PathLike, options: SolveOptions, policy: BakePolicy, use_cache=True):
-        self.path = str(path)
-        self.options = options
-        self.policy = policy
-        self.use_cache = use_cache
+    def __init__(self, label: str, thread_name: str):
+        self.label = label  # names the job in its error line
         self.fraction = 0.0
         self.message = "starting"
         self.started = time.perf_counter()
-        self.solve_started: float | None = None
-        self.result: Opened | None = None
+        self.result: Any = None
         self.error: str | None = None
         self._cancel = threading.Event()
         self._done = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="iat-open", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=thread_name, daemon=True)
         self._thread.start()
 
     # -- UI side -------------------------------------------------------------------------
@@ -295,20 +230,8 @@ class OpenJob:
         return self._done.wait(timeout)
 
     @property
-    def solving(self) -> bool:
-        return self.solve_started is not None and not self.done
-
-    @property
     def elapsed(self) -> float:
         return time.perf_counter() - self.started
-
-    @property
-    def eta(self) -> float | None:
-        """Seconds left for the solve, from its progress so far (None until it is measurable)."""
-        if self.solve_started is None or self.fraction < 0.02:
-            return None
-        spent = time.perf_counter() - self.solve_started
-        return spent * (1.0 - self.fraction) / self.fraction
 
     # -- worker side -----------------------------------------------------------------------
     def _progress(self, fraction: float, message: str) -> bool:
@@ -316,20 +239,82 @@ class OpenJob:
         self.message = str(message)
         return not self._cancel.is_set()
 
+    def _work(self) -> Any:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _error_line(self, e: Exception) -> str:
+        return f"{self.label}: {error_text(e)}"
+
     def _run(self) -> None:
         try:
-            self.result = self._open()
+            self.result = self._work()
         except Cancelled:
-            self.error = f"{self.path}: cancelled"
+            self.error = f"{self.label}: cancelled"
         except Exception as e:
-            log.debug("open failed:\n%s", traceback.format_exc())
-            self.error = error_text(e)
-            if not isinstance(e, IATError) and self.path not in self.error:
-                self.error = f"{self.path}: {self.error}"
+            log.debug("%s failed:\n%s", self.label, traceback.format_exc())
+            self.error = self._error_line(e)
         finally:
             self._done.set()
 
-    def _open(self) -> Opened:
+
+@dataclass
+class Opened:
+    """A model or solution ready to show (made by :class:`OpenJob`)."""
+
+    path: str
+    scene: Any
+    solution: Any
+    baker: Baker
+    baked: Any
+    policy: BakePolicy
+    solve_seconds: float = 0.0
+    from_cache: str = ""
+    bake_seconds: float = 0.0
+    bake_error: str | None = None
+
+
+class OpenJob(_Job):
+    """Open ``path`` (model or ``.npz`` solution) on a worker thread.
+
+    A model is solved with ``options`` unless a cached solution of the same file and options
+    exists (``use_cache``); the load, then the solve, report progress (``fraction``, ``message``,
+    :attr:`eta`, each stage from 0 to 1) and stop when :meth:`cancel` is called. Then the
+    Baker is built and ``policy`` baked. When done, ``result`` (an :class:`Opened`) or ``error``
+    (one line) is set.
+    """
+
+    def __init__(self, path: str | os.PathLike, options: SolveOptions, policy: BakePolicy, use_cache=True):
+        self.path = str(path)
+        self.options = options
+        self.policy = policy
+        self.use_cache = use_cache
+        self.load_started: float | None = None
+        self.solve_started: float | None = None
+        super().__init__(self.path, "iat-open")
+
+    @property
+    def solving(self) -> bool:
+        return self.solve_started is not None and not self.done
+
+    @property
+    def eta(self) -> float | None:
+        """Seconds left for the stage under way (the load, then the solve), from its progress so
+        far (None until it is measurable)."""
+        started = self.solve_started if self.solve_started is not None else self.load_started
+        if started is None or self.fraction < 0.02:
+            return None
+        spent = time.perf_counter() - started
+        return spent * (1.0 - self.fraction) / self.fraction
+
+    # -- worker side -----------------------------------------------------------------------
+    def _load_progress(self, fraction: float, message: str) -> bool:
+        return self._progress(fraction, f"loading: {message}")
+
+    def _error_line(self, e: Exception) -> str:
+        text = error_text(e)  # an IATError names its file already
+        return text if isinstance(e, IATError) or self.path in text else f"{self.path}: {text}"
+
+    def _work(self) -> Opened:
         from iat.inputs import is_solution_path, open_solution
         from iat.radiosity import Solution, solve
         from iat.scene import load_scene
@@ -340,11 +325,13 @@ class OpenJob:
         solve_seconds, cached = 0.0, ""
         if is_solution_path(p):
             self.message = "loading solution"
-            scene, solution = open_solution(p)
+            self.load_started = time.perf_counter()
+            scene, solution = open_solution(p, load_progress=self._load_progress)
             solve_seconds = float(solution.stats.get("time", 0.0) or 0.0)
         else:
             self.message = "loading model"
-            scene = load_scene(p, max_edge=self.options.max_edge)
+            self.load_started = time.perf_counter()
+            scene = load_scene(p, max_edge=self.options.max_edge, progress=self._load_progress)
             solution = None
             cpath = solution_cache_path(p, self.options) if self.use_cache else None
             if cpath is not None and cpath.exists():
@@ -358,7 +345,7 @@ class OpenJob:
                 except IATError:
                     solution = None
             if solution is None:
-                self.message = "solving"
+                self.message, self.fraction = "solving", 0.0
                 self.solve_started = time.perf_counter()
                 t0 = time.perf_counter()
                 solution = solve(scene, self.options, progress=self._progress)
@@ -397,50 +384,19 @@ class OpenJob:
 
 
 # -- lighting: the day cycle's solve, light picking -------------------------------------------------
-class SetJob:
+class SetJob(_Job):
     """Solve a model's lighting states on one mesh (:func:`iat.solution_set.solve_set`) on a worker
     thread, with progress (``fraction``, ``message``) and :meth:`cancel`; ``result`` (a
     :class:`~iat.solution_set.SolutionSet`) or ``error`` (one line) when done."""
 
     def __init__(self, scene, states: dict, options: SolveOptions, mesh: str = "merge"):
         self.scene, self.states, self.options, self.mesh = scene, states, options, mesh
-        self.fraction = 0.0
-        self.message = "starting"
-        self.started = time.perf_counter()
-        self.result = None
-        self.error: str | None = None
-        self._cancel = threading.Event()
-        self._done = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="iat-day-cycle", daemon=True)
-        self._thread.start()
+        super().__init__("day cycle", "iat-day-cycle")
 
-    def cancel(self) -> None:
-        self._cancel.set()
-
-    @property
-    def done(self) -> bool:
-        return self._done.is_set()
-
-    def join(self, timeout: float | None = None) -> bool:
-        return self._done.wait(timeout)
-
-    def _progress(self, fraction: float, message: str) -> bool:
-        self.fraction = float(min(max(fraction, 0.0), 1.0))
-        self.message = str(message)
-        return not self._cancel.is_set()
-
-    def _run(self) -> None:
+    def _work(self):
         from iat.solution_set import solve_set
 
-        try:
-            self.result = solve_set(self.scene, self.states, self.options, self._progress, mesh=self.mesh)
-        except Cancelled:
-            self.error = "day cycle: cancelled"
-        except Exception as e:
-            log.debug("day-cycle solve failed:\n%s", traceback.format_exc())
-            self.error = f"day cycle: {error_text(e)}"
-        finally:
-            self._done.set()
+        return solve_set(self.scene, self.states, self.options, self._progress, mesh=self.mesh)
 
 
 def project_points(camera: Camera, points, rect) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,544 @@
+# ruff: noqa: E501
+"""Solver benchmarks (issue 4): accuracy per element, ray throughput, the Cornell box goal.
+
+    .venv/bin/python benchmarks/solver_bench.py [adaptive] [shadow] [rays] [cornell] [--models a,b]
+
+writes ``benchmarks/solver.json`` (merged with what is there) and ``benchmarks/solver.md``.
+
+* **adaptive** -- on the Cornell box: uniform subdivision (``criterion="uniform"``) at depths
+  1..``UNIFORM_DEPTHS`` and the adaptive mesh (the default criterion, max depth 6) at several
+  tolerances, every solve with the default convergence, samples and ambient term and no
+  minimum element size. Each solution's error is the relative error on smooth lit pixels
+  against the Mitsuba reference of ``tests/test_reference_compare.py`` (512 spp, 96 x 96, cached
+  in ``tests/refs``; its own noise floor, measured against a 4096 spp render, is ~0.035), and
+  against the deepest uniform solve rendered the same way (a radiosity reference: same model
+  of light, so its floor is lower). For each adaptive solve the uniform element count at the
+  same error is interpolated (log elements against log error, between the two uniform solves
+  that bracket it) and the ratio adaptive / uniform reported (goal <= 0.25).
+  The third measure is the area-weighted L1 error of the surface radiance (every patch sampled
+  at 256 x 256 cell centres, emitters left out) against the deepest uniform solve: unlike the
+  96 x 96 image it sees shadow edges.
+* **shadow** -- the same comparison on a floor under a point light with an occluder (one hard
+  shadow), by the surface error against uniform depth 7, every solve converged to 0.1 % without
+  the ambient term (so the error is the mesh's).
+* **rays** -- per sample model: the solve at the defaults (time, rays, the solver's rays/s:
+  rays over the seconds spent inside ``Visibility.occluded``, and over the whole solve), and
+  in the same run the ceiling: bare embreex replaying the solver's own rays (the first 4 M,
+  recorded during the solve, already float32, cut in ``Visibility.CHUNK`` pieces as
+  ``occluded`` cuts them, on the same 2 threads, no Python work around the calls), and for
+  comparison bare embreex on random rays (origins on the patches, cosine directions, tfar the
+  scene diagonal: longer than the solver's shadow rays, so slower).
+* **cornell** -- the Cornell box at the defaults: time and the error of ``test_reference_compare``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from iat.radiosity import SolveOptions, solve  # noqa: E402
+from iat.radiosity.visibility import CHUNK, Visibility  # noqa: E402
+from iat.scene import load_scene  # noqa: E402
+
+OUT_JSON = ROOT / "benchmarks" / "solver.json"
+OUT_MD = ROOT / "benchmarks" / "solver.md"
+MODELS = ("cornell_box", "house", "cave", "lavapit", "pool")
+REFS = ROOT / "tests" / "refs"
+SIZE = (96, 96)
+UNIFORM_DEPTHS = (1, 2, 3, 4, 5, 6)
+ADAPTIVE_TOLERANCES = (0.4, 0.2, 0.1, 0.05, 0.025)
+
+
+# -- the error measure of tests/test_reference_compare.py ---------------------------------------
+def smooth_lit(ref: np.ndarray) -> np.ndarray:
+    """(h, w) bool: lit pixels away from edges (as ``tests/test_reference_compare._smooth_lit``)."""
+    y = ref.mean(axis=2)
+    pad = np.pad(y, 1, mode="edge")
+    win = np.stack([pad[i : i + y.shape[0], j : j + y.shape[1]] for i in range(3) for j in range(3)])
+    return (y > 0.05) & (
+        win.max(axis=0) - win.min(axis=0) < 0.15 * win.mean(axis=0) + 4 * win.std(axis=0).mean()
+    )
+
+
+def image_errors(img: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> dict:
+    """Relative error on the smooth lit pixels, on 8 x 8 blocks, and the mean bias."""
+    err = np.abs(img - ref).mean(axis=2)
+    rel_smooth = float(err[mask].sum() / ref.mean(axis=2)[mask].sum())
+    h, w = ref.shape[:2]
+    blocks = (h // 8, 8, w // 8, 8)
+    a = ref.mean(axis=2).reshape(blocks).mean(axis=(1, 3))
+    b = img.mean(axis=2).reshape(blocks).mean(axis=(1, 3))
+    bl = a > 0.05
+    rel_blocks = float(np.abs(a - b)[bl].sum() / a[bl].sum())
+    bias = float(img[mask].mean() / ref[mask].mean() - 1.0)
+    return {"rel_smooth": rel_smooth, "rel_blocks": rel_blocks, "bias": bias}
+
+
+class Cornell:
+    """The Cornell box, its camera, its Mitsuba reference and a renderer (EGL)."""
+
+    def __init__(self):
+        from iat.reference import render_reference_cached
+        from iat.render import Renderer
+
+        self.scene = load_scene(ROOT / "sample_models" / "cornell_box.glb")
+        self.camera = self.scene.default_camera()
+        self.ref = render_reference_cached(self.scene, self.camera, SIZE, spp=512, cache_dir=REFS, seed=1)
+        self.mask = smooth_lit(self.ref)
+        self.renderer = Renderer(None)
+
+    def image(self, sol) -> np.ndarray:
+        self.renderer.set_solution(sol)
+        return self.renderer.render(self.camera, SIZE, mode="mesh").astype(np.float64)
+
+    def errors(self, sol, ref: np.ndarray | None = None) -> dict:
+        return image_errors(self.image(sol), self.ref if ref is None else ref, self.mask)
+
+
+def surface_values(sol, n_out: int = 256) -> np.ndarray:
+    """Luminance of the solution's mesh (piecewise linear in its leaves) at the centres of an
+    n_out x n_out grid of cells in each patch's (u, v) (no lattice point of any depth, so no
+    solution is sampled only at its own vertices), concatenated over the patches, and (same
+    length) the area each point stands for and its patch."""
+    from iat.radiosity.solver import LUMINANCE, _Lattice, _sample_lattice
+
+    lat = _Lattice(sol.forest, np.asarray(sol.vert_key))
+    vals = np.asarray(sol.vert_radiance, dtype=np.float64)
+    g = (np.arange(n_out) + 0.5) / n_out
+    uu, vv = (x.ravel() for x in np.meshgrid(g, g, indexing="ij"))
+    corners = np.asarray(sol.patch_corners)
+    out, weight, patch = [], [], []
+    for p in range(len(corners)):
+        u, v = uu, vv
+        if not sol.patch_is_quad[p]:
+            keep = u + v <= 1.0 + 1e-12
+            u, v = u[keep], v[keep]
+        flat = lat.grid(p, vals).reshape(-1, 3)
+        out.append(_sample_lattice(flat, sol.n, u, v) @ LUMINANCE)
+        c = corners[p]
+        area = 0.5 * np.linalg.norm(np.cross(c[1] - c[0], c[2] - c[0]))
+        if sol.patch_is_quad[p]:
+            area += 0.5 * np.linalg.norm(np.cross(c[2] - c[0], c[3] - c[0]))
+        weight.append(np.full(len(u), area / len(u)))
+        patch.append(np.full(len(u), p))
+    return np.concatenate(out), np.concatenate(weight), np.concatenate(patch)
+
+
+def surface_error(sol, ref_sol) -> float:
+    """Area-weighted L1 error of the radiance over all surfaces (luminance, sampled at 256 x 256
+    cell centres per patch, emitters excluded) relative to the reference's mean: shadow edges count here,
+    unlike in the smooth-pixel image measure."""
+    a, w, pa = surface_values(sol)
+    b, _, _ = surface_values(ref_sol)
+    emitters = [int(row[0]) for row in ref_sol.stats.get("sources", {}).get("emitters", [])]
+    w = np.where(np.isin(pa, emitters), 0.0, w)
+    return float((np.abs(a - b) * w).sum() / (np.abs(b) * w).sum())
+
+
+def timed_solve(scene, opts: SolveOptions):
+    t0 = time.perf_counter()
+    sol = solve(scene, opts)
+    return sol, time.perf_counter() - t0
+
+
+# -- adaptive against uniform -------------------------------------------------------------------
+def interp_elements(err: float, curve: list[tuple[float, float]]) -> float | None:
+    """Uniform element count at error ``err``: log-log interpolation between the two points of
+    ``curve`` ((error, elements), any order) that bracket it; None outside the curve."""
+    pts = sorted(curve, key=lambda p: -p[0])  # error decreasing, elements increasing
+    for (e0, n0), (e1, n1) in zip(pts, pts[1:], strict=False):
+        if e1 <= err <= e0 and e0 > e1:
+            t = (math.log(e0) - math.log(err)) / (math.log(e0) - math.log(e1))
+            return float(math.exp(math.log(n0) + t * (math.log(n1) - math.log(n0))))
+    return None
+
+
+def run_adaptive(depths=UNIFORM_DEPTHS, tolerances=ADAPTIVE_TOLERANCES) -> dict:
+    cb = Cornell()
+    rows = []
+    sols = {}
+    for d in depths:
+        opts = SolveOptions(max_depth=d, criterion="uniform", min_element_size=0.0)
+        sol, dt = timed_solve(cb.scene, opts)
+        sols[("uniform", d)] = sol
+        rows.append(
+            {
+                "mesh": "uniform",
+                "depth": d,
+                "tolerance": None,
+                "elements": sol.stats["elements"],
+                "time_s": dt,
+                **cb.errors(sol),
+            }
+        )
+        print(rows[-1], flush=True)
+    for tol in tolerances:
+        opts = SolveOptions(tolerance=tol, min_element_size=0.0)
+        sol, dt = timed_solve(cb.scene, opts)
+        sols[("adaptive", tol)] = sol
+        rows.append(
+            {
+                "mesh": "adaptive",
+                "depth": opts.max_depth,
+                "tolerance": tol,
+                "elements": sol.stats["elements"],
+                "time_s": dt,
+                **cb.errors(sol),
+            }
+        )
+        print(rows[-1], flush=True)
+    # the radiosity reference: the deepest uniform solve
+    dmax = max(depths)
+    ref_img = cb.image(sols[("uniform", dmax)])
+    for r in rows:
+        key = ("uniform", r["depth"]) if r["mesh"] == "uniform" else ("adaptive", r["tolerance"])
+        e = image_errors(cb.image(sols[key]), ref_img, cb.mask)
+        r["rel_smooth_vs_uniform"] = e["rel_smooth"]
+    for r in rows:
+        key = ("uniform", r["depth"]) if r["mesh"] == "uniform" else ("adaptive", r["tolerance"])
+        r["surface_vs_uniform"] = surface_error(sols[key], sols[("uniform", dmax)])
+    for measure in ("rel_smooth", "rel_smooth_vs_uniform", "surface_vs_uniform"):
+        curve = [
+            (r[measure], r["elements"])
+            for r in rows
+            if r["mesh"] == "uniform" and not (measure != "rel_smooth" and r["depth"] == dmax)
+        ]
+        for r in rows:
+            if r["mesh"] != "adaptive":
+                continue
+            nu = interp_elements(r[measure], curve)
+            r[f"uniform_elements_at_{measure}"] = nu
+            r[f"ratio_{measure}"] = (r["elements"] / nu) if nu else None
+    cb.renderer.release()
+    return {"model": "cornell_box", "rows": rows}
+
+
+def shadow_scene():
+    """A 2 x 2 m floor (4 quads) under a point light 2 m up, with a 0.5 m square occluder halfway:
+    one hard-edged shadow and a smooth 1/r^2 fall-off, the case adaptive meshing is for (the
+    scene of ``tests/test_radiosity.floor_scene``)."""
+    from iat.scene import Light, Material, Scene
+
+    polys = []
+    for i in range(2):
+        for j in range(2):
+            x0, z0 = i - 1.0, j - 1.0
+            polys.append([[x0, 0, z0], [x0, 0, z0 + 1], [x0 + 1, 0, z0 + 1], [x0 + 1, 0, z0]])
+    polys.append([[-0.25, 1.0, -0.25], [-0.25, 1.0, 0.25], [0.25, 1.0, 0.25], [0.25, 1.0, -0.25]])
+    verts = np.array(polys, dtype=float).reshape(-1, 3)
+    corners = np.arange(len(verts)).reshape(-1, 4)
+    light = Light(kind="point", position=[0.1, 2.0, 0.05], intensity=4.0)
+    return Scene(
+        verts,
+        corners,
+        np.zeros(len(polys), dtype=int),
+        [Material("white", albedo=np.full(3, 0.6))],
+        lights=[light],
+    )
+
+
+def run_adaptive_surface(depths=(1, 2, 3, 4, 5, 6), ref_depth=7, tolerances=ADAPTIVE_TOLERANCES) -> dict:
+    """Adaptive against uniform on :func:`shadow_scene`, by the surface error against a uniform
+    solve at ``ref_depth`` (all solves to 0.1 % unshot without the ambient term, so that the error
+    is the mesh's; no minimum element size)."""
+    scene = shadow_scene()
+    common = {"convergence": 0.001, "ambient": False, "min_element_size": 0.0}
+    ref, _ = timed_solve(scene, SolveOptions(max_depth=ref_depth, criterion="uniform", **common))
+    rows = []
+    for d in depths:
+        sol, dt = timed_solve(scene, SolveOptions(max_depth=d, criterion="uniform", **common))
+        rows.append(
+            {
+                "mesh": "uniform",
+                "depth": d,
+                "tolerance": None,
+                "elements": sol.stats["elements"],
+                "time_s": dt,
+                "surface_vs_uniform": surface_error(sol, ref),
+            }
+        )
+        print(rows[-1], flush=True)
+    for tol in tolerances:
+        sol, dt = timed_solve(scene, SolveOptions(max_depth=ref_depth - 1, tolerance=tol, **common))
+        rows.append(
+            {
+                "mesh": "adaptive",
+                "depth": ref_depth - 1,
+                "tolerance": tol,
+                "elements": sol.stats["elements"],
+                "time_s": dt,
+                "surface_vs_uniform": surface_error(sol, ref),
+            }
+        )
+        print(rows[-1], flush=True)
+    curve = [(r["surface_vs_uniform"], r["elements"]) for r in rows if r["mesh"] == "uniform"]
+    for r in rows:
+        if r["mesh"] == "adaptive":
+            nu = interp_elements(r["surface_vs_uniform"], curve)
+            r["uniform_elements_at_surface_vs_uniform"] = nu
+            r["ratio_surface_vs_uniform"] = (r["elements"] / nu) if nu else None
+    return {"model": "shadow_scene", "reference": f"uniform depth {ref_depth}", "rows": rows}
+
+
+# -- ray throughput -----------------------------------------------------------------------------
+def random_rays(scene, n: int, seed: int = 0):
+    """n rays from random points on the patches (area-weighted), off the surface, in cosine
+    directions, tfar the scene diagonal: the solver's mix of shadow and hemisphere rays."""
+    rng = np.random.default_rng(seed)
+    area = scene.patch_area
+    p = rng.choice(len(area), size=n, p=area / area.sum())
+    c = scene.corner_positions[p]
+    u, v = rng.random(n), rng.random(n)
+    quad = scene.patch_is_quad[p]
+    tri_u = np.where(u + v > 1, 1 - u, u)
+    tri_v = np.where(u + v > 1, 1 - v, v)
+    pos_q = (
+        c[:, 0] * ((1 - u) * (1 - v))[:, None]
+        + c[:, 1] * (u * (1 - v))[:, None]
+        + c[:, 2] * (u * v)[:, None]
+        + c[:, 3] * ((1 - u) * v)[:, None]
+    )
+    pos_t = c[:, 0] + (c[:, 1] - c[:, 0]) * tri_u[:, None] + (c[:, 2] - c[:, 0]) * tri_v[:, None]
+    pos = np.where(quad[:, None], pos_q, pos_t)
+    nrm = scene.patch_normal[p]
+    lo, hi = scene.bounds
+    diag = float(np.linalg.norm(hi - lo))
+    origin = pos + 1e-4 * diag * nrm
+    r, phi = np.sqrt(rng.random(n)), 2 * np.pi * rng.random(n)
+    helper = np.where(np.abs(nrm[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t1 = np.cross(nrm, helper)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(nrm, t1)
+    d = (r * np.cos(phi))[:, None] * t1 + (r * np.sin(phi))[:, None] * t2 + np.sqrt(1 - r * r)[:, None] * nrm
+    return origin, d, np.full(n, diag)
+
+
+def bare_rays_per_s(scene, n: int = 4 * CHUNK, rounds: int = 3) -> float:
+    """Occlusion rays/s of embreex through :class:`Visibility` alone (CHUNK batches, its threads),
+    best of ``rounds``: the ceiling of the solver's tracing."""
+    o, d, t = random_rays(scene, n)
+    best = 0.0
+    with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
+        vis.occluded(o[:CHUNK], d[:CHUNK], t[:CHUNK])  # warm up (BVH build, threads)
+        for _ in range(rounds):
+            t0 = time.perf_counter()
+            vis.occluded(o, d, t)
+            best = max(best, n / (time.perf_counter() - t0))
+    return best
+
+
+class RayRecorder:
+    """Records (a sample of) the rays a solve traces, by wrapping :meth:`Visibility.occluded`:
+    every batch while fewer than ``limit`` rays are kept (float32, as embreex gets them)."""
+
+    def __init__(self, limit: int = 1 << 22):
+        self.limit, self.kept, self.batches = limit, 0, []
+        self._orig = Visibility.occluded
+
+    def __enter__(self):
+        rec = self
+
+        def occluded(vis, origins, dirs, tfar):
+            if rec.kept < rec.limit and len(origins):
+                rec.batches.append(
+                    tuple(
+                        np.ascontiguousarray(x, dtype=np.float32).reshape(len(origins), -1)
+                        for x in (origins, dirs, tfar)
+                    )
+                )
+                rec.kept += len(origins)
+            return rec._orig(vis, origins, dirs, tfar)
+
+        Visibility.occluded = occluded
+        return self
+
+    def __exit__(self, *exc):
+        Visibility.occluded = self._orig
+
+
+def bare_replay_rays_per_s(scene, batches, rounds: int = 3) -> float:
+    """Bare embreex on the solver's own rays: the recorded batches, already float32, cut into
+    ``CHUNK`` pieces as :meth:`Visibility.occluded` cuts them, on its 2 threads, with no Python
+    work around the calls (best of ``rounds``)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    n = sum(len(b[0]) for b in batches)
+    with (
+        Visibility(scene.corner_positions, scene.patch_is_quad) as vis,
+        ThreadPoolExecutor(vis.threads) as pool,
+    ):
+        jobs = []
+        for o, d, t in batches:
+            c = max(4096, min(CHUNK, -(-len(o) // vis.threads)))
+            jobs += [(o[a : a + c], d[a : a + c], t[a : a + c, 0]) for a in range(0, len(o), c)]
+        run = vis._scene.run
+        best = 0.0
+        for _ in range(rounds + 1):  # the first round warms up
+            t0 = time.perf_counter()
+            for f in [pool.submit(run, o, d, t, "OCCLUDED") for o, d, t in jobs]:
+                f.result()
+            best = max(best, n / (time.perf_counter() - t0))
+    return best
+
+
+def run_rays(models=MODELS) -> dict:
+    out = {}
+    for name in models:
+        scene = load_scene(ROOT / "sample_models" / f"{name}.glb")
+        with RayRecorder() as rec:
+            sol, dt = timed_solve(scene, SolveOptions())
+        replay = bare_replay_rays_per_s(scene, rec.batches)
+        random_ceiling = bare_rays_per_s(scene)
+        st = sol.stats
+        trace_s = st["rays"] / st["rays_per_s"] if st["rays_per_s"] > 0 else 0.0
+        out[name] = {
+            "elements": st["elements"],
+            "shots": st["shots"],
+            "time_s": dt,
+            "rays": st["rays"],
+            "trace_s": trace_s,
+            "rays_per_s_tracing": st["rays_per_s"],
+            "rays_per_s_solve": st["rays"] / dt,
+            "bare_rays_per_s": replay,
+            "bare_rays_replayed": rec.kept,
+            "bare_random_rays_per_s": random_ceiling,
+            "fraction_tracing": st["rays_per_s"] / replay,
+            "fraction_solve": st["rays"] / dt / replay,
+            "timings": {k: st.get(k) for k in ("meshing_s", "shooting_s", "refining_s")},
+        }
+        print(name, out[name], flush=True)
+    return out
+
+
+def run_cornell(options: dict | None = None, repeats: int = 2) -> dict:
+    cb = Cornell()
+    opts = SolveOptions(**(options or {}))
+    best = None
+    for _ in range(repeats):
+        sol, dt = timed_solve(cb.scene, opts)
+        best = dt if best is None else min(best, dt)
+    res = {
+        "options": opts.to_dict(),
+        "time_s": best,
+        "elements": sol.stats["elements"],
+        "shots": sol.stats["shots"],
+        **cb.errors(sol),
+    }
+    cb.renderer.release()
+    print(res, flush=True)
+    return res
+
+
+# -- output -------------------------------------------------------------------------------------
+def _f(x, nd=3):
+    return "-" if x is None else (f"{x:.{nd}f}" if isinstance(x, float) else str(x))
+
+
+def format_md(res: dict) -> str:
+    lines = ["# Solver benchmarks (`benchmarks/solver_bench.py`)", ""]
+    meta = res.get("meta", {})
+    if meta:
+        lines += [
+            f"Run {meta.get('date', '')}, {meta.get('cpus', '')} CPUs, load {meta.get('load', '')}.",
+            "",
+        ]
+    ad = res.get("adaptive")
+    if ad:
+        lines += [
+            "## Adaptive mesh against uniform subdivision (Cornell box)",
+            "",
+            "| mesh | depth | tolerance | elements | time s | image error vs Mitsuba | uniform elements at that error | ratio | image error vs uniform depth 6 | uniform elements at that error | ratio | surface error vs uniform depth 6 | uniform elements at that error | ratio |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for r in ad["rows"]:
+            lines.append(
+                f"| {r['mesh']} | {r['depth']} | {_f(r['tolerance'])} | {r['elements']} | {_f(r['time_s'], 2)} | "
+                f"{_f(r['rel_smooth'], 4)} | {_f(r.get('uniform_elements_at_rel_smooth'), 0)} | {_f(r.get('ratio_rel_smooth'), 2)} | "
+                f"{_f(r['rel_smooth_vs_uniform'], 4)} | {_f(r.get('uniform_elements_at_rel_smooth_vs_uniform'), 0)} | "
+                f"{_f(r.get('ratio_rel_smooth_vs_uniform'), 2)} | {_f(r['surface_vs_uniform'], 4)} | "
+                f"{_f(r.get('uniform_elements_at_surface_vs_uniform'), 0)} | {_f(r.get('ratio_surface_vs_uniform'), 2)} |"
+            )
+        lines.append("")
+    sh = res.get("adaptive_shadow")
+    if sh:
+        lines += [
+            f"## Adaptive mesh against uniform subdivision (shadow scene; reference: {sh['reference']})",
+            "",
+            "| mesh | depth | tolerance | elements | time s | surface error | uniform elements at that error | ratio |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
+        for r in sh["rows"]:
+            lines.append(
+                f"| {r['mesh']} | {r['depth']} | {_f(r['tolerance'])} | {r['elements']} | {_f(r['time_s'], 2)} | "
+                f"{_f(r['surface_vs_uniform'], 4)} | {_f(r.get('uniform_elements_at_surface_vs_uniform'), 0)} | "
+                f"{_f(r.get('ratio_surface_vs_uniform'), 2)} |"
+            )
+        lines.append("")
+    rays = res.get("rays")
+    if rays:
+        lines += [
+            "## Ray throughput against bare embreex (same run, 2 threads)",
+            "",
+            "| model | elements | shots | solve s | rays | tracing s | solver rays/s (in `occluded`) | bare embreex rays/s (solver's rays replayed) | fraction | solver rays/s (whole solve) | fraction | bare embreex, random rays |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for name, r in rays.items():
+            lines.append(
+                f"| {name} | {r['elements']} | {r['shots']} | {_f(r['time_s'], 1)} | {r['rays']:,} | {_f(r['trace_s'], 1)} | "
+                f"{r['rays_per_s_tracing'] / 1e6:.2f} M | {r['bare_rays_per_s'] / 1e6:.2f} M | {r['fraction_tracing']:.0%} | "
+                f"{r['rays_per_s_solve'] / 1e6:.2f} M | {r['fraction_solve']:.0%} | {r['bare_random_rays_per_s'] / 1e6:.2f} M |"
+            )
+        lines.append("")
+    cb = res.get("cornell")
+    if cb:
+        lines += [
+            "## Cornell box at the defaults",
+            "",
+            f"time {cb['time_s']:.2f} s (best of 2), {cb['elements']} elements, {cb['shots']} shots; "
+            f"error vs Mitsuba: smooth lit pixels {cb['rel_smooth']:.4f}, 8x8 blocks {cb['rel_blocks']:.4f}, "
+            f"bias {cb['bias']:+.1%}",
+            "",
+        ]
+    return "\n".join(lines)
+
+
+def main(argv=None) -> None:
+    import datetime
+    import os
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    models = MODELS
+    if "--models" in argv:
+        i = argv.index("--models")
+        models = tuple(argv[i + 1].split(","))
+        del argv[i : i + 2]
+    parts = argv or ["adaptive", "rays", "cornell"]
+    res = json.loads(OUT_JSON.read_text()) if OUT_JSON.exists() else {}
+    res["meta"] = {
+        "date": datetime.datetime.now().isoformat(timespec="minutes"),
+        "cpus": os.cpu_count(),
+        "load": round(os.getloadavg()[0], 2),
+    }
+    if "cornell" in parts:
+        res["cornell"] = run_cornell()
+    if "adaptive" in parts:
+        res["adaptive"] = run_adaptive()
+    if "shadow" in parts:
+        res["adaptive_shadow"] = run_adaptive_surface()
+    if "rays" in parts:
+        res.setdefault("rays", {}).update(run_rays(models))
+    OUT_JSON.write_text(json.dumps(res, indent=1))
+    OUT_MD.write_text(format_md(res) + "\n")
+    print(format_md(res))
+
+
+if __name__ == "__main__":
+    main()

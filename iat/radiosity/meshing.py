@@ -1,0 +1,276 @@
+"""Meshing: the split test on the quad-trees (:func:`_refine`), probe points, the interpolation
+a naive solver would use (for the bias it would cause), coarse receiver grids and the (P, V)
+averaging matrix."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import sparse
+
+from .. import quadtree as qt
+from .context import _Cancel, _Context
+from .options import ABS_FLOOR, BIG_LEVELS, BIG_TOLERANCE
+from .sampling import _lum
+
+
+# -- meshing helpers ------------------------------------------------------------
+def _probe_keys(forest: qt.Forest) -> tuple[np.ndarray, np.ndarray]:
+    """(L, 5) int64 keys of the points that become corners when a leaf splits, and (L, 5) bool validity.
+
+    Quads: centre and the four edge midpoints. Triangles: the three edge midpoints.
+    """
+    s = forest.leaf_size
+    h = s // 2
+    i = forest.leaf_i.astype(np.int64)
+    j = forest.leaf_j.astype(np.int64)
+    q = forest.leaf_is_quad
+    down = ~q & forest.leaf_flip
+    pi = np.stack([i + h, i + h, i + s, i + h, i], axis=1)
+    pj = np.stack([j + h, j, j + h, j + s, j + h], axis=1)
+    # up triangle (i,j),(i+s,j),(i,j+s): midpoints (i+h,j), (i+h,j+h), (i,j+h)
+    # down triangle (i+s,j+s),(i,j+s),(i+s,j): midpoints (i+h,j+s), (i+h,j+h), (i+s,j+h)
+    tri = ~q
+    pi[tri, :3] = np.stack([i + h, i + h, np.where(down, i + s, i)], axis=1)[tri]
+    pj[tri, :3] = np.stack([np.where(down, j + s, j), j + h, j + h], axis=1)[tri]
+    pi[tri, 3:] = pi[tri, :1]
+    pj[tri, 3:] = pj[tri, :1]
+    valid = np.ones((forest.n_leaves, 5), dtype=bool)
+    valid[tri, 3:] = False
+    return qt.make_key(forest.leaf_patch[:, None], pi, pj, forest.n), valid
+
+
+def _probe_interp(forest: qt.Forest) -> np.ndarray:
+    """(L, 5, 4) int64 corner slots whose mean interpolates each probe of :func:`_probe_keys`."""
+    q = forest.leaf_is_quad
+    down = ~q & forest.leaf_flip
+    out = np.empty((forest.n_leaves, 5, 4), dtype=np.int64)
+    # quad corners 0:(0,0) 1:(s,0) 2:(s,s) 3:(0,s); probes centre, bottom, right, top, left
+    out[q] = [[0, 1, 2, 3], [0, 1, 0, 1], [1, 2, 1, 2], [2, 3, 2, 3], [3, 0, 3, 0]]
+    # up corners 0:(0,0) 1:(s,0) 2:(0,s); probes (h,0), (h,h), (0,h)
+    up = ~q & ~forest.leaf_flip
+    out[up] = [[0, 1, 0, 1], [1, 2, 1, 2], [0, 2, 0, 2], [0, 1, 0, 1], [0, 1, 0, 1]]
+    # down corners 0:(s,s) 1:(0,s) 2:(s,0); probes (h,s), (h,h), (s,h)
+    out[down] = [[0, 1, 0, 1], [1, 2, 1, 2], [0, 2, 0, 2], [0, 1, 0, 1], [0, 1, 0, 1]]
+    return out
+
+
+def _leaf_longest_edge(forest: qt.Forest, corners: np.ndarray) -> np.ndarray:
+    """(L,) float64 longest world edge of each leaf."""
+    c = qt.leaf_corner_lattice(forest)
+    w = qt.lattice_to_world(
+        corners,
+        forest.patch_is_quad,
+        np.repeat(forest.leaf_patch, 4),
+        c[..., 0].ravel(),
+        c[..., 1].ravel(),
+        forest.n,
+    ).reshape(-1, 4, 3)
+    e = np.linalg.norm(np.roll(w, -1, axis=1) - w, axis=2)
+    tri = ~forest.leaf_is_quad
+    e[tri, 2] = np.linalg.norm(w[tri, 0] - w[tri, 2], axis=1)
+    return e.max(axis=1)
+
+
+def _parent_interpolation(keys: np.ndarray, is_quad: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """For non-root vertex keys: (k, 4) keys of the parent-edge ends (or parent corners) and (k, 4) weights.
+
+    A vertex first appears as the midpoint of an edge (or the centre of a quad) of
+    the leaf whose split created it; its naive interpolated value is the mean of
+    that edge's ends (or of the quad's four corners).
+    """
+    p, i, j = qt.decode_key(keys, n)
+    low = (i | j) & -(i | j)  # largest power of two dividing both: the level's leaf size
+    s2 = 2 * low
+    a, b = i - i % s2, j - j % s2
+    x, y = i % s2, j % s2
+    quad = is_quad[p]
+    ci = np.stack([a, a + s2, a, a + s2], axis=1)
+    cj = np.stack([b, b, b + s2, b + s2], axis=1)
+    w = np.full((len(keys), 4), 0.25)
+    horiz = (x > 0) & (y == 0)
+    vert = (x == 0) & (y > 0)
+    diag = (x > 0) & (y > 0) & ~quad
+    for mask, e0, e1 in (
+        (horiz, (a, j), (a + s2, j)),
+        (vert, (i, b), (i, b + s2)),
+        (diag, (a + s2, b), (a, b + s2)),
+    ):
+        ci[mask, 0], cj[mask, 0] = e0[0][mask], e0[1][mask]
+        ci[mask, 1], cj[mask, 1] = e1[0][mask], e1[1][mask]
+        ci[mask, 2:], cj[mask, 2:] = ci[mask, :1], cj[mask, :1]
+        w[mask] = (0.5, 0.5, 0.0, 0.0)
+    return qt.make_key(p[:, None], ci, cj, n), w
+
+
+def _coarse_keys(is_quad: np.ndarray, level: int, n: int) -> np.ndarray:
+    """(Vc,) sorted keys of every patch's lattice grid at ``level`` (triangles: i + j <= n)."""
+    k, s = 1 << level, n >> level
+    a, b = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
+    a, b = a.ravel(), b.ravel()
+    p = np.arange(len(is_quad))
+    keys = qt.make_key(p[:, None], a[None, :] * s, b[None, :] * s, n)
+    tri = a + b <= k
+    return np.sort(np.concatenate([keys[is_quad].ravel(), keys[~is_quad][:, tri].ravel()]))
+
+
+def _coarse_weights(keys: np.ndarray, coarse: np.ndarray, is_quad: np.ndarray, level: int, n: int):
+    """(V, Vc) sparse CSR: values at ``keys`` interpolated (bilinear / barycentric) in the
+    level-``level`` cells of their patches from values at the grid keys ``coarse``."""
+    p, i, j = qt.decode_key(keys, n)
+    k, s = 1 << level, n >> level
+    a, b = np.minimum(i // s, k - 1), np.minimum(j // s, k - 1)
+    fx, fy = (i - a * s) / s, (j - b * s) / s
+    quad = is_quad[p]
+    lower = fx + fy <= 1.0
+    ci = np.stack([a, a + 1, a + 1, a], axis=1)
+    cj = np.stack([b, b, b + 1, b + 1], axis=1)
+    w = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), fx * fy, (1 - fx) * fy], axis=1)
+    tl, tu = ~quad & lower, ~quad & ~lower
+    ci[tl], cj[tl] = np.stack([a, a + 1, a, a], 1)[tl], np.stack([b, b, b + 1, b + 1], 1)[tl]
+    w[tl] = np.stack([1 - fx - fy, fx, fy, 0 * fx], 1)[tl]
+    ci[tu], cj[tu] = np.stack([a + 1, a, a + 1, a + 1], 1)[tu], np.stack([b + 1, b + 1, b, b], 1)[tu]
+    w[tu] = np.stack([fx + fy - 1, 1 - fx, 1 - fy, 0 * fx], 1)[tu]
+    cols = qt.lookup(coarse, qt.make_key(p[:, None], ci * s, cj * s, n))
+    ok = w > 0
+    rows = np.repeat(np.arange(len(keys)), 4).reshape(-1, 4)
+    return sparse.csr_matrix((w[ok], (rows[ok], cols[ok])), shape=(len(keys), len(coarse)))
+
+
+def _averaging_matrix(forest: qt.Forest, keys: np.ndarray, corners: np.ndarray, area: np.ndarray):
+    """(P, V) scipy.sparse CSR: row p averages vertex values over patch p (area-weighted leaf means)."""
+    idx = qt.lookup(keys, qt.leaf_corner_keys(forest))
+    la = qt.leaf_area(forest, corners)
+    wl = la / np.maximum(area[forest.leaf_patch], 1e-300)
+    q = forest.leaf_is_quad
+    wc = np.where(q, 0.25, 1.0 / 3.0)[:, None] * wl[:, None] * np.ones((1, 4))
+    wc[~q, 3] = 0.0
+    rows = np.repeat(forest.leaf_patch.astype(np.int64), 4)
+    return sparse.csr_matrix((wc.ravel(), (rows, idx.ravel())), shape=(len(area), len(keys)))
+
+
+class _Cache:
+    """Values (n, 3) at sorted vertex keys (n,), grown by :meth:`add`."""
+
+    def __init__(self, keys=None, vals=None):
+        self.keys = np.zeros(0, dtype=np.int64) if keys is None else np.asarray(keys, dtype=np.int64)
+        self.vals = np.zeros((0, 3)) if vals is None else np.asarray(vals, dtype=np.float64)
+
+    def find(self, keys: np.ndarray) -> np.ndarray:
+        return qt.lookup(self.keys, keys)
+
+    def get(self, keys: np.ndarray) -> np.ndarray:
+        """(n, 3) values at ``keys``; 0 where unknown."""
+        i = self.find(keys)
+        out = np.zeros((len(keys), 3))
+        out[i >= 0] = self.vals[i[i >= 0]]
+        return out
+
+    def add(self, keys: np.ndarray, vals: np.ndarray) -> None:
+        k = np.concatenate([self.keys, keys])
+        v = np.concatenate([self.vals, vals])
+        order = np.argsort(k, kind="stable")
+        self.keys, self.vals = k[order], v[order]
+
+
+def _refine(ctx: _Context, forest: qt.Forest, cache: _Cache, evaluate, report, label: str, span):
+    """Split elements until nothing deviates by more than the tolerance (see the module docstring).
+
+    cache : reflected radiance (n, 3) at vertex keys, extended with ``evaluate(new_keys)``.
+    Returns (forest, passes, cancelled); on cancel the last forest whose vertices are all
+    evaluated (or the given one) is returned.
+    """
+    opts, D = ctx.opts, ctx.opts.max_depth
+    emission_y = _lum(ctx.emission)
+    good, passes = forest, 0
+    try:
+        while True:
+            keys = qt.vertex_keys(forest)
+            cand = forest.leaf_level < D
+            if ctx.min_size > 0 and cand.any():
+                cand[cand] = _leaf_longest_edge(forest.take(cand), ctx.corners) / 2 >= ctx.min_size
+            sub = forest.take(cand)
+            big = None
+            if ctx.max_size > 0 and sub.n_leaves:
+                big = _leaf_longest_edge(sub, ctx.corners) > ctx.max_size
+                big &= sub.leaf_level < D - BIG_LEVELS
+            pk, pvalid = _probe_keys(sub)
+            need = np.union1d(keys, pk[pvalid])
+            new = need[cache.find(need) < 0]
+            report(
+                span[0] + (span[1] - span[0]) * passes / (D + 1),
+                f"{label}: pass {passes + 1}, {forest.n_leaves} elements, {len(new)} new points",
+            )
+            cache.add(new, evaluate(new))
+            good, passes = forest, passes + 1
+            if not cand.any():
+                break
+            # split test on luminance of the outgoing radiance (emission + reflected)
+            refl_y = _lum(cache.vals)
+            # (the mean is capped by the most the scene can reflect on average: a point light touching a
+            # wall puts I / d^2 on one vertex, which would lift the floor above all other light)
+            mean_y = min(_area_mean(forest, keys, cache.find(keys), refl_y, ctx), ctx.max_mean_reflected())
+            eps_abs = max(ABS_FLOOR * mean_y, 1e-30)
+            y = refl_y + emission_y[qt.decode_key(cache.keys, ctx.n)[0]]
+            vy = np.concatenate([y[cache.find(qt.leaf_corner_keys(sub))], y[cache.find(pk)]], axis=1)
+            vm = np.concatenate([np.ones((sub.n_leaves, 4), dtype=bool), pvalid], axis=1)
+            mean = (vy * vm).sum(axis=1) / vm.sum(axis=1)
+            if opts.criterion == "uniform":
+                score = np.full(sub.n_leaves, np.inf)
+            elif opts.criterion == "variation":
+                hi = np.where(vm, vy, -np.inf).max(axis=1)
+                lo = np.where(vm, vy, np.inf).min(axis=1)
+                score = hi - lo
+            else:
+                slots = _probe_interp(sub)
+                ck = vy[:, :4]
+                interp = (
+                    np.take_along_axis(ck, slots.reshape(len(ck), -1), axis=1)
+                    .reshape(slots.shape)
+                    .mean(axis=2)
+                )
+                score = np.where(pvalid, np.abs(vy[:, 4:] - interp), 0.0).max(axis=1)
+            tol = np.full(sub.n_leaves, opts.tolerance)
+            if big is not None:  # an element larger than max_size must interpolate more closely
+                tol[big] *= BIG_TOLERANCE
+            split = score > tol * (mean + eps_abs)
+            if not split.any():
+                break
+            mask = np.zeros(forest.n_leaves, dtype=bool)
+            mask[cand] = split
+            forest = qt.balance(qt.split(forest, mask))
+    except _Cancel:
+        return good, passes, True
+    return forest, passes, False
+
+
+def _interpolation_bias(
+    keys: np.ndarray, old_keys: np.ndarray, cache: _Cache, ctx: _Context
+) -> tuple[float, int]:
+    """Mean relative error (sum |interpolated - exact| / sum exact, luminance of reflected radiance)
+    that parent interpolation would have given the vertices of ``keys`` not in ``old_keys``."""
+    late = keys[qt.lookup(old_keys, keys) < 0]
+    if len(late) == 0:
+        return 0.0, 0
+    pkeys, pw = _parent_interpolation(late, ctx.is_quad, ctx.n)
+    pi = cache.find(pkeys)
+    ok = (pi >= 0).all(axis=1) & (cache.find(late) >= 0)
+    if not ok.any():
+        return 0.0, 0
+    y = _lum(cache.vals)
+    interp = (y[pi[ok]] * pw[ok]).sum(axis=1)
+    exact = y[cache.find(late[ok])]
+    tot = exact.sum()
+    return (float(np.abs(interp - exact).sum() / tot) if tot > 0 else 0.0), int(ok.sum())
+
+
+def _area_mean(forest: qt.Forest, keys: np.ndarray, kidx: np.ndarray, y: np.ndarray, ctx: _Context) -> float:
+    """Area-weighted mean over the scene of per-vertex values ``y[kidx]`` (leaf-corner means)."""
+    if forest.n_leaves == 0:
+        return 0.0
+    yv = y[kidx]
+    corner = qt.lookup(keys, qt.leaf_corner_keys(forest))
+    q = forest.leaf_is_quad
+    vals = yv[corner]
+    leaf_mean = np.where(q, vals.mean(axis=1), vals[:, :3].mean(axis=1))
+    la = qt.leaf_area(forest, ctx.corners)
+    return float((leaf_mean * la).sum() / max(la.sum(), 1e-300))
