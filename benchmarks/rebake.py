@@ -25,6 +25,13 @@ upload separately. Not a test: timings depend on the machine (llvmpipe here).
     python benchmarks/rebake.py                       # house, max depth 6
     python benchmarks/rebake.py out/x.npz --changes 100 --json out/rebake.json
     python benchmarks/rebake.py --synthetic 150000
+    python benchmarks/rebake.py --trace               # every change: Baked.timings stages, upload
+    python benchmarks/rebake.py --prewarm             # + the slider's neighbours baked between steps
+
+``--prewarm`` bakes, after each change, the slider's not yet visited neighbours (timed
+apart as "prewarm (idle)"): what a viewer's bake worker could do while the slider rests.
+The load average at the end of the run is printed and kept in the JSON (the machine may be
+shared).
 
 Goal: p95 <= 16 ms (one 60 Hz frame); 100 ms p95 is the most that still counts as live.
 """
@@ -34,6 +41,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -156,14 +164,41 @@ def run(args) -> dict:
             times.setdefault(k, []).append(v)
         times.setdefault("all", []).append(t2 - t0)
         last["baked"] = baked
+        trace.append(
+            {
+                "kind": kind,
+                "threshold": policy.threshold,
+                "scale": policy.scale,
+                "bake_ms": (t1 - t0) * 1e3,
+                "upload_ms": (t2 - t1) * 1e3,
+                "timings_ms": {k: v * 1e3 for k, v in baked.timings.items()},
+            }
+        )
+        if args.trace:
+            tm = " ".join(f"{k}={v * 1e3:.1f}" for k, v in baked.timings.items() if k != "total")
+            print(
+                f"  {kind:<15} t={policy.threshold} s={policy.scale:.3f}: bake {(t1 - t0) * 1e3:6.1f} "
+                f"upload {(t2 - t1) * 1e3:6.1f} ms ({tm})"
+            )
 
     last: dict = {}
+    trace: list = []
     t0 = time.perf_counter()
     first = baker.bake(base)
     r.set_baked(first)
     ctx.finish()
     first_s = time.perf_counter() - t0
     n = max(args.changes, 50)
+
+    def prewarm(policies) -> None:
+        """--prewarm: what a viewer could do while the slider rests (untimed as a change): bake
+        the slider's neighbours of the value just shown, so the next step finds them cached."""
+        if not args.prewarm:
+            return
+        for pol in policies:
+            t0 = time.perf_counter()
+            baker.bake(pol)
+            times.setdefault("prewarm (idle)", []).append(time.perf_counter() - t0)
 
     # threshold slider at scale 1, then the scale slider at the base threshold (cold, then warm)
     thresholds = list(range(deepest + 2))
@@ -174,11 +209,21 @@ def run(args) -> dict:
             "threshold_cold" if t not in seen_t else "threshold_warm", dataclasses.replace(base, threshold=t)
         )
         seen_t.add(t)
+        prewarm(
+            dataclasses.replace(base, threshold=thresholds[j])
+            for j in (i - 1, i + 1)
+            if 0 <= j < len(thresholds) and thresholds[j] not in seen_t
+        )
     seen: set = {1.0}
     for i in walk(LADDER, n - n // 2):
         s = LADDER[i]
         change("scale_cold" if s not in seen else "scale_warm", dataclasses.replace(base, scale=s))
         seen.add(s)
+        prewarm(
+            dataclasses.replace(base, scale=LADDER[j])
+            for j in (i - 1, i + 1)
+            if 0 <= j < len(LADDER) and LADDER[j] not in seen
+        )
     m = last["baked"].memory
     res = {
         "source": source,
@@ -192,6 +237,8 @@ def run(args) -> dict:
         "last_pages": [int(m.pages), int(m.page_width), int(m.page_height)],
         "renderer": ctx.info.get("GL_RENDERER", "?"),
         "changes": {k: percentiles(v) for k, v in sorted(times.items())},
+        "trace": trace,
+        "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
     }
     r.release()
     ctx.release()
@@ -213,6 +260,13 @@ def main(argv=None) -> int:
     ap.add_argument("--method", default="bilinear")
     ap.add_argument("--cache-dir", default=str(ROOT / "out" / "bench-rebake"))
     ap.add_argument("--json", default=None, help="also write the results here")
+    ap.add_argument("--trace", action="store_true", help="print every change (bake stages, upload)")
+    ap.add_argument(
+        "--prewarm",
+        action="store_true",
+        help="after each change, bake the slider's unvisited neighbours (idle work, timed apart): "
+        "what the viewer's bake worker could do between slider steps",
+    )
     args = ap.parse_args(argv)
     res = run(args)
     print(
@@ -220,6 +274,8 @@ def main(argv=None) -> int:
         f"{res['mesh_triangles']} mesh triangles, depths {res['depths']}"
     )
     print(f"first bake + upload {res['first_bake_s'] * 1e3:.0f} ms; renderer {res['renderer']}")
+    if res["load_average"]:
+        print("load average (1, 5, 15 min) at the end: " + ", ".join(f"{x:.2f}" for x in res["load_average"]))
     print(f"{'change':<22}{'n':>4}{'p50 ms':>9}{'p95 ms':>9}{'max ms':>9}")
     for k, v in res["changes"].items():
         if v["n"]:

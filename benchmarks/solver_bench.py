@@ -7,17 +7,20 @@ writes ``benchmarks/solver.json`` (merged with what is there) and ``benchmarks/s
 
 * **adaptive** -- on the Cornell box: uniform subdivision (``criterion="uniform"``) at depths
   1..``UNIFORM_DEPTHS`` and the adaptive mesh (the default criterion, max depth 6) at several
-  tolerances, every solve with the default convergence, samples and ambient term and no
-  minimum element size. Each solution's error is the relative error on smooth lit pixels
-  against the Mitsuba reference of ``tests/test_reference_compare.py`` (512 spp, 96 x 96, cached
-  in ``tests/refs``; its own noise floor, measured against a 4096 spp render, is ~0.035), and
-  against the deepest uniform solve rendered the same way (a radiosity reference: same model
-  of light, so its floor is lower). For each adaptive solve the uniform element count at the
-  same error is interpolated (log elements against log error, between the two uniform solves
-  that bracket it) and the ratio adaptive / uniform reported (goal <= 0.25).
-  The third measure is the area-weighted L1 error of the surface radiance (every patch sampled
-  at 256 x 256 cell centres, emitters left out) against the deepest uniform solve: unlike the
-  96 x 96 image it sees shadow edges.
+  tolerances, every solve with the default convergence, samples, seed and ambient term and no
+  minimum element size. Errors: (1) the relative error on smooth lit pixels against the Mitsuba
+  reference of ``tests/test_reference_compare.py`` (512 spp, 96 x 96, cached in ``tests/refs``;
+  its own noise floor, measured against a 4096 spp render, is ~0.035); against the radiosity
+  reference ``REFERENCE`` (uniform depth 6 with 2x the samples per side and another seed, so
+  that no solve shares its Monte Carlo errors): (2) the same image measure, and (3) the
+  area-weighted L1 error of the surface radiance (every patch sampled at 256 x 256 cell
+  centres, emitters left out), which unlike the 96 x 96 image sees shadow edges; and (4) the
+  surface error of direct light alone (the same solves with ``max_shots=0``: the stage-A mesh
+  and its exactly evaluated direct light, against the reference's), the mesh's error with no
+  indirect-light noise. For each adaptive solve the uniform element count at the same error
+  is interpolated (log elements against log error, between the two uniform solves that bracket
+  it) and the ratio adaptive / uniform reported (goal <= 0.25). The uniform depth-6 row (the
+  reference's mesh) shows the noise floor of a solve at the default samples.
 * **shadow** -- the same comparison on a floor under a point light with an occluder (one hard
   shadow), by the surface error against uniform depth 7, every solve converged to 0.1 % without
   the ambient term (so the error is the mesh's).
@@ -37,6 +40,7 @@ import json
 import math
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +59,8 @@ REFS = ROOT / "tests" / "refs"
 SIZE = (96, 96)
 UNIFORM_DEPTHS = (1, 2, 3, 4, 5, 6)
 ADAPTIVE_TOLERANCES = (0.4, 0.2, 0.1, 0.05, 0.025)
+#: the radiosity reference of ``adaptive``: uniform depth 6, 2x the samples per side, another seed
+REFERENCE = {"max_depth": 6, "criterion": "uniform", "min_element_size": 0.0, "samples": 64, "seed": 1}
 
 
 # -- the error measure of tests/test_reference_compare.py ---------------------------------------
@@ -162,63 +168,67 @@ def interp_elements(err: float, curve: list[tuple[float, float]]) -> float | Non
 
 
 def run_adaptive(depths=UNIFORM_DEPTHS, tolerances=ADAPTIVE_TOLERANCES) -> dict:
+    """Adaptive against uniform on the Cornell box (see the module docstring). The radiosity
+    reference is uniform depth 6 solved with ``REFERENCE`` (2x the samples per side, another
+    seed): a reference of the same samples and seed as the solves shares their Monte Carlo
+    errors where their vertices coincide (the depth-6 adaptive mesh's vertex keys and sample
+    rotations are the depth-6 solve's), which flatters the adaptive mesh, and its own noise
+    would be a floor under every error. The uniform depth-6 row, solved like the others,
+    measures what is left: the noise of a solve at the default samples (its mesh is the
+    reference's)."""
     cb = Cornell()
     rows = []
-    sols = {}
-    for d in depths:
-        opts = SolveOptions(max_depth=d, criterion="uniform", min_element_size=0.0)
+    sols, direct = {}, {}
+
+    def add(key, opts):
         sol, dt = timed_solve(cb.scene, opts)
-        sols[("uniform", d)] = sol
+        sols[key] = sol
+        direct[key], _ = timed_solve(cb.scene, replace(opts, max_shots=0))
         rows.append(
             {
-                "mesh": "uniform",
-                "depth": d,
-                "tolerance": None,
-                "elements": sol.stats["elements"],
-                "time_s": dt,
-                **cb.errors(sol),
-            }
-        )
-        print(rows[-1], flush=True)
-    for tol in tolerances:
-        opts = SolveOptions(tolerance=tol, min_element_size=0.0)
-        sol, dt = timed_solve(cb.scene, opts)
-        sols[("adaptive", tol)] = sol
-        rows.append(
-            {
-                "mesh": "adaptive",
+                "mesh": key[0],
                 "depth": opts.max_depth,
-                "tolerance": tol,
+                "tolerance": key[1] if key[0] == "adaptive" else None,
                 "elements": sol.stats["elements"],
+                "direct_elements": direct[key].stats["elements"],
                 "time_s": dt,
                 **cb.errors(sol),
             }
         )
         print(rows[-1], flush=True)
-    # the radiosity reference: the deepest uniform solve
-    dmax = max(depths)
-    ref_img = cb.image(sols[("uniform", dmax)])
+
+    for d in depths:
+        add(("uniform", d), SolveOptions(max_depth=d, criterion="uniform", min_element_size=0.0))
+    for tol in tolerances:
+        add(("adaptive", tol), SolveOptions(tolerance=tol, min_element_size=0.0))
+    ref_opts = SolveOptions(**REFERENCE)
+    ref, ref_dt = timed_solve(cb.scene, ref_opts)
+    ref_direct, _ = timed_solve(cb.scene, replace(ref_opts, max_shots=0))
+    ref_img = cb.image(ref)
     for r in rows:
         key = ("uniform", r["depth"]) if r["mesh"] == "uniform" else ("adaptive", r["tolerance"])
-        e = image_errors(cb.image(sols[key]), ref_img, cb.mask)
-        r["rel_smooth_vs_uniform"] = e["rel_smooth"]
-    for r in rows:
-        key = ("uniform", r["depth"]) if r["mesh"] == "uniform" else ("adaptive", r["tolerance"])
-        r["surface_vs_uniform"] = surface_error(sols[key], sols[("uniform", dmax)])
-    for measure in ("rel_smooth", "rel_smooth_vs_uniform", "surface_vs_uniform"):
-        curve = [
-            (r[measure], r["elements"])
-            for r in rows
-            if r["mesh"] == "uniform" and not (measure != "rel_smooth" and r["depth"] == dmax)
-        ]
+        r["rel_smooth_vs_uniform"] = image_errors(cb.image(sols[key]), ref_img, cb.mask)["rel_smooth"]
+        r["surface_vs_uniform"] = surface_error(sols[key], ref)
+        r["direct_surface_vs_uniform"] = surface_error(direct[key], ref_direct)
+    for measure, count in (
+        ("rel_smooth", "elements"),
+        ("rel_smooth_vs_uniform", "elements"),
+        ("surface_vs_uniform", "elements"),
+        ("direct_surface_vs_uniform", "direct_elements"),
+    ):
+        curve = [(r[measure], r[count]) for r in rows if r["mesh"] == "uniform"]
         for r in rows:
             if r["mesh"] != "adaptive":
                 continue
             nu = interp_elements(r[measure], curve)
             r[f"uniform_elements_at_{measure}"] = nu
-            r[f"ratio_{measure}"] = (r["elements"] / nu) if nu else None
+            r[f"ratio_{measure}"] = (r[count] / nu) if nu else None
     cb.renderer.release()
-    return {"model": "cornell_box", "rows": rows}
+    return {
+        "model": "cornell_box",
+        "reference": {"options": ref_opts.to_dict(), "elements": ref.stats["elements"], "time_s": ref_dt},
+        "rows": rows,
+    }
 
 
 def shadow_scene():
@@ -452,19 +462,32 @@ def format_md(res: dict) -> str:
         ]
     ad = res.get("adaptive")
     if ad:
+        ref = ad.get("reference") or {}
+        ro = ref.get("options", {})
+        ref_name = (
+            f"uniform depth {ro.get('max_depth')}, samples {ro.get('samples')}, seed {ro.get('seed')}"
+            if ro
+            else "uniform depth 6"
+        )
         lines += [
             "## Adaptive mesh against uniform subdivision (Cornell box)",
             "",
-            "| mesh | depth | tolerance | elements | time s | image error vs Mitsuba | uniform elements at that error | ratio | image error vs uniform depth 6 | uniform elements at that error | ratio | surface error vs uniform depth 6 | uniform elements at that error | ratio |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+            f"Radiosity reference: {ref_name}"
+            + (f" ({ref['elements']} elements, {ref['time_s']:.0f} s)." if ref else "."),
+            "Ratio: adaptive elements / uniform elements at the same error (log-log interpolation;"
+            " '-' where the error is outside the uniform curve).",
+            "",
+            "| mesh | depth | tolerance | elements | time s | image error vs Mitsuba | ratio | image error vs reference | ratio | surface error vs reference | uniform elements at that error | ratio | direct light only: elements | surface error | ratio |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for r in ad["rows"]:
             lines.append(
                 f"| {r['mesh']} | {r['depth']} | {_f(r['tolerance'])} | {r['elements']} | {_f(r['time_s'], 2)} | "
-                f"{_f(r['rel_smooth'], 4)} | {_f(r.get('uniform_elements_at_rel_smooth'), 0)} | {_f(r.get('ratio_rel_smooth'), 2)} | "
-                f"{_f(r['rel_smooth_vs_uniform'], 4)} | {_f(r.get('uniform_elements_at_rel_smooth_vs_uniform'), 0)} | "
-                f"{_f(r.get('ratio_rel_smooth_vs_uniform'), 2)} | {_f(r['surface_vs_uniform'], 4)} | "
-                f"{_f(r.get('uniform_elements_at_surface_vs_uniform'), 0)} | {_f(r.get('ratio_surface_vs_uniform'), 2)} |"
+                f"{_f(r['rel_smooth'], 4)} | {_f(r.get('ratio_rel_smooth'), 2)} | "
+                f"{_f(r['rel_smooth_vs_uniform'], 4)} | {_f(r.get('ratio_rel_smooth_vs_uniform'), 2)} | "
+                f"{_f(r['surface_vs_uniform'], 4)} | {_f(r.get('uniform_elements_at_surface_vs_uniform'), 0)} | "
+                f"{_f(r.get('ratio_surface_vs_uniform'), 2)} | {r.get('direct_elements', '-')} | "
+                f"{_f(r.get('direct_surface_vs_uniform'), 4)} | {_f(r.get('ratio_direct_surface_vs_uniform'), 2)} |"
             )
         lines.append("")
     sh = res.get("adaptive_shadow")

@@ -437,7 +437,9 @@ GPU_DTYPES = {"rgba16f": np.float16, "rgba32f": np.float32, "rgba8": np.uint8, "
 HALF_MAX = 65504.0
 
 
-def to_gpu(x: np.ndarray, pixel_format: str, page_scale: float = 1.0, out: np.ndarray | None = None) -> np.ndarray:
+def to_gpu(
+    x: np.ndarray, pixel_format: str, page_scale: float = 1.0, out: np.ndarray | None = None
+) -> np.ndarray:
     """``(..., 3)`` linear values -> their GPU form ``(..., 4)`` of dtype ``GPU_DTYPES[pixel_format]``.
 
     rgba8: ``rint(sRGB(clip(x / page_scale, 0, 1)) x 255)`` (GL_SRGB8_ALPHA8 decodes it before
@@ -627,7 +629,9 @@ def host_memory_bytes() -> int:
 def host_bytes(sides: np.ndarray, packing: atlas.Packing, policy: BakePolicy, align: int) -> int:
     """Host bytes a bake allocates for its textures (estimate, made before any texel exists):
     the tiles (float32), their padded boxes (float32 and GPU form), the GPU pages, and the
-    float64 temporaries of resampling the largest group of equal-sized tiles (two arrays)."""
+    float64 temporaries of resampling the largest group of equal-sized tiles (two arrays).
+    An upper bound since the boxes keep only their GPU form and scaling and boxing run in
+    float32 chunks of a few MB (float32 boxes are made again only for ``Baked.pages``)."""
     sides = np.asarray(sides, dtype=np.int64)
     if not len(sides):
         return 0
@@ -835,11 +839,15 @@ class Baker:
         missing = np.array([p for p in ps.tolist() if p not in store], dtype=np.int64)
         if len(missing):
             tiles = self.tiles.get(missing, policy.method, policy.scale, policy.scale_mode)
-            store.update(zip(missing.tolist(), self._build_boxes(missing, tiles, None, policy, align), strict=True))
+            store.update(
+                zip(missing.tolist(), self._build_boxes(missing, tiles, None, policy, align), strict=True)
+            )
         pairs = [store[p] for p in ps.tolist()]
         return [a for a, _ in pairs], [b for _, b in pairs]
 
-    def _build_boxes(self, ps: np.ndarray, tiles: list, rings: dict | None, policy: BakePolicy, align: int) -> list:
+    def _build_boxes(
+        self, ps: np.ndarray, tiles: list, rings: dict | None, policy: BakePolicy, align: int
+    ) -> list:
         """``[(source, GPU-form box)]`` of patches ``ps`` from their (scaled) ``tiles``.
 
         A box is the tile with its boundary ring replaced by ``rings[p]`` when given (the seam
@@ -879,18 +887,18 @@ class Baker:
                 for j, q in enumerate(chunk.tolist()):
                     inner[j] = tiles[q]
                 for tri in (False, True):  # harmonised rings, one scatter per kind
-                    js = [j for j, q in enumerate(chunk.tolist()) if is_tri[q] == tri and has_ring[q]]
-                    if not js:
+                    js = np.flatnonzero(has_ring[chunk] & (is_tri[chunk] == tri))
+                    if not len(js):
                         continue
                     rows, cols = ring_index(n, tri)
-                    inner[np.array(js)[:, None], rows[None], cols[None]] = np.stack(
-                        [rings[int(ps[chunk[j]])] for j in js]
+                    inner[js[:, None], rows[None], cols[None]] = np.stack(
+                        [rings[p] for p in ps[chunk[js]].tolist()]
                     )
                     if tri:
                         inner[js] = extend_triangle(inner[js])
-                dj = [j for j, q in enumerate(chunk.tolist()) if factors[q] is not None]
-                if dj:
-                    inner[dj] *= np.stack([factors[chunk[j]] for j in dj])[:, None, None, :]
+                dj = np.flatnonzero(dmask[chunk])
+                if len(dj):
+                    inner[dj] *= np.stack([factors[q] for q in chunk[dj].tolist()])[:, None, None, :]
                 if g or bs > n:  # edge replication, as np.pad(mode="edge")
                     b[:, :g, g : g + n] = inner[:, :1]
                     b[:, g + n :, g : g + n] = inner[:, -1:]

@@ -62,10 +62,36 @@ def _progress_bar(args, desc: str, close_when_done: bool = False):
         bar.close()
 
 
+def _solution_not_a_model(args, path) -> None:
+    """``iat info SOL.npz`` / ``iat solve SOL.npz``: say what the file is and what would help (one line),
+    instead of "unsupported file type '.npz'". A missing file is left to load_scene ("file not found")."""
+    from .errors import LoadError
+    from .inputs import is_solution_path
+    from .scene import SUPPORTED_EXTENSIONS
+
+    path = Path(path)
+    if not (is_solution_path(path) and path.is_file()):
+        return
+    model = ""
+    try:  # the model it was solved from, if the file says (cheap: one array of the archive)
+        with np.load(path, allow_pickle=False) as z:
+            model = str(z["model_path"]) if "model_path" in z.files else ""
+    except Exception:
+        pass
+    command = getattr(args, "command", "info")
+    reads = f"'iat {command}' reads models ({', '.join(SUPPORTED_EXTENSIONS)})"
+    if model:
+        what = f"a solution file, not a model: {reads}; run it on {model}, the model it was solved from"
+    else:  # unreadable, or not an IAT solution at all: say what the extension means
+        what = f"'.npz' is IAT's solution format, not a model: {reads}"
+    raise LoadError(f"{what}; 'iat bake/render/view' read solutions", path)
+
+
 def _load(args, path, max_edge=None):
     """:func:`iat.scene.load_scene` with a progress bar."""
     from .scene import load_scene
 
+    _solution_not_a_model(args, path)
     with _progress_bar(args, f"load {Path(path).name}") as bar:
         return load_scene(path, max_edge=max_edge, progress=bar)
 
@@ -340,6 +366,10 @@ def cmd_view(args) -> int:
         if not path.is_file():
             raise LoadError("file not found" if not path.exists() else "not a regular file", path)
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        if args.input is not None:  # nothing can be shown: name a bad file before the display
+            from .inputs import is_solution_path, open_solution
+
+            open_solution(path) if is_solution_path(path) else _load(args, path)
         raise RenderError(
             "no display (DISPLAY is not set): run under xvfb-run or on a desktop, or use 'iat render'"
         )

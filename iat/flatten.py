@@ -51,11 +51,15 @@ tile's own interpolant (bilinear for bilinear/scan, Catmull-Rom for bicubic) at
 depend on edge texels only, so corners stay exact and neighbours with equal
 edges still agree. ``mode="naive"`` is a PIL image resize of the whole tile
 (texel centres move by a fraction of a texel: the report's correspondence
-errors), kept for comparison. Neighbours of *different* sizes describe a shared edge
-by different polylines (and sample it at different points once scaled); the baker
-matches them after scaling (:mod:`iat.seams`: the coarser side's edge polyline is
-copied onto the finer side's edge texels, exact when sides are ``2**k + 1``), for
-clamped scaling and scale 1 only.
+errors), kept for comparison. Both are separable and linear: one ``(m, n)`` float32
+weight matrix ``W`` per (n, m) (Pillow's own coefficients for naive), applied to every
+tile of that size at once as ``W @ tile @ W.T`` (two float32 products per chunk of tiles,
+block-diagonal sparse ones for the usual 2-6 taps; the per-tap float64 gathers they
+replace took 6-10x longer). Neighbours of *different* sizes describe a shared edge by
+different polylines (and sample it at different points once scaled); the baker matches
+them after scaling (:mod:`iat.seams`: the coarser side's edge polyline is copied onto the
+finer side's edge texels, exact when sides are ``2**k + 1``), for clamped scaling and
+scale 1 only.
 
 Every fill is vectorised over groups of leaves / triangles of equal size; no
 Python loop runs per leaf or per texel.
@@ -463,7 +467,9 @@ def _pil_filter(x: np.ndarray, kernel: str) -> np.ndarray:
         return np.where(x < 1.0, 1.0 - x, 0.0)
     a = -0.5  # Pillow's bicubic
     return np.where(
-        x < 1.0, ((a + 2.0) * x - (a + 3.0)) * x * x + 1, np.where(x < 2.0, (((x - 5) * x + 8) * x - 4) * a, 0.0)
+        x < 1.0,
+        ((a + 2.0) * x - (a + 3.0)) * x * x + 1,
+        np.where(x < 2.0, (((x - 5) * x + 8) * x - 4) * a, 0.0),
     )
 
 
@@ -515,28 +521,65 @@ def _weights(n: int, m: int, kernel: str, mode: str) -> np.ndarray:
     return W
 
 
+_BLOCKS: dict = {}
+
+
+def _block_diag(W: np.ndarray, c: int):
+    """``kron(I_c, W)`` as a scipy CSR matrix (float32), cached per (``W``, ``c``)."""
+    key = (id(W), int(c))
+    hit = _BLOCKS.get(key)
+    if hit is not None and hit[0] is W:
+        return hit[1]
+    from scipy.sparse import csr_matrix
+
+    m, n = W.shape
+    r, col = np.nonzero(W)  # row-major: rows sorted
+    b = np.arange(c, dtype=np.int64)[:, None]
+    cols = (b * n + col[None]).ravel()
+    counts = np.bincount(r, minlength=m)
+    indptr = np.concatenate([[0], np.cumsum(np.tile(counts, c))])
+    K = csr_matrix((np.tile(W[r, col], c), cols, indptr), shape=(c * m, c * n))
+    if len(_BLOCKS) > 64:
+        _BLOCKS.clear()
+    _BLOCKS[key] = (W, K)
+    return K
+
+
 def _resample_stack(tiles, W: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """``W @ tile @ W.T`` per tile and channel: (k, n, n, C) -> (k, m, m, C) float32.
 
-    Two batched float32 matrix products, no transposed copies: rows (``W`` times each tile
-    seen as ``(n, n C)``), then columns (``W`` times each resampled row seen as ``(n, C)``).
-    ``tiles`` is an array or a list of equal tiles (stacked a chunk at a time); chunks keep
-    the temporaries near 2 MB (below numpy's huge-page threshold, so the heap reuses them).
-    One big GEMM for the columns (``kron(W, I_C)``) was faster on an idle machine but several
-    times slower when another process holds a core (OpenBLAS threads wait for each other).
+    Two float32 products per chunk of tiles (temporaries near 2 MB, below numpy's huge-page
+    threshold, so the heap reuses them): rows (``W`` times each tile seen as ``(n, n C)``),
+    then columns (``W`` times each resampled row seen as ``(n, C)``). ``tiles`` is an array
+    or a list of equal tiles (stacked a chunk at a time). When ``W`` is sparse (the bilinear
+    and cubic kernels: 2-6 taps of ``n``) both products are one block-diagonal CSR matrix
+    ``kron(I, W)`` times the chunk (1.5-2x faster than the dense products on 65-texel tiles);
+    otherwise batched ``np.matmul``. One big dense GEMM for the columns (``kron(W, I_C)``) was
+    faster on an idle machine but several times slower while another process held a core.
     """
-    k, n, ch = len(tiles), tiles[0].shape[0], tiles[0].shape[2]
+    k = len(tiles)
+    n, ch = (
+        (tiles.shape[1], tiles.shape[3])
+        if isinstance(tiles, np.ndarray)
+        else (tiles[0].shape[0], tiles[0].shape[2])
+    )
     m = W.shape[0]
     if out is None:
         out = populated_empty((k, m, m, ch), np.float32)
     step = max(1, (2 << 20) // max(1, max(m, n) * n * ch * 4))
+    sparse = n >= 8 and np.count_nonzero(W) * 4 <= W.size
     for c0 in range(0, k, step):
         t = tiles[c0 : c0 + step]
         t = np.stack(t).astype(np.float32, copy=False) if isinstance(t, (list, tuple)) else t
         t = np.ascontiguousarray(t, dtype=np.float32)
         kk = len(t)
-        rows = np.matmul(W, t.reshape(kk, n, n * ch)).reshape(kk * m, n, ch)  # (k m, n, C)
-        np.matmul(W, rows, out=out[c0 : c0 + kk].reshape(kk * m, m, ch))
+        dst = out[c0 : c0 + kk]
+        if sparse:
+            rows = _block_diag(W, kk) @ t.reshape(kk * n, n * ch)  # (kk m, n C)
+            dst[...] = (_block_diag(W, kk * m) @ rows.reshape(kk * m * n, ch)).reshape(kk, m, m, ch)
+        else:
+            rows = np.matmul(W, t.reshape(kk, n, n * ch)).reshape(kk * m, n, ch)  # (k m, n, C)
+            np.matmul(W, rows, out=dst.reshape(kk * m, m, ch))
     return out
 
 
@@ -565,7 +608,11 @@ def scale_tiles(
         raise OptionError(f"scale must be > 0, got {scale}")
     if not isinstance(tiles, (list, tuple)):
         tiles = np.asarray(tiles)
-    k, n = len(tiles), tiles[0].shape[0]
+        k, n = tiles.shape[:2]
+    elif not tiles:
+        raise OptionError("scale_tiles: no tiles")
+    else:
+        k, n = len(tiles), tiles[0].shape[0]
     m = scaled_side(n, scale)
     if m == n:
         return np.array(np.stack(tiles) if isinstance(tiles, (list, tuple)) else tiles, dtype=np.float32)

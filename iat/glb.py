@@ -26,8 +26,6 @@ none is required.
 from __future__ import annotations
 
 import json
-import os
-import secrets
 import struct
 from pathlib import Path
 from typing import Any
@@ -548,32 +546,13 @@ class GlbBuilder:
     def write(self, path: str | Path) -> Path:
         """Write the GLB to ``path`` atomically; returns the path.
 
-        The bytes go to a temporary file in the same directory, which is flushed,
-        fsynced and then renamed over ``path`` (``os.replace``). On any error the
-        previous file at ``path`` is left untouched and the temporary file removed.
+        The bytes go to a temporary file ``.<name>.<random>.tmp`` in the same directory, which
+        is flushed, fsynced and then renamed over ``path`` (``os.replace``), by
+        :func:`iat.imageio.atomic_write`. On any error the previous file at ``path`` is left
+        untouched and the temporary file removed; stale temporaries of killed writers (older
+        than an hour) are removed after a successful write.
         """
-        path = Path(path)
+        from .imageio import atomic_write
+
         data = self.to_bytes()  # serialisation errors happen before anything touches the disk
-        tmp = None
-        try:
-            while True:
-                candidate = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-                try:
-                    fd = os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-                except FileExistsError:
-                    continue
-                tmp = candidate
-                break
-            with os.fdopen(fd, "wb") as f:
-                f.write(data)
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, path)
-            tmp = None
-        finally:
-            if tmp is not None:
-                try:
-                    os.unlink(tmp)
-                except OSError:
-                    pass
-        return path
+        return atomic_write(path, lambda f: f.write(data), make_parents=False)

@@ -37,7 +37,8 @@ packing:
   their hypotenuse changed, so bilinear filtering stays exact at the diagonal.
 
 :func:`harmonised_boxes` is the Baker's hook: it returns what ``Baker._box_tiles`` returns,
-with the boxes of the changed patches rebuilt from harmonised tiles. Harmonisation applies
+with the boxes of the changed patches built from their tile and harmonised ring (rings are
+harmonised first, so each box is built once, by ``Baker._build_boxes``). Harmonisation applies
 to ``clamped`` scaling of every method (``bilinear``, ``scan``, ``bicubic``: all are drawn
 with GL_LINEAR) and to scale 1 (which the tile cache shares between the two modes);
 ``naive`` scaling at other scales is left as the report did it, to show its correspondence
@@ -85,9 +86,9 @@ REL_TOL = 1e-6
 #: at most this many Jacobi passes (corners shared by chains of masters)
 MAX_PASSES = 8
 #: a shared segment whose two sides differ by more than this on average at the knots they share
-#: (a corner group: at its vertex), relative to the larger value, is a real discontinuity (light under a wall standing on the
-#: edge, a shadow line on a patch edge): it is left as the solution has it. At shared knots,
-#: independent subdivision leaves only solver noise.
+#: (a corner group: at its vertex), relative to the larger value, is a real discontinuity (light
+#: under a wall standing on the edge, a shadow line on a patch edge): it is left as the solution
+#: has it. At shared knots, independent subdivision leaves only solver noise.
 MAX_STEP = 0.4
 
 # polygon edges: slot a -> slot b

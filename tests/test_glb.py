@@ -16,7 +16,6 @@ import pytest
 from PIL import Image
 from pygltflib import GLTF2
 
-import iat.glb as glb
 from iat.camera import Camera
 from iat.glb import GlbBuilder, look_rotation, quat_from_matrix
 from sample_models import cornell_box
@@ -285,7 +284,7 @@ def test_write_is_atomic_when_replace_fails(tmp_path, monkeypatch):
         assert Path(src).exists() and Path(src).parent == path.parent  # the temp sits next to the target
         raise OSError("disk on fire")
 
-    monkeypatch.setattr(glb.os, "replace", boom)
+    monkeypatch.setattr(os, "replace", boom)
     with pytest.raises(OSError, match="disk on fire"):
         kitchen_sink().write(path)
     assert path.read_bytes() == old
@@ -298,7 +297,7 @@ def test_write_is_atomic_when_writing_fails(tmp_path, monkeypatch):
     def boom(fd):
         raise OSError("no space left")
 
-    monkeypatch.setattr(glb.os, "fsync", boom)
+    monkeypatch.setattr(os, "fsync", boom)
     with pytest.raises(OSError, match="no space"):
         kitchen_sink().write(path)
     assert path.read_bytes() == old
@@ -321,6 +320,31 @@ def test_write_replaces_and_is_deterministic(tmp_path):
     kitchen_sink().write(path)
     assert path.read_bytes() == kitchen_sink().to_bytes()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.glb"]
+
+
+def test_write_removes_stale_temporaries_of_killed_writers(tmp_path, monkeypatch):
+    """The temporary is `.scene.glb.<random>.tmp` (the one scheme of iat.imageio.atomic_write); one a
+    killed writer left more than an hour ago goes with the next successful write, a young one (a write
+    in progress elsewhere) and other names stay (docs/stability.md, G4)."""
+    import time
+
+    from iat.imageio import STALE_TEMPORARY_S, temporary_pattern
+
+    path, _ = _old_file(tmp_path)
+    names = []
+    real_replace = os.replace
+    monkeypatch.setattr(os, "replace", lambda a, b: (names.append(Path(a).name), real_replace(a, b)))
+    kept = [".scene.glb.w0rk1ng.tmp", "x.tmp"]
+    stale, young, other = (tmp_path / n for n in [".scene.glb.k1ll3d_1.tmp", *kept])
+    old = time.time() - 2 * STALE_TEMPORARY_S
+    for f in (stale, young, other):
+        f.write_bytes(b"half")
+        os.utime(f, (old, old))
+    os.utime(young)  # now
+    kitchen_sink().write(path)
+    assert len(names) == 1 and temporary_pattern(path).fullmatch(names[0]), names
+    assert path.read_bytes() == kitchen_sink().to_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([*kept, "scene.glb"])
 
 
 # -- the Cornell box sample -----------------------------------------------------------------------

@@ -305,3 +305,82 @@ def test_a_real_discontinuity_on_a_shared_edge_is_kept(monkeypatch):
     on, off = bake_both(sol, BakePolicy(threshold=0, scale=0.25, detail=False), monkeypatch)
     np.testing.assert_array_equal(on.gpu_pages, off.gpu_pages)
     assert seam_error(on, sol)["max"] > 1.0
+
+
+# -- the Baker's boxes ---------------------------------------------------------------------------
+
+
+def _boxes_by_recipe(baker, baked, pol):
+    """GPU pages and float32 pages as the harmonised boxes were first made: each harmonised tile
+    materialised (``apply_ring``), padded with ``np.pad(mode="edge")``, divided by the albedo on
+    detail patches, converted with ``to_gpu`` and blitted."""
+    from iat import atlas
+    from iat.bake import from_gpu, to_gpu
+    from iat.flatten import scaled_side, tile_side
+
+    idx = baker.index
+    ps = np.flatnonzero(baked.patch_textured)
+    align, g = 1 << (pol.mip_levels - 1), pol.gutter
+    tiles = baker.tiles.get(ps, pol.method, pol.scale, pol.scale_mode)
+    new = {}
+    if seams.applies(pol):
+        textured = baked.patch_textured
+        sides = tile_side(idx.depth).astype(np.int64)
+        sides[ps] = scaled_side(tile_side(idx.depth[ps]), pol.scale)
+        pairs = baker._seam_state.pairs
+        inv = set(np.unique(pairs.patch[textured[pairs.patch].any(1)]).tolist())
+        rings = {
+            p: seams.tile_ring(t, not idx.is_quad[p])
+            for p, t in zip(ps.tolist(), tiles, strict=True)
+            if p in inv
+        }
+        mesh = np.array(sorted(p for p in inv if not textured[p]), dtype=np.int64)
+        for p, t in zip(mesh.tolist(), baker.tiles.get(mesh, "bilinear", 1.0, "clamped"), strict=True):
+            rings[p] = seams.tile_ring(t, not idx.is_quad[p])
+        new, _ = seams.harmonise_rings(rings, sides, textured, idx.is_quad, pairs)
+    scale8 = baker._rgba8_scale(pol.detail) if pol.pixel_format == "rgba8" else 1.0
+    dm = baker._detail_mask(pol)
+    gpus, floats = [], []
+    for p, t in zip(ps.tolist(), tiles, strict=True):
+        if p in new:
+            t = seams.apply_ring(t, new[p], not idx.is_quad[p])
+        n = t.shape[0]
+        after = int(atlas.align_up(n + 2 * g, align)) - n - g
+        box = np.pad(t, ((g, after), (g, after), (0, 0)), mode="edge")
+        if dm[p]:
+            box *= baker._inv_albedo[p].astype(np.float32)
+        gpu = to_gpu(box, pol.pixel_format, scale8)
+        if pol.pixel_format in ("rgba8", "rgb9e5"):
+            box = from_gpu(gpu, pol.pixel_format, scale8)
+        gpus.append(gpu)
+        floats.append(box)
+    pk = baker._pack(ps, np.array([t.shape[0] for t in tiles]), pol, align)
+    G = np.zeros(baked.gpu_pages.shape, baked.gpu_pages.dtype)
+    F = np.zeros(baked.gpu_pages.shape[:3] + (3,), np.float32)
+    atlas.blit_boxes(G, gpus, pk.placements, g)
+    atlas.blit_boxes(F, floats, pk.placements, g)
+    return G, F
+
+
+@pytest.mark.parametrize(
+    "kw",
+    [
+        {"scale": 1.0},
+        {"scale": 0.5},
+        {"scale": 0.7, "pixel_format": "rgba8"},
+        {"scale": 0.6, "pixel_format": "rgb9e5", "method": "bicubic"},
+        {"scale": 0.6, "scale_mode": "naive"},
+        {"scale": 0.45, "method": "scan", "detail": False},
+    ],
+)
+def test_boxes_built_once_equal_the_harmonise_pad_convert_recipe(kw):
+    """The Baker builds each box once (harmonised ring written into the padded box, no tile copy,
+    only the GPU form kept): its pages equal, bit for bit, apply_ring + pad + to_gpu + blit."""
+    sol = uniform_solution(TEE + [TRI_QUAD[0]], [True, True, True, False], [2, 3, 4, 4])
+    baker = Baker(sol)
+    for t in (0, 3, 0):
+        pol = BakePolicy(threshold=t, **kw)
+        b = baker.bake(pol)
+        G, F = _boxes_by_recipe(baker, b, pol)
+        np.testing.assert_array_equal(np.asarray(b.gpu_pages).view(np.uint8), G.view(np.uint8))
+        np.testing.assert_array_equal(b.pages, F)

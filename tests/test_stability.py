@@ -12,6 +12,7 @@ so the table in docs/stability.md can be refreshed from a run:
 Tests marked ``xfail(strict=True)`` show a defect found while writing the catalogue: they
 run (nothing is skipped) and fail as expected today; when the defect is fixed they pass,
 strict mode turns that into a failure, and the marker (and the doc's row) must be updated.
+None is marked today: the defects found (D1-D10) are fixed and their tests hold the fixes.
 Timings are bounds with a wide margin, never comparisons between runs.
 """
 
@@ -299,9 +300,8 @@ def test_geometry_t_junctions_between_patches(renderer):
 
 
 def test_geometry_large_and_small_scales_keep_shadows_above_the_ray_offset():
-    """A 1 cm cube on a tile in a scene 14 m across: its shadow is there. Shadow rays start
-    RAY_EPS x scene diagonal off the surface, so objects smaller than that lose their shadows
-    (see the xfail below)."""
+    """A 1 cm cube on a tile alone and in a scene 14 m across: its shadow is there (and in a scene
+    141 m across, below: D1 fixed, the ray offset is capped by the patch size)."""
     shadow = {}
     for big in (0.0, 10.0):
         scene = ss.small_object_in_large_scene(big=big)
@@ -315,6 +315,8 @@ def test_geometry_large_and_small_scales_keep_shadows_above_the_ray_offset():
 
 
 def test_geometry_small_object_in_a_huge_scene_keeps_its_shadow():
+    """D1 (fixed): the 1 cm cube keeps its shadow in a scene 141 m across (the ray offset is capped by
+    2 % of the patch radius, not 1e-4 x the 141 m diagonal = 1.4 cm)."""
     scene = ss.small_object_in_large_scene(big=100.0)
     area, eps = _cube_shadow_area(scene)
     record("mixed_scales", shadow_cm2_scene_100m=area * 1e4, ray_eps_m_scene_100m=eps)
@@ -426,6 +428,7 @@ def test_geometry_nan_and_inf_coordinates_in_files(tmp_path):
 
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")
 def test_geometry_nan_in_memory_scene_is_an_iat_error():
+    """D2 (fixed): an in-memory scene with a NaN vertex is an IATError from solve, not a bare ValueError."""
     scene = ss.floor_under_light()
     scene.vertices[0, 0] = np.nan
     with pytest.raises(IATError, match="non-finite"):
@@ -502,6 +505,38 @@ def test_geometry_a_million_triangles(tmp_path):
     f = m["load_progress_fractions"]  # G2: the load reports progress at each stage, 0 to 1
     assert len(f) >= 5 and f[0] == 0.0 and f[-1] == 1.0
     assert all(b >= a for a, b in zip(f, f[1:], strict=False))
+
+
+def test_geometry_vertex_keys_of_a_million_corners_sort_and_mask():
+    """G1 (fixed): the vertex table of a mesh pass is the sorted unique leaf-corner keys; numpy 2.4's
+    np.unique was most of the million-triangle solve. qt.sorted_unique (np.sort + a first-of-run mask)
+    gives the same keys; both timed on 1 M random int64 keys and on the 1 024 000 corner keys of a
+    256 000-leaf forest (best of 3)."""
+
+    def best(fn, x):
+        t = []
+        for _ in range(3):
+            t0 = time.perf_counter()
+            y = fn(x)
+            t.append(time.perf_counter() - t0)
+        return min(t), y
+
+    random_keys = np.random.default_rng(0).integers(0, 1 << 40, 1_000_000)
+    forest = qt.roots(np.ones(4000, dtype=bool), 6)
+    for _ in range(3):
+        forest = qt.split(forest, np.ones(forest.n_leaves, dtype=bool))
+    corner_keys = qt.leaf_corner_keys(forest)
+    figures = {}
+    for name, keys in (("random_1M", random_keys), ("forest_corners_1M", corner_keys)):
+        t_unique, want = best(np.unique, keys)
+        t_sort, got = best(qt.sorted_unique, keys)
+        assert np.array_equal(got, want), name
+        figures[f"{name}_np_unique_s"] = round(t_unique, 3)
+        figures[f"{name}_sort_mask_s"] = round(t_sort, 3)
+    assert np.array_equal(qt.vertex_keys(forest), np.unique(corner_keys))
+    assert len(qt.sorted_unique(np.zeros(0, dtype=np.int64))) == 0
+    record("vertex_keys_unique", keys=len(random_keys), **figures)
+    assert figures["random_1M_sort_mask_s"] < 2.0  # 0.05 s measured; a bound, not a comparison
 
 
 # =================================================================================================
@@ -702,13 +737,59 @@ def test_lighting_bright_and_dim_emitters_pixel_formats(renderer):
     assert (q8[x[:, 0] < 1e-5 * x.max()] == 0).all()
 
 
+def test_lighting_banding_8_bit_vs_16_bit_on_a_smooth_ramp():
+    """Banding measured: a smooth exponential ramp over 3 decades (1e-3 to 1, a light's falloff) baked
+    at 1 025 texels across in rgba16f and rgba8. Per decade: distinct texel values, the widest band
+    (run of equal texels where the exact value rises 0.7 % per texel), the largest step between
+    neighbouring levels and the largest relative error. rgba16f: every texel its own level; rgba8
+    (sRGB 8-bit, one scale for all pages): bands widen as the radiance falls below the maximum."""
+    ramp = lambda p, x: (10.0 ** (-3.0 + 3.0 * x[:, 0]))[:, None] * np.ones(3)  # noqa: E731
+    sol = ss.uniform_depth_solution(ss.grid_corners(1, 1), 6, ramp)
+    base = Baker(sol)
+    policy = dict(threshold=0, method="bilinear", mipmaps=False, scale=16.0)
+    exact = base.bake(BakePolicy(**policy)).pages.astype(np.float64)  # rgba16f pages hold exact values
+    stored = {
+        "rgba16f": exact.astype(np.float16).astype(np.float64),  # what the rgba16f texture holds
+        "rgba8": base.bake(BakePolicy(**policy, pixel_format="rgba8")).pages.astype(np.float64),
+    }
+    lit = exact[0, ..., 0] > 0
+    ys, xs = np.nonzero(lit)
+    row = ys[len(ys) // 2]
+    cols = xs[ys == row]
+    e = exact[0, row, cols, 0]
+    rising = np.r_[np.diff(e) > 0, False] & np.r_[False, np.diff(e) > 0]  # inside the tile, no gutter
+    e = e[rising]
+    assert len(e) > 1000 and (e[1:] / e[:-1]).max() < 1.01
+    fig = {}
+    for fmt, pages in stored.items():
+        q = pages[0, row, cols, 0][rising]
+        for k, name in enumerate(("1e-3_1e-2", "1e-2_1e-1", "1e-1_1")):
+            sel = (e >= 10.0 ** (k - 3)) & (e < 10.0 ** (k - 2))
+            qq = q[sel]
+            runs = np.diff(np.flatnonzero(np.r_[True, qq[1:] != qq[:-1], True]))
+            levels = np.unique(qq)
+            fig[f"{fmt}_{name}_texels"] = int(sel.sum())
+            fig[f"{fmt}_{name}_levels"] = len(levels)
+            fig[f"{fmt}_{name}_widest_band_texels"] = int(runs.max())
+            fig[f"{fmt}_{name}_max_level_step"] = round(float((levels[1:] / levels[:-1] - 1).max()), 4)
+            fig[f"{fmt}_{name}_max_rel_err"] = round(float((np.abs(qq - e[sel]) / e[sel]).max()), 5)
+    record("banding_8_vs_16_bit", **fig)
+    for name in ("1e-3_1e-2", "1e-2_1e-1", "1e-1_1"):
+        assert fig[f"rgba16f_{name}_widest_band_texels"] == 1  # no band: the ramp's 0.7 % steps survive
+        assert fig[f"rgba16f_{name}_max_rel_err"] <= 2.0**-11
+    assert fig["rgba8_1e-1_1_max_rel_err"] < 0.02  # the top decade is fine in 8 bits
+    assert fig["rgba8_1e-3_1e-2_widest_band_texels"] > 10  # 3 decades down: visible bands (documented)
+
+
 def test_lighting_rgb9e5_bake_renders(renderer):
+    """D4 (fixed): an rgb9e5 bake uploads (GL_RGB9_E5) instead of raising RenderError."""
     scene = ss.bright_and_dim()
     sol = solve(scene, opts(max_depth=2))
     renderer.set_baked(Baker(sol, scene).bake(BakePolicy(threshold=0, pixel_format="rgb9e5")))
 
 
 def test_lighting_rgba8_gpu_matches_the_baked_pages(renderer):
+    """D5 (fixed): rgba8 pages are drawn as the baker stored them (sRGB8 texture), not 29 % off."""
     scene = ss.floor_under_light(height=0.3)
     sol = solve(scene, opts(max_depth=4))
     base = Baker(sol, scene)
@@ -731,6 +812,7 @@ def test_lighting_rgba8_gpu_matches_the_baked_pages(renderer):
 
 @pytest.mark.filterwarnings("ignore:overflow encountered in cast:RuntimeWarning")
 def test_lighting_very_bright_texel_stays_finite_in_rgba16f(renderer):
+    """D6 (fixed): a 1e5 texel is clamped to 65504 before the float16 cast, never inf on screen."""
     scene = ss.bright_and_dim(bright=1.0e5)
     sol = solve(scene, opts(max_depth=2))
     renderer.set_baked(Baker(sol, scene).bake(BakePolicy(threshold=0)))
@@ -876,6 +958,7 @@ def test_baking_atlas_pages_full_spill_to_more_pages(renderer):
 
 
 def test_baking_more_pages_than_the_gl_layer_limit_is_an_error(egl_ctx):
+    """D7 (fixed): more atlas pages than GL_MAX_ARRAY_TEXTURE_LAYERS is an error, not a black image."""
     from iat.render import Renderer
 
     limit = int(egl_ctx.info["GL_MAX_ARRAY_TEXTURE_LAYERS"])
@@ -947,6 +1030,8 @@ except MemoryError as e:
 
 
 def test_baking_texture_memory_beyond_the_host_is_a_bake_error(tmp_path):
+    """D8 (fixed): a bake larger than the memory available (ulimit -v 3 GiB here) is a BakeError raised
+    before allocating, not a MemoryError."""
     script = tmp_path / "huge.py"
     script.write_text(_HUGE_BAKE)
     r = subprocess.run([sys.executable, str(script), str(ROOT)], capture_output=True, text=True, timeout=300)
@@ -1101,6 +1186,7 @@ def test_files_bad_inputs_real_stderr_is_one_line(bad_inputs, tmp_path):
 
 
 def test_files_junk_npz_message_does_not_suggest_unpickling(bad_inputs):
+    """D9 (fixed): a junk .npz is refused before np.load, whose message suggested allow_pickle."""
     with pytest.raises(SolutionFileError) as e:
         Solution.load(bad_inputs["junk.npz"])
     record("cli_bad_inputs", junk_npz_message=str(e.value))
@@ -1124,8 +1210,8 @@ def test_files_viewer_open_job_reports_each_bad_input_on_one_line(bad_inputs, tm
 
 
 def test_files_view_without_a_display_exits_2(tmp_path, bad_inputs):
-    """`iat view` with no DISPLAY: exit 2 and our one-line message (see the xfail below for the extra
-    line GLFW prints before it)."""
+    """`iat view` with no DISPLAY: exit 2 and our one-line message, in a real process (D10 fixed: the
+    file is checked and the display looked for before GLFW is loaded, so GLFW prints nothing)."""
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     r = subprocess.run(
         [sys.executable, "-m", "iat.cli", "view", str(bad_inputs["missing.glb"])],
@@ -1142,6 +1228,7 @@ def test_files_view_without_a_display_exits_2(tmp_path, bad_inputs):
 
 
 def test_files_view_without_a_display_is_one_line_naming_the_file(bad_inputs):
+    """D10 (fixed): `iat view missing.glb` with no display is one line naming the file (no GLFW line)."""
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     r = subprocess.run(
         [sys.executable, "-m", "iat.cli", "view", str(bad_inputs["missing.glb"])],
@@ -1153,6 +1240,71 @@ def test_files_view_without_a_display_is_one_line_naming_the_file(bad_inputs):
     )
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert r.returncode == 2 and len(lines) == 1 and "missing.glb" in lines[0]
+
+
+def test_files_view_without_a_display_every_bad_input_is_one_line_and_exit_2(
+    bad_inputs, capsys, caplog, monkeypatch
+):
+    """`iat view BAD` with no display, for every bad input: exit 2, one line naming the file and its
+    fault, no traceback, no window: with no display `view` reads the file first (with a display the
+    window's open job reads it, see the viewer row)."""
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    named = 0
+    for name, path in bad_inputs.items():
+        rc, err, warnings = _run_cli(["view", path], capsys, caplog)
+        assert rc == 2 and len(err) == 1 and "Traceback" not in err[0], (name, err)
+        assert not warnings, (name, [w.getMessage() for w in warnings])
+        assert name in err[0] and "no display" not in err[0], (name, err)
+        named += name in err[0]
+    record("view_no_display", bad_inputs=len(bad_inputs), bad_inputs_named=named)
+
+
+def test_files_missing_file_is_file_not_found_everywhere(tmp_path, capsys, caplog, monkeypatch):
+    """G5 (fixed): a missing file is "<path>: file not found" from load_scene, open_solution and
+    Solution.load, and from every command (info, solve, bake, render, view)."""
+    from iat.inputs import open_solution
+
+    model, solution = tmp_path / "gone.glb", tmp_path / "gone.npz"
+    for fn, path in (
+        (load_scene, model),
+        (open_solution, model),
+        (open_solution, solution),
+        (Solution.load, solution),
+    ):
+        with pytest.raises(IATError) as e:
+            fn(path)
+        assert str(e.value) == f"{path}: file not found", (fn, str(e.value))
+    monkeypatch.delenv("DISPLAY", raising=False)  # view: never open a window here
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    out = {
+        "solve": ["-o", tmp_path / "s.npz"],
+        "bake": ["-o", tmp_path / "o.glb"],
+        "render": ["-o", tmp_path / "o.png"],
+    }
+    for command in ("info", "solve", "bake", "render", "view"):
+        for path in (model, solution):
+            rc, err, _ = _run_cli([command, path, *out.get(command, [])], capsys, caplog)
+            assert rc == 2 and err == [f"iat {command}: error: {path}: file not found"], (command, path, err)
+
+
+def test_files_info_and_solve_on_a_solution_say_what_would_help(
+    small_solution_file, tmp_path, capsys, caplog
+):
+    """G5 (fixed): `iat info SOL.npz` / `iat solve SOL.npz` say the file is a solution, which commands
+    read models, and name the model it was solved from (was "unsupported file type '.npz'")."""
+    lines = {}
+    for command, extra in (("info", []), ("solve", ["-o", tmp_path / "again.npz"])):
+        rc, err, _ = _run_cli([command, small_solution_file, *extra], capsys, caplog)
+        assert rc == 2 and len(err) == 1, (command, err)
+        head, msg = err[0].split(": error: ", 1)
+        assert head == f"iat {command}", err
+        assert msg.startswith(f"{small_solution_file}: a solution file, not a model"), msg
+        assert f"'iat {command}' reads models (.glb" in msg and "read solutions" in msg
+        assert f"run it on {CORNELL}, the model it was solved from" in msg
+        lines[command] = msg
+    assert not (tmp_path / "again.npz").exists()
+    record("cli_bad_inputs", info_on_a_solution=lines["info"])
 
 
 # -- interrupted writes --------------------------------------------------------------------------------
@@ -1218,6 +1370,40 @@ def test_files_interrupted_writes_leave_the_previous_file_intact(tmp_path, small
     record("interrupted_writes", disk_full_previous_intact=True, file_bytes=sizes)
 
 
+def test_files_atomic_writers_fsync_the_temporary_before_the_rename(
+    tmp_path, small_solution_file, monkeypatch
+):
+    """G3 (fixed): Solution.save, export_glb and save_png all go through imageio.atomic_write: the
+    temporary `.<name>.<random>.tmp` is fsynced, then renamed over the target, nothing else."""
+    from iat.imageio import temporary_pattern
+
+    writers = _writers(tmp_path, small_solution_file)
+    real_fsync, real_replace = os.fsync, os.replace
+    events = []
+
+    def fsync(fd):
+        events.append(("fsync", os.readlink(f"/proc/self/fd/{fd}")))
+        return real_fsync(fd)
+
+    def replace(src, dst):
+        events.append(("replace", os.fspath(src), os.fspath(dst)))
+        return real_replace(src, dst)
+
+    for name, (target, write) in writers.items():
+        events.clear()
+        monkeypatch.setattr(os, "fsync", fsync)
+        monkeypatch.setattr(os, "replace", replace)
+        try:
+            write(target)
+        finally:
+            monkeypatch.setattr(os, "fsync", real_fsync)
+            monkeypatch.setattr(os, "replace", real_replace)
+        assert [e[0] for e in events] == ["fsync", "replace"], (name, events)
+        assert events[0][1] == events[1][1] and events[1][2] == str(target), (name, events)
+        assert temporary_pattern(target).fullmatch(Path(events[1][1]).name), (name, events)
+    record("interrupted_writes", fsync_then_rename=sorted(writers))
+
+
 _KILLED_WRITER = r"""
 import os, sys, time
 sys.path.insert(0, sys.argv[1])
@@ -1240,8 +1426,12 @@ write(target)
 
 
 def test_files_killed_writers_leave_the_previous_file_intact(tmp_path, small_solution_file):
+    from iat.imageio import STALE_TEMPORARY_S, temporary_pattern
+
     """SIGKILL half-way through each writer (no cleanup can run): the previous file is intact; the
-    half-written temporary file stays behind as debris next to it (measured, documented)."""
+    half-written temporary `.<name>.<random>.tmp` stays behind next to it until the next successful
+    write of the same file, which removes it once it is older than STALE_TEMPORARY_S (1 h; a younger
+    one may be another process's write in progress) (G4 fixed)."""
     script = tmp_path / "killed.py"
     script.write_text(_KILLED_WRITER)
     debris = {}
@@ -1264,9 +1454,29 @@ def test_files_killed_writers_leave_the_previous_file_intact(tmp_path, small_sol
         assert target.read_bytes() == before, name
         left = [q for q in tmp_path.iterdir() if q.name.endswith(".tmp")]
         debris[name] = [[q.name, q.stat().st_size] for q in left]
-        for q in left:
-            q.unlink()
-    record("interrupted_writes", sigkill_previous_intact=True, sigkill_debris=debris)
+        assert len(left) == 1 and temporary_pattern(target).fullmatch(left[0].name), (name, left)
+        # the next write cleans it up once it is stale; a young one (a live writer's) and files of
+        # other names are left alone
+        stale = time.time() - 2 * STALE_TEMPORARY_S
+        os.utime(left[0], (stale, stale))
+        young = target.with_name(f".{target.name}.young0.tmp")
+        other = target.with_name(f".{target.name}.keep.me.tmp")  # not the pattern: a dot in <random>
+        for q in (young, other):
+            q.write_bytes(b"x")
+        os.utime(other, (stale, stale))
+        write(target)
+        assert not left[0].exists() and young.exists() and other.exists(), name
+        assert target.read_bytes() != b"" and target.stat().st_size > 0
+        young.unlink()
+        other.unlink()
+        assert [q.name for q in tmp_path.iterdir() if q.name.endswith(".tmp")] == [], name
+    record(
+        "interrupted_writes",
+        sigkill_previous_intact=True,
+        sigkill_debris=debris,
+        debris_removed_by_next_write=True,
+        stale_after_s=STALE_TEMPORARY_S,
+    )
 
 
 # =================================================================================================

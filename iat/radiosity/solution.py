@@ -7,8 +7,6 @@ Saved as a versioned ``.npz`` without pickles (``format = "iat-solution"``,
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +15,7 @@ import numpy as np
 
 from .. import quadtree as qt
 from ..errors import SolutionFileError
+from ..imageio import atomic_write
 
 SOLUTION_FORMAT = "iat-solution"
 SOLUTION_VERSION = 1
@@ -129,9 +128,12 @@ class Solution:
 
     # -- files ---------------------------------------------------------------
     def save(self, path: str | Path) -> None:
-        """Write atomically as ``.npz`` (no pickles); the previous file survives a failure."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
+        """Write atomically as ``.npz`` (no pickles); the previous file survives a failure.
+
+        Through :func:`iat.imageio.atomic_write`: a temporary ``.<name>.<random>.tmp`` in the same
+        directory, flushed and fsynced before ``os.replace``; stale temporaries of killed writers
+        (older than an hour) are removed after a successful write.
+        """
         arrays = {k: np.asarray(getattr(self, k), dtype=t) for k, t in _ARRAYS.items()}
         meta = {
             "format": np.array(SOLUTION_FORMAT),
@@ -141,16 +143,8 @@ class Solution:
             "options": np.array(json.dumps(self.options)),
             "model_path": np.array(self.model_path),
         }
-        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez_compressed(fh, **arrays, **meta)
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        # temporary ``.<name>.<random>.tmp`` next to the target, fsynced, then renamed over it
+        atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays, **meta))
 
     @classmethod
     def load(cls, path: str | Path) -> Solution:

@@ -122,6 +122,7 @@ from .options import (  # noqa: F401  (the constants are re-exported: read them 
     MIN_ELEMENT_FRACTION,
     RAY_EPS,
     RAY_EPS_PATCH,
+    REFINE_SAMPLE_FACTOR,
     RESOLVE_MAX_CHANGE,
     SHOT_FULL_SHARE,
     SHOT_SAMPLE_FACTOR,
@@ -427,11 +428,13 @@ class _Run:
         grids = {int(p): lattice_b.grid(int(p), shot_field) for p in sources}
         means = mesh["M"] @ shot_field
         total_cache = _Cache(keys, self.reflected.copy())
-        # samples per source by the share of the power it has shot (as the shots themselves)
+        # samples per source by the share of the power it has shot (as the shots themselves), but
+        # REFINE_SAMPLE_FACTOR x more per side: one pattern serves all new vertices, so its error
+        # is a coherent offset of them all, which the shots' per-vertex patterns average out
         ref = max(SHOT_FULL_SHARE * self.power0, 1e-300)
+        m_ref = REFINE_SAMPLE_FACTOR * self.m_side
         m_src = {
-            int(p): max(1, min(self.m_side, round(self.m_side * math.sqrt(self.shot_power[p] / ref))))
-            for p in sources
+            int(p): max(1, min(m_ref, round(m_ref * math.sqrt(self.shot_power[p] / ref)))) for p in sources
         }
         n_pass = self.stats["refine_passes"]
 
