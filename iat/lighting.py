@@ -45,9 +45,7 @@ import dataclasses
 import json
 import logging
 import math
-import os
 import struct
-import tempfile
 import time
 import traceback
 from dataclasses import dataclass
@@ -497,18 +495,9 @@ def _quat_from_direction(direction) -> list[float]:
 
 
 def _atomic_write(path: Path, data: bytes) -> None:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    from .imageio import atomic_write
+
+    atomic_write(path, lambda f: f.write(data))
 
 
 def _glb_bytes(json_text: str, blob: bytes | None) -> bytes:

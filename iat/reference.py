@@ -46,7 +46,6 @@ import json
 import os
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -368,16 +367,7 @@ def render_reference_cached(
         except (OSError, ValueError):
             pass  # damaged cache file: render again
     img = render_reference(scene, camera, size, spp, seed, max_depth, rr_depth=rr_depth, two_sided=two_sided)
-    cache_dir.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".ref-{key}-", suffix=".npy", dir=cache_dir)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.save(f, img, allow_pickle=False)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    from .imageio import atomic_write
+
+    atomic_write(path, lambda f: np.save(f, img, allow_pickle=False))
     return img

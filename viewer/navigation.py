@@ -35,7 +35,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -403,20 +402,9 @@ def save_paths(file: str | os.PathLike, paths: dict[str, CameraPath] | Iterable[
     """Write ``{name: [camera dict, ...]}`` as JSON, atomically; returns the path."""
     items = paths.values() if isinstance(paths, dict) else paths
     doc = {p.name: p.to_json() for p in items}
-    file = Path(file)
-    file.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{file.name}.", suffix=".tmp", dir=file.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(doc, f, indent=1)
-        os.replace(tmp, file)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return file
+    from iat.imageio import atomic_write
+
+    return atomic_write(file, lambda f: f.write(json.dumps(doc, indent=1).encode("utf-8")))
 
 
 def load_paths(file: str | os.PathLike) -> dict[str, CameraPath]:
