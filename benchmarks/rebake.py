@@ -27,11 +27,20 @@ upload separately. Not a test: timings depend on the machine (llvmpipe here).
     python benchmarks/rebake.py --synthetic 150000
     python benchmarks/rebake.py --trace               # every change: Baked.timings stages, upload
     python benchmarks/rebake.py --prewarm             # + the slider's neighbours baked between steps
+    python benchmarks/rebake.py --worker              # the viewer's path: BakeWorker, idle gaps
+    python benchmarks/rebake.py --no-reuse --no-freeze   # as before issue 5's last changes
 
 ``--prewarm`` bakes, after each change, the slider's not yet visited neighbours (timed
 apart as "prewarm (idle)"): what a viewer's bake worker could do while the slider rests.
-The load average at the end of the run is printed and kept in the JSON (the machine may be
-shared).
+``--worker`` drives the viewer's own :class:`viewer.state.BakeWorker` instead: each change is
+``submit`` on the UI side, the bake on the worker thread, then ``set_baked`` + ``finish`` once
+the result is there (timed from ``submit``, without waiting for a frame), and ``--gap`` seconds
+of idle time (the slider resting) before the next change, in which the worker pre-warms the
+neighbours of the policy shown (``--no-prewarm`` turns that off). The script calls
+``gc.freeze()`` once the solution, the Baker and the first bake are made, as the viewer does
+after opening a model (``--no-freeze``: not). ``--no-reuse`` makes the renderer re-create its
+page texture whenever the atlas size changes (as it did before). The load average at the end
+of the run is printed and kept in the JSON (the machine may be shared).
 
 Goal: p95 <= 16 ms (one 60 Hz frame); 100 ms p95 is the most that still counts as live.
 """
@@ -40,6 +49,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import gc
 import json
 import os
 import sys
@@ -148,14 +158,34 @@ def run(args) -> dict:
     depth = sol.patch_depth()
     deepest = int(depth.max())
     ctx = moderngl.create_standalone_context(backend="egl")
+    Renderer.reuse_pages = not args.no_reuse
     r = Renderer(ctx)
     baker = Baker(sol, scene)
     base = BakePolicy(threshold=args.threshold, method=args.method)
     times: dict[str, list] = {}
+    worker = None
+
+    def bake_now(policy: BakePolicy):
+        """The bake of one change: on this thread, or through the viewer's worker (--worker)."""
+        if worker is None:
+            return baker.bake(policy)
+        time.sleep(args.gap)  # the slider rests: the worker pre-warms meanwhile
+        worker.poll()
+        t0 = time.perf_counter()
+        worker.submit(policy)
+        if not worker.wait(120.0):
+            raise RuntimeError(f"no bake of {policy} within 120 s")
+        res = worker.poll()
+        if res is None or res.error is not None:
+            raise RuntimeError(f"bake of {policy} failed: {res and res.error}")
+        res.t_submit = t0
+        return res
 
     def change(kind: str, policy: BakePolicy) -> None:
         t0 = time.perf_counter()
-        baked = baker.bake(policy)
+        baked = bake_now(policy)
+        if worker is not None:
+            t0, baked = baked.t_submit, baked.baked
         t1 = time.perf_counter()
         r.set_baked(baked)
         ctx.finish()
@@ -189,11 +219,21 @@ def run(args) -> dict:
     ctx.finish()
     first_s = time.perf_counter() - t0
     n = max(args.changes, 50)
+    freeze_s = None
+    if not args.no_freeze:  # as the viewer does once a model is open (viewer.app.freeze_heap)
+        t0 = time.perf_counter()
+        gc.collect()
+        gc.freeze()
+        freeze_s = time.perf_counter() - t0
+    if args.worker:
+        from viewer.state import BakeWorker
+
+        worker = BakeWorker(baker, prewarm=not args.no_prewarm, warm_from=base)
 
     def prewarm(policies) -> None:
         """--prewarm: what a viewer could do while the slider rests (untimed as a change): bake
         the slider's neighbours of the value just shown, so the next step finds them cached."""
-        if not args.prewarm:
+        if not args.prewarm or worker is not None:
             return
         for pol in policies:
             t0 = time.perf_counter()
@@ -225,8 +265,20 @@ def run(args) -> dict:
             if 0 <= j < len(LADDER) and LADDER[j] not in seen
         )
     m = last["baked"].memory
+    mode = "worker" if worker is not None else ("direct + prewarm" if args.prewarm else "direct")
+    if worker is not None:
+        worker.close()
+        for _pol, secs, done in worker.prewarm_log:
+            times.setdefault("prewarm (idle)" if done else "prewarm (cancelled)", []).append(secs)
+        mode += f", gap {args.gap:g} s" + ("" if worker.prewarm else ", no prewarm")
+        mode += f"; prewarmed {worker.prewarmed}, cancelled {worker.prewarm_cancelled}"
     res = {
         "source": source,
+        "mode": mode,
+        "gc_frozen": freeze_s is not None,
+        "freeze_s": freeze_s,
+        "page_texture_reuse": bool(Renderer.reuse_pages),
+        "page_texture": r.page_texture,
         "elements": elements,
         "patches": int(len(depth)),
         "mesh_triangles": int(len(sol.tri_vertices)),
@@ -267,6 +319,15 @@ def main(argv=None) -> int:
         help="after each change, bake the slider's unvisited neighbours (idle work, timed apart): "
         "what the viewer's bake worker could do between slider steps",
     )
+    ap.add_argument(
+        "--worker",
+        action="store_true",
+        help="drive the viewer's BakeWorker (bake on its thread, pre-warm in the idle gaps)",
+    )
+    ap.add_argument("--gap", type=float, default=0.25, help="--worker: idle seconds before each change")
+    ap.add_argument("--no-prewarm", action="store_true", help="--worker: no pre-warming")
+    ap.add_argument("--no-freeze", action="store_true", help="no gc.freeze() after the first bake")
+    ap.add_argument("--no-reuse", action="store_true", help="re-create the page texture on every size change")
     args = ap.parse_args(argv)
     res = run(args)
     print(
@@ -274,6 +335,13 @@ def main(argv=None) -> int:
         f"{res['mesh_triangles']} mesh triangles, depths {res['depths']}"
     )
     print(f"first bake + upload {res['first_bake_s'] * 1e3:.0f} ms; renderer {res['renderer']}")
+    fz = (
+        f"gc.freeze() after the first bake ({res['freeze_s'] * 1e3:.0f} ms)"
+        if res["gc_frozen"]
+        else "no gc.freeze()"
+    )
+    reuse = "kept when the pages fit" if res["page_texture_reuse"] else "re-created on size changes"
+    print(f"mode: {res['mode']}; {fz}; page texture {reuse} (last: {res['page_texture']})")
     if res["load_average"]:
         print("load average (1, 5, 15 min) at the end: " + ", ".join(f"{x:.2f}" for x in res["load_average"]))
     print(f"{'change':<22}{'n':>4}{'p50 ms':>9}{'p95 ms':>9}{'max ms':>9}")

@@ -37,7 +37,10 @@ when the data grows, or shrinks below a quarter, keeping its name and its
 vertex arrays), so re-baking every frame does not grow GL memory. Data that is a
 prefix of a read-only array (the Baker's mesh parts) is written as the whole
 array once, then drawn by count; the Baker's page arrays already on the GPU are
-not written again.
+not written again. The page texture is kept when new pages fit in it (written into
+its corner, texture coordinates scaled exactly; :meth:`Renderer._page_texture_size`),
+so it may be larger than the bake's :class:`~iat.bake.MemoryReport` counts:
+:attr:`Renderer.page_texture` gives both.
 """
 
 from __future__ import annotations
@@ -50,7 +53,7 @@ from typing import Any
 
 import numpy as np
 
-from .bake import GPU_DTYPES, HALF_MAX, to_gpu  # noqa: F401  (HALF_MAX re-exported)
+from .bake import BYTES_PER_TEXEL, GPU_DTYPES, HALF_MAX, to_gpu  # noqa: F401  (HALF_MAX re-exported)
 from .errors import RenderError
 
 log = logging.getLogger(__name__)
@@ -331,6 +334,10 @@ class Renderer:
           EGL standalone context (headless), which the renderer then owns and releases.
     """
 
+    #: keep the page texture when new pages fit in it (:meth:`_page_texture_size`); False re-creates
+    #: it whenever the pages' size changes (the benchmark's ``--no-reuse``, for comparison)
+    reuse_pages = True
+
     def __init__(self, ctx=None):
         import moderngl
 
@@ -364,6 +371,7 @@ class Renderer:
         self._pages = None  # texture array
         self._pages_key: tuple | None = None
         self._pages_src: np.ndarray | None = None  # the array last written to the page texture
+        self._pages_region: tuple = (0, 0, 0)  # (w, h, layers) of the pages in it (its corner)
         self._page_scale = 1.0
         # solution sets: per-state vertex colours (CPU) of the solution mesh and of the baked mesh
         # part, the (a, b) pair uploaded as color / color_b, the states and pages per state in IAT mode
@@ -485,27 +493,34 @@ class Renderer:
                 f" {max_size}x{max_size}: lower the scale, raise the threshold or set a budget"
             )
         # the mip levels are part of the key: a texture that once held a mip chain keeps it allocated
-        key = (w, h, n, pixel_format, (mip_levels or 0) if mipmaps else 1)
-        if self._pages is not None and self._pages_key == key:
-            if data is self._pages_src and not data.flags.writeable:
-                return  # the baker's cached pages, already on the GPU with their mip levels
+        levels = (mip_levels or 0) if mipmaps else 1
+        region = (w, h, n)
+        if self._pages is not None and self._pages_key is not None and self._pages_region == region:
+            if self._pages_key[3:] == (pixel_format, levels):
+                if data is self._pages_src and not data.flags.writeable:
+                    return  # the baker's cached pages, already on the GPU with their mip levels
         for _ in range(8):  # GL error flags are sticky: clear what others left, so ours is ours
             stale = self.ctx.error
             if stale == "GL_NO_ERROR":
                 break
             log.debug("GL error before uploading pages (not ours): %s", stale)
+        key = self._page_texture_size(w, h, n, pixel_format, levels)
         if self._pages is None or self._pages_key != key:
             self._reg.release(self._pages)
             self._pages = None
-            tex = self._reg.add(self.ctx.texture_array((w, h, n), 4, None, dtype=dtype))
+            aw, ah, an = key[:3]
+            tex = self._reg.add(self.ctx.texture_array((aw, ah, an), 4, None, dtype=dtype))
             if internal:  # re-specify level 0 with the internal format moderngl cannot ask for
                 fmt, typ = _GL_FORMAT_TYPE[dtype]
                 tex.use(0)
-                _libgl().glTexImage3D(_GL_TEXTURE_2D_ARRAY, 0, internal, w, h, n, 0, fmt, typ, None)
+                _libgl().glTexImage3D(_GL_TEXTURE_2D_ARRAY, 0, internal, aw, ah, an, 0, fmt, typ, None)
             tex.repeat_x = tex.repeat_y = False
             self._pages, self._pages_key = tex, key
-        self._pages_src = None
-        self._pages.write(memoryview(np.ascontiguousarray(data)))
+        self._pages_src, self._pages_region = None, region
+        if key[:3] == region:
+            self._pages.write(memoryview(np.ascontiguousarray(data)))
+        else:  # the pages' corner of a larger array (texture coordinates are scaled to match)
+            self._pages.write(memoryview(np.ascontiguousarray(data)), viewport=(0, 0, 0, w, h, n))
         if mipmaps and (mip_levels is None or mip_levels > 1):
             self._pages.build_mipmaps(0, 1000 if mip_levels is None else mip_levels - 1)
             self._pages.filter = (mgl.LINEAR_MIPMAP_LINEAR, mgl.LINEAR)
@@ -515,6 +530,70 @@ class Renderer:
         if err != "GL_NO_ERROR":
             raise RenderError(f"uploading {pixel_format} pages of {w}x{h}x{n} failed: {err}")
         self._pages_src = data
+
+    def _page_texture_size(self, w: int, h: int, n: int, pixel_format: str, levels: int) -> tuple:
+        """The page texture for ``n`` pages of ``w`` x ``h``: ``(W, H, N, pixel_format, levels)``.
+
+        The texture held now when the pages fit in its corner, else one grown to the largest size
+        seen in each dimension: re-creating a 2048 x 2048 array costs 25-55 ms on llvmpipe, which a
+        scale slider would pay on every step that changes the atlas size. Kept only when the
+        texture coordinates scale exactly (``W / w`` and ``H / h`` powers of two: the Baker's pages
+        always are), the mip levels stay inside the pages (``w`` and ``h`` multiples of
+        ``2**(levels - 1)``; never for a full chain) and the pages use at least 1/64 of it (so a
+        texture left large by an earlier bake is given back once the pages become much smaller).
+        """
+
+        def pow2(a: int, b: int) -> bool:
+            return a % b == 0 and ((a // b) & (a // b - 1)) == 0
+
+        exact = (w, h, n, pixel_format, levels)
+        old = self._pages_key
+        if (
+            not self.reuse_pages
+            or self._pages is None
+            or old is None
+            or old[3:] != (pixel_format, levels)
+            or levels == 0
+        ):
+            return exact
+        align = 1 << max(levels - 1, 0)
+        if w % align or h % align:
+            return exact
+        aw, ah, an = max(old[0], w), max(old[1], h), max(old[2], n)
+        if not (pow2(aw, w) and pow2(ah, h)):
+            return exact
+        if 64 * w * h * n < aw * ah * an:
+            return exact
+        max_layers = int(self.ctx.info["GL_MAX_ARRAY_TEXTURE_LAYERS"])
+        max_size = int(self.ctx.info["GL_MAX_TEXTURE_SIZE"])
+        if an > max_layers or max(aw, ah) > max_size:
+            return exact
+        return (aw, ah, an, pixel_format, levels)
+
+    @property
+    def page_texture(self) -> dict:
+        """The IAT page texture: ``allocated`` ``(W, H, layers)`` and the ``used`` corner ``(w, h,
+        layers)`` of the pages last set, and ``bytes`` allocated at level 0 (the bake's
+        :class:`~iat.bake.MemoryReport` counts what the pages need; the array may be larger, see
+        :meth:`_page_texture_size`). Empty without pages."""
+        if self._pages is None or self._pages_key is None:
+            return {}
+        aw, ah, an, fmt = self._pages_key[:4]
+        return {
+            "allocated": (aw, ah, an),
+            "used": tuple(self._pages_region),
+            "pixel_format": fmt,
+            "bytes": int(aw * ah * an * BYTES_PER_TEXEL.get(fmt, 8)),
+        }
+
+    def _page_uv(self, uv: np.ndarray) -> np.ndarray:
+        """Atlas UVs of the pages set last, in the page texture (scaled when the texture is larger;
+        exact: the factors are powers of two)."""
+        if self._pages_key is None or tuple(self._pages_key[:2]) == tuple(self._pages_region[:2]):
+            return uv
+        w, h = self._pages_region[:2]
+        f = np.array([w / self._pages_key[0], h / self._pages_key[1]], dtype=np.float32)
+        return uv * f
 
     # -- data -------------------------------------------------------------------------------
     def set_scene(self, scene) -> None:
@@ -649,8 +728,9 @@ class Renderer:
         The textured part is drawn in one call for the patches without detail texture and
         one call per detail material (``baked.detail_textures: {material: (h,w,3)}``,
         applied where ``tex_detail`` is 1, or on every vertex of that material when the
-        field is absent). Pages go into one texture array, rewritten in place when the
-        shape and ``policy.pixel_format`` are unchanged, mipmapped when ``policy.mipmaps``:
+        field is absent). Pages go into one texture array, rewritten in place when they fit
+        in it with the same ``policy.pixel_format`` and mip levels (into its corner when
+        smaller, see :meth:`_page_texture_size`), mipmapped when ``policy.mipmaps``:
         ``baked.gpu_form()`` (the Baker's pages in their GPU dtype) is written as it is and not
         at all when the texture already holds that very array; other Baked-likes' float
         ``pages`` are converted (:func:`iat.bake.to_gpu`). rgba8 pages are GL_SRGB8_ALPHA8,
@@ -745,6 +825,8 @@ class Renderer:
             self.ctx, self._reg, {"position": mpos, "color": colors[a], "color_b": colors[b]}, midx
         )
         self._colors_pair["iat"] = (a, b)
+        if len(tidx):
+            tuv = self._page_uv(tuv)
         self._baked_tex.upload(
             self.ctx,
             self._reg,

@@ -6,6 +6,11 @@ publishes results as they come, and the UI thread takes the newest one with
 :meth:`~LatestWorker.poll` without ever blocking. Subclasses say how a request is
 taken (:meth:`~LatestWorker._take`) and what it does (:meth:`~LatestWorker._work`);
 :class:`iat.lighting.Relighter` and ``viewer.state.BakeWorker`` are the two.
+
+Between requests the thread may do optional work of its own (:meth:`~LatestWorker._idle`,
+one small piece per call: the bake worker pre-warms the slider's neighbours there); a
+request made meanwhile is taken as soon as that piece returns, and the piece may look at
+:meth:`~LatestWorker._superseded` to return early.
 """
 
 from __future__ import annotations
@@ -92,15 +97,32 @@ class LatestWorker:
         with self._cv:
             return self._pending is not None or self._stop
 
+    def _idle(self) -> bool:
+        """Optional work while no request waits (called without the lock, not counted as
+        :attr:`busy`): do one small piece and return True to be called again, False when there
+        is nothing to do (the thread then sleeps until the next request). Requests are taken
+        between pieces, so a piece should be short or stop early when :meth:`_superseded`."""
+        return False
+
     def _loop(self) -> None:
         while True:
             with self._cv:
-                while self._pending is None and not self._stop:
-                    self._cv.wait()
                 if self._stop:
                     return
-                request = self._take()
-                self._running = True
+                taken = self._pending is not None
+                if taken:
+                    request = self._take()
+                    self._running = True
+            if not taken:
+                try:
+                    more = self._idle()
+                except Exception:  # idle work is optional: it never ends the thread
+                    more = False
+                if not more:
+                    with self._cv:
+                        while self._pending is None and not self._stop:
+                            self._cv.wait()
+                continue
             try:
                 self._work(request)
             finally:

@@ -569,3 +569,63 @@ def test_threshold_walk_on_one_renderer_matches_fresh_renderers(renderer, egl_ct
         assert (want > 0).any(axis=2).sum() > 500
         np.testing.assert_array_equal(got, want, err_msg=f"threshold {t}")
         assert renderer.stats()["triangles"] == len(bk.mesh_indices) + len(bk.tex_indices)
+
+
+def test_scale_walk_keeps_the_page_texture_and_matches_fresh_renderers(renderer, egl_ctx):
+    """Pages that fit in the page texture are written into its corner (texture coordinates scaled
+    by powers of two, exactly) instead of re-creating the texture: a scale walk down and up (every
+    format, mip levels on) draws, at every step, exactly what a fresh renderer draws; the texture is
+    re-created only to grow or for another format, and ``page_texture`` tells allocated from used."""
+    from iat.bake import BakePolicy, Baker
+    from tests.test_bake import grid_scene_solution
+
+    b = Baker(grid_scene_solution())
+    cam = Camera(eye=[2.0, 1.5, 5.0], target=[2.0, 1.5, 0.0], yfov=60.0)
+    steps = [(0, 1.0), (0, 0.5), (0, 2.0), (0, 0.25), (1, 1.0), (0, 0.7), (2, 0.125), (0, 1.0)]
+    for fmt in ("rgba16f", "rgba8", "rgb9e5"):
+        created = []
+        for t, s in steps:
+            bk = b.bake(BakePolicy(threshold=t, scale=s, pixel_format=fmt))
+            assert bk.mip_levels >= 2
+            renderer.set_baked(bk)
+            if renderer._pages not in created:
+                created.append(renderer._pages)
+            got = renderer.render(cam, (W, H), "iat")
+            fresh = Renderer(egl_ctx)
+            try:
+                fresh.set_baked(bk)
+                want = fresh.render(cam, (W, H), "iat")
+            finally:
+                fresh.release()
+            assert (want > 0).any(axis=2).sum() > 300
+            np.testing.assert_array_equal(got, want, err_msg=f"{fmt} threshold {t} scale {s}")
+            m, pt = bk.memory, renderer.page_texture
+            assert pt["used"] == (m.page_width, m.page_height, m.pages) and pt["pixel_format"] == fmt
+            aw, ah, an = pt["allocated"]
+            assert aw >= m.page_width and ah >= m.page_height and an >= m.pages
+        # the first bake of the format, then growing once to scale 2's pages; never for smaller ones
+        assert len(created) == 2, fmt
+        assert renderer.page_texture["allocated"][:2] == (2 * 128, 2 * 64)
+    assert renderer.ctx.error == "GL_NO_ERROR"
+
+
+def test_page_texture_is_recreated_when_pages_are_much_smaller_or_not_power_of_two(renderer):
+    """Pages using under 1/64 of the texture, or whose size does not divide it by a power of two (the
+    texture coordinates could not scale exactly), get a texture of their own size."""
+    renderer.set_solution(solution_of(linear_field(UV4[:, 0], UV4[:, 1])))
+    mesh = renderer.render(CAM, (W, H), "mesh")
+    renderer.set_baked(baked_of(page_from_field(64, 64), "rgba16f"))
+    assert renderer.page_texture["allocated"] == (64, 64, 1)
+    renderer.set_baked(baked_of(page_from_field(16, 16), "rgba16f"))  # 1/16: kept
+    assert renderer.page_texture["allocated"] == (64, 64, 1)
+    assert renderer.page_texture["used"] == (16, 16, 1)
+    iat = renderer.render(CAM, (W, H), "iat")  # the 16 x 16 corner only, the field exactly
+    assert (mesh > 0).any(axis=2).sum() > 500
+    np.testing.assert_array_equal((mesh > 0).any(axis=2), (iat > 0).any(axis=2))
+    assert np.abs(iat - mesh).max() < 1e-3
+    renderer.set_baked(baked_of(page_from_field(12, 12), "rgba16f"))  # 64 / 12: not a power of two
+    assert renderer.page_texture["allocated"] == (12, 12, 1)
+    renderer.set_baked(baked_of(page_from_field(96, 96), "rgba16f"))  # grows: 96 / 12 = 8
+    assert renderer.page_texture["allocated"] == (96, 96, 1)
+    renderer.set_baked(baked_of(page_from_field(8, 8), "rgba16f"))  # 64 / 9216: under 1/64
+    assert renderer.page_texture["allocated"] == (8, 8, 1)

@@ -292,6 +292,161 @@ def test_bake_worker_bakes_the_newest_request_and_survives_errors():
     assert not w._thread.is_alive()
 
 
+def test_the_scale_slider_snaps_to_the_prewarmed_ladder():
+    """Every value the Scale slider can set is on the 2**(k/4) ladder the worker pre-warms, inside
+    the slider's range, and the seam-free dyadic scales are on it."""
+    from viewer.state import SCALE_MAX, SCALE_MIN, scale_neighbours, snap_scale
+
+    for v in np.geomspace(0.05, 4.0, 97):
+        s = snap_scale(v)
+        assert SCALE_MIN <= s <= SCALE_MAX
+        assert abs(4 * np.log2(s) - round(4 * np.log2(s))) < 1e-12
+        if SCALE_MIN < v < SCALE_MAX:
+            assert abs(np.log2(s) - np.log2(v)) <= 0.125 + 1e-12  # the nearest quarter octave
+        for n in scale_neighbours(s):
+            assert snap_scale(n) == n
+    assert [snap_scale(x) for x in (1.0, 0.5, 0.25, 0.125)] == [1.0, 0.5, 0.25, 0.125]
+
+
+def test_neighbour_policies_are_the_sliders_next_steps():
+    from iat.bake import BakePolicy
+    from viewer.state import neighbour_policies, scale_neighbours
+
+    q, r = 2.0**0.25, 2.0 ** (-1 / 4)
+    assert scale_neighbours(1.0) == [2.0 ** (-1 / 4), 2.0 ** (1 / 4)]
+    assert scale_neighbours(2.0) == [2.0 ** (3 / 4)]  # the slider's top
+    assert scale_neighbours(0.125) == [2.0 ** (-11 / 4)]  # and its bottom
+    assert scale_neighbours(0.6) == [2.0 ** (-3 / 4), 2.0 ** (-2 / 4)]  # off the ladder: either side
+    assert abs(scale_neighbours(1.0)[1] - q) < 1e-15
+    p = BakePolicy(threshold=2, scale=1.0, method="scan")
+    got = [(n.threshold, n.scale, n.method) for n in neighbour_policies(p, deepest=3)]
+    assert got == [(3, 1.0, "scan"), (1, 1.0, "scan"), (2, r, "scan"), (2, q, "scan")]
+    # the slider moved last first, in its direction
+    down = neighbour_policies(p, 3, previous=BakePolicy(threshold=3))
+    assert [(n.threshold, n.scale) for n in down][:2] == [(1, 1.0), (3, 1.0)]
+    up = neighbour_policies(p, 3, previous=BakePolicy(threshold=2, scale=r))
+    assert [(n.threshold, n.scale) for n in up] == [(2, q), (2, r), (3, 1.0), (1, 1.0)]
+    top = BakePolicy(threshold=4, scale=2.0)
+    assert [(n.threshold, n.scale) for n in neighbour_policies(top, 3)] == [(3, 2.0), (4, 2.0**0.75)]
+    assert neighbour_policies(BakePolicy(budget_mb=4.0), 3) == []  # the baker picks threshold and scale
+
+
+def test_bake_worker_prewarms_the_neighbours_so_the_next_step_is_a_cache_hit():
+    """Idle, the worker bakes the last policy's neighbours (threshold +-1, the ladder scales on
+    either side) into the Baker's caches, publishing nothing; a step to any of them then finds its
+    pages cached: no resampling, no seam pass, no blit."""
+    from iat.bake import BakePolicy, Baker
+    from tests.test_bake import grid_scene_solution
+    from viewer.state import BakeSource, BakeWorker, neighbour_policies
+
+    sol = grid_scene_solution()
+    deepest = int(sol.patch_depth().max())
+    baker = Baker(sol)
+    start = BakePolicy(threshold=1)
+    w = BakeWorker(baker)
+    try:
+        w.submit(start)
+        assert w.wait(60) and w.wait_warm(60)
+        assert w.poll().policy == start and w.poll() is None  # only the real request is published
+        hoods = neighbour_policies(start, deepest)
+        assert len(hoods) == 4 and w.prewarmed == 4 and w.bakes == 1
+        assert [p for p, _, done in w.prewarm_log] == hoods and all(done for _, _, done in w.prewarm_log)
+        resampled = baker.tiles.tiles_scaled
+        for n in hoods:  # each step the slider can take next: the pages are cached
+            hits = baker.stats["pages_hits"]
+            w.prewarm = False  # measure the step alone (no pre-warm of its own neighbours)
+            w.submit(n)
+            assert w.wait(60)
+            r = w.poll()
+            assert r.error is None and r.policy == n
+            assert baker.stats["pages_hits"] == hits + 1, n
+            assert r.baked.timings["tiles"] == 0.0 and "scale" not in r.baked.timings
+            assert "seams" not in r.baked.timings and "blit" not in r.baked.timings
+        assert baker.tiles.tiles_scaled == resampled  # nothing resampled since the pre-warm
+    finally:
+        w.close()
+
+    # the viewer's first bake (made by OpenJob) seeds the pre-warm as soon as the worker starts
+    baker2 = Baker(sol)
+    baker2.bake(start)
+    w = BakeWorker(baker2, warm_from=start)
+    try:
+        assert w.wait_warm(60) and w.prewarmed == 4 and w.bakes == 0
+        w.prewarm = False
+        w.submit(BakePolicy(threshold=2))
+        assert w.wait(60) and w.poll().baked.timings["tiles"] == 0.0
+        # a new source (a re-solve's result) is not pre-warmed: it would compete with the re-solve
+        w.prewarm = True
+        w.submit(BakePolicy(threshold=2), BakeSource(sol))
+        assert w.wait(60) and w.wait_warm(60) and w.poll().error is None
+        assert w.prewarmed == 4 and w.baker is not baker2
+    finally:
+        w.close()
+
+
+class _SlowNeighbourBaker:
+    """Stands in for a Baker with a solution: real requests return at once; a pre-warm bake (one
+    that passes ``progress``) waits on ``gate`` and then reports progress, as Baker.bake does
+    between its stages (False: cancelled)."""
+
+    def __init__(self, deepest: int = 4):
+        import threading
+        from types import SimpleNamespace
+
+        self.solution = SimpleNamespace(patch_depth=lambda: np.array([0, deepest]))
+        self.calls: list[tuple[str, int, float]] = []
+        self.gate = threading.Event()
+        self.started = threading.Event()
+
+    def bake(self, policy, progress=None):
+        from types import SimpleNamespace
+
+        from iat.errors import Cancelled
+
+        kind = "real" if progress is None else "warm"
+        self.calls.append((kind, policy.threshold, policy.scale))
+        if progress is not None:
+            self.started.set()
+            self.gate.wait(10)
+            if progress(0.5, "tiles") is False:
+                raise Cancelled("bake cancelled")
+        return SimpleNamespace(policy=policy, timings={})
+
+
+def test_a_request_made_during_prewarm_is_served_first():
+    """A request submitted while a neighbour is being pre-warmed: the neighbour's bake stops at its
+    next stage, the request is baked next, the old policy's other neighbours are dropped, and the
+    new policy's neighbours are pre-warmed after it."""
+    from iat.bake import BakePolicy
+    from viewer.state import BakeWorker
+
+    baker = _SlowNeighbourBaker()
+    w = BakeWorker(baker)
+    try:
+        w.submit(BakePolicy(threshold=2))
+        assert baker.started.wait(10)  # baked 2, now pre-warming its first neighbour (3)
+        assert w.poll().policy.threshold == 2
+        assert not w.busy and w.warming  # pre-warming is not "busy": the UI shows no re-bake
+        w.submit(BakePolicy(threshold=0))
+        assert w.busy
+        baker.gate.set()
+        assert w.wait(10)
+        r = w.poll()
+        assert r.policy.threshold == 0 and r.error is None
+        assert baker.calls[:3] == [("real", 2, 1.0), ("warm", 3, 1.0), ("real", 0, 1.0)]
+        assert w.prewarm_cancelled == 1
+        assert w.wait_warm(10)
+        # then the new policy's neighbours (threshold 1 first: 0 is the bottom), none of the old's
+        rest = baker.calls[3:]
+        assert rest[0] == ("warm", 1, 1.0) and all(k == "warm" for k, _, _ in rest)
+        assert {t for _, t, s in rest if s == 1.0} == {1} and len(rest) == 3
+        assert w.prewarmed == 3 and w.bakes == 2
+    finally:
+        baker.gate.set()
+        w.close()
+    assert not w._thread.is_alive()
+
+
 def test_open_job_solves_caches_and_reports_errors(tmp_path, monkeypatch):
     from iat.bake import BakePolicy
     from iat.radiosity import SolveOptions

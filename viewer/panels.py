@@ -24,7 +24,7 @@ import numpy as np
 from imgui_bundle import ImVec2, ImVec4, hello_imgui, imgui, implot
 
 from .navigation import paths_file
-from .state import METHODS, MODE_LABELS, MODES, AppState
+from .state import METHODS, MODE_LABELS, MODES, AppState, snap_scale
 
 RED = ImVec4(0.85, 0.2, 0.2, 1.0)
 GREEN = ImVec4(0.3, 0.75, 0.35, 1.0)
@@ -79,8 +79,11 @@ def tuning_panel(state: AppState) -> None:
     shown = resolved.scale if (auto and resolved is not None) else t.scale
     changed, v = imgui.slider_float("Scale", float(shown), 0.125, 2.0, "%.3f", imgui.SliderFlags_.logarithmic)
     if changed and not auto:
-        t.scale = float(v)
-    _help("Texture side factor: below 1 saves memory (blur), above 1 costs memory.")
+        t.scale = snap_scale(v)
+    _help(
+        "Texture side factor, in quarter-octave steps: below 1 saves memory (blur), above 1 costs\n"
+        "memory. At 1, 0.5, 0.25 and 0.125 neighbouring textures meet without seams."
+    )
     imgui.end_disabled()
 
     changed, k = imgui.combo("Method", METHODS.index(t.method) if t.method in METHODS else 0, list(METHODS))
