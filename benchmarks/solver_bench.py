@@ -411,8 +411,11 @@ def run_rays(models=MODELS) -> dict:
         trace_s = st["rays"] / st["rays_per_s"] if st["rays_per_s"] > 0 else 0.0
         out[name] = {
             "elements": st["elements"],
+            "triangles": st["triangles"],
             "shots": st["shots"],
             "time_s": dt,
+            "unshot_fraction": st["unshot_fraction"],
+            "ambient_luminance_fraction": st["ambient_luminance_fraction"],
             "rays": st["rays"],
             "trace_s": trace_s,
             "rays_per_s_tracing": st["rays_per_s"],

@@ -126,7 +126,7 @@ def test_energy_balance_in_a_closed_lit_box():
     The reflected power is measured on the mesh (vertex values interpolated in the leaves),
     so the mesh's interpolation error adds to the solver's: on a mesh fine enough (the
     classic "variation" test) the balance holds within 2 %; on the default mesh, which
-    leaves smooth gradients coarse, within 5 % (measured 3.4 %, and 0.5 % for direct light
+    leaves smooth gradients coarse, within 5 % (measured 2.8 %, and 0.5 % for direct light
     alone: the loss is on coarse elements where the light is concave).
     """
     scene = lit_box(0.5)

@@ -9,7 +9,7 @@ from scipy import sparse
 
 from .. import quadtree as qt
 from .context import _Cancel, _Context
-from .options import ABS_FLOOR, BIG_LEVELS, BIG_TOLERANCE
+from .options import ABS_FLOOR, BIG_LEVELS, BIG_TOLERANCE, GAIN_LIMIT
 from .sampling import _lum
 
 
@@ -274,3 +274,34 @@ def _area_mean(forest: qt.Forest, keys: np.ndarray, kidx: np.ndarray, y: np.ndar
     leaf_mean = np.where(q, vals.mean(axis=1), vals[:, :3].mean(axis=1))
     la = qt.leaf_area(forest, ctx.corners)
     return float((leaf_mean * la).sum() / max(la.sum(), 1e-300))
+
+
+def _shot_gain(forest: qt.Forest, cache: _Cache, ctx: _Context) -> np.ndarray:
+    """(P,) ratio of each patch's reflected power integrated with the probes (a quadratic rule per
+    leaf: 3 x 3 Simpson on quads, the edge midpoints on triangles) to the power of its piecewise
+    linear interpolant (the corner means), from the luminance values in ``cache``; leaves without
+    all their probes evaluated (the last level, below the minimum size) count as linear. Within
+    ``GAIN_LIMIT``; 1 for a patch with no reflected light."""
+    P = len(ctx.area)
+    if forest.n_leaves == 0 or len(cache.keys) == 0:
+        return np.ones(P)
+    y = _lum(cache.vals)
+    ci = cache.find(qt.leaf_corner_keys(forest))
+    pk, pvalid = _probe_keys(forest)
+    pi = cache.find(pk)
+    q = forest.leaf_is_quad
+    cvalid = np.ones(ci.shape, dtype=bool)
+    cvalid[~q, 3] = False
+    have = ((ci >= 0) | ~cvalid).all(axis=1) & ((pi >= 0) | ~pvalid).all(axis=1)
+    yc = np.where(ci >= 0, y[np.maximum(ci, 0)], 0.0)
+    yp = np.where(pi >= 0, y[np.maximum(pi, 0)], 0.0)
+    lin = np.where(q, yc.sum(axis=1) / 4.0, yc[:, :3].sum(axis=1) / 3.0)
+    quad = np.where(
+        q, (yc.sum(axis=1) + 4.0 * yp[:, 1:5].sum(axis=1) + 16.0 * yp[:, 0]) / 36.0, yp[:, :3].mean(axis=1)
+    )
+    quad = np.where(have, quad, lin)
+    la = qt.leaf_area(forest, ctx.corners)
+    num = np.bincount(forest.leaf_patch, weights=la * quad, minlength=P)
+    den = np.bincount(forest.leaf_patch, weights=la * lin, minlength=P)
+    gain = np.where(den > 0, num / np.where(den > 0, den, 1.0), 1.0)
+    return np.clip(gain, 1.0 / (1.0 + GAIN_LIMIT), 1.0 + GAIN_LIMIT)

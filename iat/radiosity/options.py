@@ -61,17 +61,25 @@ DIRECT_SAMPLE_FACTOR = 2
 #: the strongest shots (the first bounces, which make most of the indirect light) use this many
 #: times the per-side samples of ``samples``; fainter ones fewer, down to 1 x 1
 SHOT_SAMPLE_FACTOR = 2
-#: the gathers that give stage C's new vertices the light shot so far (one sample pattern for all
-#: of them, so its error is one coherent offset, not speckle) use this many times the per-side
-#: samples of ``samples`` for a source that shot at least ``SHOT_FULL_SHARE`` of the emitted power,
-#: fewer for a fainter one (by the square root of its share): with the 4 x 4 of before, the Cornell box
-#: floor's light reached the new vertices up to 9 % off (one offset per solve, -5 % in the seed-0
-#: solve), so the adaptive mesh stayed 1.5 % darker than uniform subdivision whatever the tolerance
-#: and refinement chased that noise (tolerance 0.05: 13.5 k elements instead of 9.5 k)
-REFINE_SAMPLE_FACTOR = 4
 #: ... those that shoot at least this fraction of the emitted power; a shot of a smaller share
 #: s uses ``sqrt(s / SHOT_FULL_SHARE)`` of them per side (samples in proportion to power)
 SHOT_FULL_SHARE = 0.05
+#: the gathers that give stage C's new vertices the light shot so far (one sample pattern for all
+#: of them, so its error is one coherent offset of them all, not speckle) use this many times the
+#: per-side samples of ``samples`` for a source that shot at least ``SHOT_FULL_SHARE`` of the
+#: emitted power, fewer for a fainter one (by the square root of its share), as the strongest shots
+#: do. With 1 x (4 x 4 samples) the Cornell box floor's light reached the new vertices up to 9 %
+#: off (one offset per solve: -5 % on the new vertices of the seed-0 solve), and refinement chased
+#: that error: the adaptive mesh stayed ~1.5 % darker than uniform subdivision whatever the
+#: tolerance (13.5 k elements at tolerance 0.05 instead of 9.2 k); 4 x halves the rest of the
+#: offset but doubles the Cornell box's time and adds 30 % to the house's
+REFINE_SAMPLE_FACTOR = 2
+#: a patch shoots its unshot field (linear in its leaves) times its *gain*: the power of its light
+#: integrated with the probes every split test evaluates (quadratic per leaf) over the power of the
+#: linear interpolant, kept within 1 / (1 + GAIN_LIMIT) .. 1 + GAIN_LIMIT. An element that stays
+#: coarse under concave light interpolates below it; shooting the interpolant lost that light from
+#: every surface's indirect light (the Cornell box's vertices 1.1 % dark, the closed lit box 2.8 %)
+GAIN_LIMIT = 0.25
 #: :func:`resolve` solves afresh on the mesh when the changed sources' power exceeds this
 #: fraction of the new emitted power
 RESOLVE_MAX_CHANGE = 1.0
@@ -102,7 +110,7 @@ class SolveOptions:
         square root of the scene's surface area (3.8 cm in the 12 m house, 4 cm in the cave,
         2.3 mm in the Cornell box), which stops the endless subdivision of tiny regions
         along hard shadow edges.
-    convergence : float in (0, 1], default 0.02. Stop shooting when the unshot power is
+    convergence : float in (0, 1], default 0.05. Stop shooting when the unshot power is
         below this fraction of the emitted power (patches and lights); with ``ambient``
         its later bounces are added as a uniform ambient term, otherwise that light
         (amplified by interreflection) is missing from the result. Smaller costs more
@@ -114,7 +122,8 @@ class SolveOptions:
         fewer (by the square root of their power), down to one. Shots rotate the pattern per
         receiver (independent errors, which average out over the shots); the gathers that
         give the vertices new in stage C the light shot so far use one pattern for all
-        receivers (errors smooth in space: new vertices do not stand out as speckle).
+        receivers (errors smooth in space: new vertices do not stand out as speckle) and,
+        since that pattern's error is common to them all, the strongest shots' samples.
     max_shots : int >= 0, default 20000. Hard cap on progressive shots (0: direct
         light only).
     max_edge : float > 0 or None. Recorded for the loader's pre-split of long

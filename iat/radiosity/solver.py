@@ -23,7 +23,12 @@ B. **Progressive refinement on the settled mesh.** Each vertex's unshot radiance
    x each element's solid angle from the light x its visible fraction, lumped to the
    vertices (:mod:`.pointlight`) -- not as the exact vertex irradiance, whose 1/d^2 peak
    next to a light, spread over whole elements by the mesh, would create energy
-   (``offset`` keeps the difference). The patch with the most unshot power (pi x area x
+   (``offset`` keeps the difference). Likewise a patch shoots its unshot field (linear in its
+   leaves) times its *gain*, the power of its light integrated with the probes of the last
+   split test (a quadratic rule per leaf) over that of the linear interpolant, so that an
+   element left coarse under concave light, which interpolates below it, does not take that
+   light out of the indirect light (:func:`.meshing._shot_gain`; 1 where point lights shine and
+   on a given mesh). The patch with the most unshot power (pi x area x
    area-weighted mean of |unshot|, from a sparse (P, V) averaging matrix) shoots: every
    vertex in front of it receives ``rho * <F * vis * L>`` -- the analytic
    point-to-polygon form factor (:mod:`.formfactor`, cached per shooter for its later
@@ -47,7 +52,9 @@ C. **Refinement on the total radiance** (``refine_indirect``), once, after the
    too. A new vertex gets its direct light, what the coarse grids of its patch
    received (interpolated, as its old neighbours got it) and a gather of
    everything each patch that reached it at vertex level has shot so far (shots
-   add linearly, so one gather of their sum equals replaying them all): never
+   add linearly, so one gather of their sum equals replaying them all; one sample
+   pattern for all new vertices, with the samples of the strongest shots,
+   ``REFINE_SAMPLE_FACTOR``, since its error is common to them all): never
    interpolated from its parent. Its unshot radiance is what it received minus
    what its patch already shot from there, so light a coarse element could not
    hold is shot again, not lost. Shooting then continues to ``convergence``
@@ -101,6 +108,7 @@ from .meshing import (  # noqa: F401
     _probe_interp,
     _probe_keys,
     _refine,
+    _shot_gain,
 )
 from .options import (  # noqa: F401  (the constants are re-exported: read them here or in .options)
     ABS_FLOOR,
@@ -115,6 +123,7 @@ from .options import (  # noqa: F401  (the constants are re-exported: read them 
     FF_CACHE_ENTRIES,
     FF_EPS,
     FF_FAR,
+    GAIN_LIMIT,
     GATHER_BLOCK,
     LUMINANCE,
     MAX_ELEMENT_FRACTION,
@@ -198,6 +207,8 @@ class _Run:
         # point lights instead of its exact vertex value, see :meth:`light_correction`); what it
         # has shot so far is reflected + offset - unshot
         self.offset = np.zeros((0, 3))
+        # per patch: what it shoots is its unshot field times this (:meth:`shot_gain`)
+        self.gain = np.ones(self.P)
 
     # -- progress -----------------------------------------------------------------
     def report(self, fraction: float, message: str) -> None:
@@ -275,6 +286,7 @@ class _Run:
         self.reflected = self.direct_cache.get(keys)  # 0 where a cancel left a vertex unevaluated
         self.offset = self.light_correction()
         self.unshot = self.reflected + self.offset
+        self.gain = self.shot_gain(self.direct_cache)
         self.timings["meshing_s"] = time.perf_counter() - t0
 
     def take_mesh(self, sol: Solution) -> None:
@@ -319,6 +331,21 @@ class _Run:
         except _Cancel:
             return np.zeros((len(keys), 3))
 
+    def shot_gain(self, cache: _Cache) -> np.ndarray:
+        """(P,) :func:`_shot_gain` of the current mesh from the values in ``cache``: the power of each
+        patch's light integrated with its probes over that of its linear interpolant, which its
+        shots multiply (an element that stays coarse under concave light interpolates below it).
+        1 on patches lit by point or spot lights (their ``offset`` already shoots the light the
+        elements hold) and when the solve was cancelled."""
+        if self.state["cancelled"]:
+            return np.ones(self.P)
+        gain = _shot_gain(self.forest, cache, self.ctx)
+        if len(self.offset) and np.any(self.offset):
+            lit = np.zeros(self.P, dtype=bool)
+            lit[qt.decode_key(self.keys, self.ctx.n)[0][np.any(self.offset != 0, axis=1)]] = True
+            gain[lit] = 1.0
+        return gain
+
     # -- shooting -----------------------------------------------------------------
     def patch_power(self, unshot: np.ndarray) -> np.ndarray:
         """(P,) luminance power of each patch's unshot field (by magnitude: it may be signed)."""
@@ -346,8 +373,8 @@ class _Run:
                 self.check()
                 s = int(np.argmax(power))
                 a, b = mesh["start"][s], mesh["start"][s + 1]
-                field = mesh["lattice"].grid(s, self.unshot)
-                field_mean = np.ravel(mesh["M"][s] @ self.unshot)
+                field = mesh["lattice"].grid(s, self.unshot) * self.gain[s]
+                field_mean = np.ravel(mesh["M"][s] @ self.unshot) * self.gain[s]
                 # fewer samples for faint shots: their noise matters less (sqrt keeps power / m flat-ish)
                 m_hi = SHOT_SAMPLE_FACTOR * self.m_side
                 share = float(power[s]) / (SHOT_FULL_SHARE * self.power0)
@@ -425,8 +452,9 @@ class _Run:
         shot_field = self.reflected + self.offset - self.unshot
         lattice_b = mesh["lattice"]
         sources = np.flatnonzero(self.shot_index > 1)
-        grids = {int(p): lattice_b.grid(int(p), shot_field) for p in sources}
-        means = mesh["M"] @ shot_field
+        # what each source shot: its shot field times the gain its shots had
+        grids = {int(p): lattice_b.grid(int(p), shot_field) * self.gain[p] for p in sources}
+        means = (mesh["M"] @ shot_field) * self.gain[:, None]
         total_cache = _Cache(keys, self.reflected.copy())
         # samples per source by the share of the power it has shot (as the shots themselves), but
         # REFINE_SAMPLE_FACTOR x more per side: one pattern serves all new vertices, so its error
@@ -470,6 +498,7 @@ class _Run:
         keys = qt.vertex_keys(forest)
         self.timings["refining_s"] += time.perf_counter() - t0
         if len(keys) == len(old_keys):
+            self.gain = self.shot_gain(total_cache)
             return
         b, bn = _interpolation_bias(keys, old_keys, total_cache, ctx)
         n_old = self.stats["interpolation_bias_total_vertices"]
@@ -499,6 +528,7 @@ class _Run:
         new_offset[old_idx < 0] = light_corr[old_idx < 0]
         self.offset = new_offset
         self.set_mesh(forest, keys)
+        self.gain = self.shot_gain(total_cache)
 
     def run_plan(self, plan) -> None:
         self.u_start = max(float(self.patch_power(self.unshot).sum()), 1e-300)
