@@ -466,6 +466,7 @@ print(json.dumps(dict(
     load_s=t_load, solve_s=t_solve, peak_load_mb=peak_load / 2**20,
     max_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
     progress_calls=len(calls), progress_fractions=[c[1] for c in calls],
+    progress_stages=len({c[2] for c in calls}),
     progress_max_gap_s=float(np.diff(stamps).max()),
     load_progress_calls=len(load_calls), load_progress_fractions=[c[1] for c in load_calls],
     load_progress_max_gap_s=float(np.diff(load_stamps).max()),
@@ -502,6 +503,7 @@ def test_geometry_a_million_triangles(tmp_path):
     assert m["load_s"] + m["solve_s"] < 240
     f = m["progress_fractions"]
     assert f and f[-1] == 1.0 and all(b >= a for a, b in zip(f, f[1:], strict=False))
+    assert m["progress_stages"] >= 6  # G2: preparing, meshing pass, vertex table, light, power, done
     f = m["load_progress_fractions"]  # G2: the load reports progress at each stage, 0 to 1
     assert len(f) >= 5 and f[0] == 0.0 and f[-1] == 1.0
     assert all(b >= a for a, b in zip(f, f[1:], strict=False))

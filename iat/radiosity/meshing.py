@@ -194,7 +194,7 @@ def _refine(ctx: _Context, forest: qt.Forest, cache: _Cache, evaluate, report, l
                 big = _leaf_longest_edge(sub, ctx.corners) > ctx.max_size
                 big &= sub.leaf_level < D - BIG_LEVELS
             pk, pvalid = _probe_keys(sub)
-            need = np.union1d(keys, pk[pvalid])
+            need = qt.sorted_unique(np.concatenate([keys, pk[pvalid]]))
             new = need[cache.find(need) < 0]
             report(
                 span[0] + (span[1] - span[0]) * passes / (D + 1),

@@ -218,6 +218,15 @@ class _Run:
             st["cancelled"] = True
             raise _Cancel
 
+    def _step(self, message: str) -> None:
+        """Report a new stage at the current fraction (so a big model is never silent for long);
+        nothing once the solve was cancelled (it is finishing with what it has)."""
+        if not self.state["cancelled"]:
+            try:
+                self.report(self.state["fraction"], message)
+            except _Cancel:
+                pass  # the stages below see state["cancelled"] and keep what was evaluated
+
     def check(self) -> None:  # cheap poll inside long loops, at most 20 times a second
         now = time.perf_counter()
         if self.progress is not None and now - self.state["last"] > 0.05:
@@ -282,10 +291,13 @@ class _Run:
         self.stats.update(
             mesh_passes=int(passes), interpolation_bias=bias, interpolation_bias_vertices=bias_n
         )
+        self._step(f"meshing: {forest.n_leaves} elements, vertex table")
         self.set_mesh(forest, keys)
         self.reflected = self.direct_cache.get(keys)  # 0 where a cancel left a vertex unevaluated
+        self._step("meshing: light the elements receive")
         self.offset = self.light_correction()
         self.unshot = self.reflected + self.offset
+        self._step("meshing: power each patch shoots")
         self.gain = self.shot_gain(self.direct_cache)
         self.timings["meshing_s"] = time.perf_counter() - t0
 
@@ -737,6 +749,8 @@ def solve(
         _check_mesh(mesh, scene, "solve mesh")
         opts = replace(opts, max_depth=int(mesh.max_depth)).validate()
     t_start = time.perf_counter()
+    if progress is not None:  # building the ray-tracing scene takes seconds on big models
+        progress(0.0, f"preparing: {scene.n_patches} patches")  # a cancel is seen at the next report
     with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
         run = _Run(scene, opts, progress, vis, t_start)
         target = opts.convergence * run.power0
