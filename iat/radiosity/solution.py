@@ -189,7 +189,10 @@ class Solution:
         ok = (
             self.vert_radiance.shape == (v, 3)
             and self.patch_corners.shape == (p, 4, 3)
-            and (self.tri_vertices.size == 0 or (0 <= self.tri_vertices.min() and self.tri_vertices.max() < v))
+            and (
+                self.tri_vertices.size == 0
+                or (0 <= self.tri_vertices.min() and self.tri_vertices.max() < v)
+            )
             and (len(self.leaf_patch) == 0 or self.leaf_patch.max() < p)
             and np.isfinite(self.vert_radiance).all()
         )
