@@ -109,8 +109,11 @@ def default_models() -> tuple[list[Path], list[str]]:
 
 
 def options_key(options) -> str:
-    """First 10 hex digits of a hash of the solve options (names a cached solution)."""
-    d = json.dumps(asdict(options), sort_keys=True, default=str)
+    """First 10 hex digits of a hash of the solve options and the solver's source (names a cached
+    solution: a solver change solves again)."""
+    from .radiosity import solver_fingerprint
+
+    d = json.dumps(asdict(options), sort_keys=True, default=str) + solver_fingerprint()
     return hashlib.sha256(d.encode()).hexdigest()[:10]
 
 

@@ -116,29 +116,34 @@ def _emissive_patches(baked, scene=None) -> np.ndarray | None:
     return None
 
 
-def _tile_values(baked, drop: np.ndarray | None) -> np.ndarray:
-    """Max-channel values of the textured patches' own texels: each tile once (no gutter or
-    alignment padding, which repeat its edges), triangles' lower-left half only (the other half
-    is extrapolated, never shown); patches with ``drop[patch]`` left out. (k,) float."""
+def _tile_values(baked, drop: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Max-channel values of the textured patches' own texels and the world area each stands for:
+    each tile once (no gutter or alignment padding, which repeat its edges), triangles' lower-left
+    half only (the other half is extrapolated, never shown); patches with ``drop[patch]`` left out.
+    Returns ``(values, areas)``, (k,) float each (areas in model units squared)."""
     tp = np.asarray(getattr(baked, "tex_patch", np.zeros(0)), dtype=np.int64)
     pages = np.asarray(baked.pages)
     if not pages.size:
-        return np.zeros(0, np.float32)
-    if not len(tp):  # no layout to read: every texel
-        return pages.max(axis=-1).ravel()
+        return np.zeros(0, np.float32), np.zeros(0)
+    if not len(tp):  # no layout to read: every texel, equal weights
+        v = pages.max(axis=-1).ravel()
+        return v, np.ones(len(v))
     _, H, W, _ = pages.shape
     ps, first, nv = np.unique(tp, return_index=True, return_counts=True)
     if drop is not None:
         ok = (ps < len(drop)) & ~drop[np.minimum(ps, len(drop) - 1)]
         first, nv = first[ok], nv[ok]
     uv = np.asarray(baked.tex_uv, dtype=np.float64)
+    pos = np.asarray(baked.tex_positions, dtype=np.float64)
     layer = np.asarray(baked.tex_layer, dtype=np.int64)
     # a patch's vertices are consecutive from `first`; slots 0, 1, 2 span the tile's first row and column
     span = np.stack([uv[first + k] for k in range(3)], axis=1)  # (k, 3, 2)
     x0 = np.rint(span[:, :, 0].min(axis=1) * W - 0.5).astype(np.int64)
     y0 = np.rint(span[:, :, 1].min(axis=1) * H - 0.5).astype(np.int64)
     side = np.rint(np.ptp(span[:, :, 0], axis=1) * W).astype(np.int64) + 1
-    out = []
+    e = np.cross(pos[first + 1] - pos[first], pos[first + 2] - pos[first])
+    area = np.linalg.norm(e, axis=1) * np.where(nv == 3, 0.5, 1.0)  # parallelogram / triangle
+    vals_out, area_out = [], []
     for m in np.unique(side).tolist():  # a few distinct tile sides: one gather each
         sel = side == m
         a = np.arange(m)
@@ -146,19 +151,48 @@ def _tile_values(baked, drop: np.ndarray | None) -> np.ndarray:
         vals = pages[lay, y0[sel][:, None, None] + a[None, :, None], x0[sel][:, None, None] + a].max(axis=-1)
         tri = (nv[sel] == 3)[:, None, None]  # (k, m, m), row b, column a: triangles keep a + b <= m - 1
         inside = ~tri | ((a[:, None] + a[None, :]) <= m - 1)[None]
-        out.append(vals[inside])
-    return np.concatenate(out) if out else np.zeros(0, np.float32)
+        per_texel = area[sel] / inside.sum(axis=(1, 2))
+        vals_out.append(vals[inside])
+        area_out.append(np.broadcast_to(per_texel[:, None, None], inside.shape)[inside])
+    if not vals_out:
+        return np.zeros(0, np.float32), np.zeros(0)
+    return np.concatenate(vals_out), np.concatenate(area_out)
+
+
+def _mesh_vertex_areas(baked) -> np.ndarray:
+    """(M,) a third of the area of the mesh-part triangles around each vertex."""
+    pos = np.asarray(baked.mesh_positions, dtype=np.float64).reshape(-1, 3)
+    tri = np.asarray(baked.mesh_indices, dtype=np.int64).reshape(-1, 3)
+    out = np.zeros(len(pos))
+    if len(tri):
+        e = np.cross(pos[tri[:, 1]] - pos[tri[:, 0]], pos[tri[:, 2]] - pos[tri[:, 0]])
+        np.add.at(out, tri.ravel(), np.repeat(np.linalg.norm(e, axis=1) / 6.0, 3))
+    return out
+
+
+def _weighted_percentile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
+    """The value below which ``q`` percent of the total weight lies."""
+    order = np.argsort(values, kind="stable")
+    cw = np.cumsum(weights[order])
+    k = int(np.searchsorted(cw, q / 100.0 * cw[-1]))
+    return float(values[order][min(k, len(order) - 1)])
 
 
 def radiance_scale(baked, scene=None) -> float:
-    """The exposure scale export uses (1.0 if nothing is lit): the 99.5th percentile of the non-zero
-    stored values of the patches that do not emit -- mesh-part vertices and each tile's own texels
-    once (gutters and padding, copies of tile edges, left out) -- so that walls use the 8-bit range
-    and a bright light's many texels do not decide it; emitters then clip to white in the file, as
-    in a tone-mapped render. Emitters are known from ``baked.patch_emissive`` (baked with a scene)
-    or ``scene``; without either, or when only emitters are stored, every stored value counts."""
+    """The exposure scale export uses (1.0 if nothing is lit): the 99.5th percentile, by surface
+    area, of the non-zero stored values of the patches that do not emit -- mesh-part vertices (a
+    third of their triangles' area each) and each tile's own texels once (the tile's area over its
+    texels; gutters and padding, copies of tile edges, left out) -- so that walls use the 8-bit
+    range: neither a bright light nor the many texels of the deep trees around it decide it (a
+    texel count would: adaptive meshing puts most texels where the light is brightest); emitters
+    then clip to white in the file, as in a tone-mapped render. Emitters are known from
+    ``baked.patch_emissive`` (baked with a scene) or ``scene``; without either, or when only
+    emitters are stored, every stored value counts."""
     emissive = _emissive_patches(baked, scene)
     mesh = np.asarray(baked.mesh_radiance, dtype=np.float32).reshape(-1, 3).max(axis=1)
+    mesh_area = _mesh_vertex_areas(baked)
+    if len(mesh_area) != len(mesh):
+        mesh_area = np.ones(len(mesh))
     keep_mesh = None
     if emissive is not None and emissive.any():
         mp = np.asarray(getattr(baked, "mesh_patch", np.zeros(0)), dtype=np.int64)
@@ -168,15 +202,18 @@ def radiance_scale(baked, scene=None) -> float:
         emissive = None
 
     def values(km, drop):
-        v = np.concatenate([mesh if km is None else mesh[km], _tile_values(baked, drop)])
-        return v[np.isfinite(v) & (v > 0)]
+        tv, ta = _tile_values(baked, drop)
+        v = np.concatenate([mesh if km is None else mesh[km], tv])
+        w = np.concatenate([mesh_area if km is None else mesh_area[km], ta])
+        ok = np.isfinite(v) & (v > 0) & (w > 0)
+        return v[ok], w[ok]
 
-    v = values(keep_mesh, emissive)
+    v, w = values(keep_mesh, emissive)
     if not len(v):
-        v = values(None, None)
+        v, w = values(None, None)
     if not len(v):
         return 1.0
-    s = float(np.percentile(v, _PERCENTILE))
+    s = _weighted_percentile(v, w, _PERCENTILE)
     return s if s > 0 else 1.0
 
 

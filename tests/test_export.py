@@ -169,9 +169,11 @@ def test_khronos_validator_finds_no_errors(tmp_path, layered):
 
 def test_radiance_scale_leaves_out_emitters_and_gutters(tmp_path):
     """One patch 1000x brighter and marked emissive: without that mark it decides the scale (its
-    texels are many); with it, the scale is the 99.5th percentile of the other patches' own tile
-    texels (each once: gutters and padding repeat edges; triangles' lower-left half) and mesh
-    vertices, recomputed here from the tile cache; the emitter clips to white in the file."""
+    texels are many); with it, the scale is the 99.5th percentile, by surface area, of the other
+    patches' own tile texels (each once: gutters and padding repeat edges; triangles' lower-left
+    half; each the patch's area over its texels) and mesh vertices (a third of their triangles'
+    area), recomputed here from the atlas placements and the patch corners; the emitter clips to
+    white in the file."""
     import dataclasses
 
     sol = grid_scene_solution(wavy_field, seed=2)
@@ -191,15 +193,28 @@ def test_radiance_scale_leaves_out_emitters_and_gutters(tmp_path):
     ps = np.flatnonzero(bk.patch_textured)
     sides = (2 ** sol.patch_depth()[ps] + 1).astype(np.int64)
     packing = baker._pack(ps, sides, bk.policy, 2 ** (bk.mip_levels - 1))
-    own = []
+    own, own_area = [], []
     for p, m, (layer, x, y) in zip(ps, sides, packing.placements.tolist(), strict=True):
         if emissive[p]:
             continue
         t = bk.pages[layer, y : y + m, x : x + m].max(axis=2)
         keep = np.ones((m, m), bool) if sol.patch_is_quad[p] else np.add.outer(np.arange(m), np.arange(m)) < m
+        c = sol.patch_corners[p]
+        area = 0.5 * np.linalg.norm(np.cross(c[1] - c[0], c[2] - c[0]))
+        if sol.patch_is_quad[p]:
+            area += 0.5 * np.linalg.norm(np.cross(c[2] - c[0], c[3] - c[0]))
         own.append(t[keep])
-    mesh = bk.mesh_radiance.max(axis=1)[~emissive[bk.mesh_patch]]
-    want = np.percentile(np.concatenate([mesh, *own]), 99.5)
+        own_area.append(np.full(int(keep.sum()), area / keep.sum()))
+    tri = bk.mesh_indices.astype(np.int64)
+    pos = bk.mesh_positions.astype(np.float64)
+    tri_area = 0.5 * np.linalg.norm(np.cross(pos[tri[:, 1]] - pos[tri[:, 0]], pos[tri[:, 2]] - pos[tri[:, 0]]), axis=1)
+    vert_area = np.bincount(tri.ravel(), np.repeat(tri_area / 3, 3), minlength=len(pos))
+    m_keep = ~emissive[bk.mesh_patch]
+    v = np.concatenate([bk.mesh_radiance.max(axis=1)[m_keep], *own])
+    w = np.concatenate([vert_area[m_keep], *own_area])
+    order = np.argsort(v, kind="stable")
+    cw = np.cumsum(w[order])
+    want = v[order][np.searchsorted(cw, 0.995 * cw[-1])]
     s = radiance_scale(marked)
     assert s == pytest.approx(want, rel=1e-6)
     assert s < hot_value / 100

@@ -30,7 +30,7 @@ import pytest
 
 from iat.bake import BakePolicy, Baker, seam_error
 from iat.bench import cached_solve
-from iat.imageio import auto_exposure, save_png, tonemap
+from iat.imageio import auto_exposure, save_png, srgb_encode, tonemap
 from iat.metrics import flip, psnr
 from iat.radiosity import SolveOptions
 
@@ -448,8 +448,9 @@ def test_seams_clamped_against_naive_scaling_on_the_cornell_box():
         clamped, naive = table[f"{method}/clamped/0.25"], table[f"{method}/naive/0.25"]
         assert clamped["max"] * 10 <= naive["max"], (method, clamped, naive)
         assert clamped["mean"] * 10 <= naive["mean"]
-    for scale in (0.841, 0.6, 0.42):
-        assert table[f"bilinear/clamped/{scale}"]["max"] * 4 <= table[f"bilinear/naive/{scale}"]["max"]
+    for scale in (0.841, 0.6, 0.42):  # knots do not nest: a few spots, the mean stays tiny
+        clamped, naive = table[f"bilinear/clamped/{scale}"], table[f"bilinear/naive/{scale}"]
+        assert clamped["max"] < naive["max"] and clamped["mean"] * 10 <= naive["mean"], (scale, clamped, naive)
     # scale 1 is one bake for both modes (tile and page caches share it): harmonised too
     assert table["scan/naive/1.0"]["max"] <= 1e-6
 
@@ -588,9 +589,16 @@ def test_exported_colours_use_the_8_bit_range_on_the_cornell_box(renderer):
     scene, sol = solved("cornell_box", QUICK)
     bk = Baker(sol, scene).bake(BakePolicy(threshold=0, detail=False))
     renderer.set_baked(bk)
-    iat = renderer.render(scene.cameras[0], SIZE, mode="iat")
-    # white in the file should be within 2x of white at the image's own exposure
-    assert radiance_scale(bk) * auto_exposure(iat) <= 2.0
+    iat = renderer.render(scene.cameras[0], SIZE, mode="iat").max(axis=2)
+    s = radiance_scale(bk)
+    light = float(sol.vert_radiance.max())
+    lit = (iat > 0) & (iat < 0.5 * light)  # the surfaces the camera sees, the light left out
+    code = np.rint(255 * np.clip(srgb_encode(iat[lit] / s), 0, 1))  # their 8-bit values in the file
+    median, clipped = float(np.median(code)), float((iat[lit] > s).mean())
+    record("export_range", "cornell_box", {"radiance_scale": s, "median_code": median, "clipped": clipped})
+    # the walls use the 8-bit range (with the light's 120 as white they sat at code ~16) and
+    # little of what the camera sees clips: white is the 99.5th percentile of the surface area
+    assert median >= 64 and clipped <= 0.02, (s, median, clipped)
 
 
 def test_rgba8_pages_render_close_to_the_mesh(renderer):

@@ -74,10 +74,14 @@ def cache_dir() -> Path:
 
 
 def solution_cache_path(model: str | os.PathLike, options: SolveOptions) -> Path:
-    """Cache file of ``model`` solved with ``options``: keyed by the file's bytes and the options."""
+    """Cache file of ``model`` solved with ``options``: keyed by the file's bytes, the options and
+    the solver's source (:func:`iat.radiosity.solver_fingerprint`)."""
+    from iat.radiosity import solver_fingerprint
+
     h = hashlib.sha256()
     h.update(Path(model).read_bytes())
     h.update(json.dumps(options.to_dict(), sort_keys=True).encode())
+    h.update(solver_fingerprint().encode())
     return cache_dir() / f"{Path(model).stem}-{h.hexdigest()[:16]}.npz"
 
 

@@ -1,6 +1,21 @@
 """Radiosity: analytic form factors, embreex visibility, the adaptive progressive solver, solutions."""
 
+import functools
+import hashlib
+from pathlib import Path
+
 from .solution import Solution
 from .solver import SolveOptions, resolve, solve
 
-__all__ = ["SolveOptions", "Solution", "resolve", "solve"]
+__all__ = ["SolveOptions", "Solution", "resolve", "solve", "solver_fingerprint"]
+
+
+@functools.cache
+def solver_fingerprint() -> str:
+    """First 12 hex digits of a hash of this package's source: part of every solution cache key, so
+    a cached solution is never reused after the solver changed (the options alone do not say)."""
+    h = hashlib.sha256()
+    for f in sorted(Path(__file__).parent.glob("*.py")):
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()[:12]
