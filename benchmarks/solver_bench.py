@@ -48,6 +48,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from iat.metrics import reference_errors, smooth_lit_mask  # noqa: E402
 from iat.radiosity import SolveOptions, solve  # noqa: E402
 from iat.radiosity.visibility import CHUNK, Visibility  # noqa: E402
 from iat.scene import load_scene  # noqa: E402
@@ -63,31 +64,6 @@ ADAPTIVE_TOLERANCES = (0.4, 0.2, 0.1, 0.05, 0.025)
 REFERENCE = {"max_depth": 6, "criterion": "uniform", "min_element_size": 0.0, "samples": 64, "seed": 1}
 
 
-# -- the error measure of tests/test_reference_compare.py ---------------------------------------
-def smooth_lit(ref: np.ndarray) -> np.ndarray:
-    """(h, w) bool: lit pixels away from edges (as ``tests/test_reference_compare._smooth_lit``)."""
-    y = ref.mean(axis=2)
-    pad = np.pad(y, 1, mode="edge")
-    win = np.stack([pad[i : i + y.shape[0], j : j + y.shape[1]] for i in range(3) for j in range(3)])
-    return (y > 0.05) & (
-        win.max(axis=0) - win.min(axis=0) < 0.15 * win.mean(axis=0) + 4 * win.std(axis=0).mean()
-    )
-
-
-def image_errors(img: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> dict:
-    """Relative error on the smooth lit pixels, on 8 x 8 blocks, and the mean bias."""
-    err = np.abs(img - ref).mean(axis=2)
-    rel_smooth = float(err[mask].sum() / ref.mean(axis=2)[mask].sum())
-    h, w = ref.shape[:2]
-    blocks = (h // 8, 8, w // 8, 8)
-    a = ref.mean(axis=2).reshape(blocks).mean(axis=(1, 3))
-    b = img.mean(axis=2).reshape(blocks).mean(axis=(1, 3))
-    bl = a > 0.05
-    rel_blocks = float(np.abs(a - b)[bl].sum() / a[bl].sum())
-    bias = float(img[mask].mean() / ref[mask].mean() - 1.0)
-    return {"rel_smooth": rel_smooth, "rel_blocks": rel_blocks, "bias": bias}
-
-
 class Cornell:
     """The Cornell box, its camera, its Mitsuba reference and a renderer (EGL)."""
 
@@ -98,7 +74,7 @@ class Cornell:
         self.scene = load_scene(ROOT / "sample_models" / "cornell_box.glb")
         self.camera = self.scene.default_camera()
         self.ref = render_reference_cached(self.scene, self.camera, SIZE, spp=512, cache_dir=REFS, seed=1)
-        self.mask = smooth_lit(self.ref)
+        self.mask = smooth_lit_mask(self.ref)
         self.renderer = Renderer(None)
 
     def image(self, sol) -> np.ndarray:
@@ -106,7 +82,7 @@ class Cornell:
         return self.renderer.render(self.camera, SIZE, mode="mesh").astype(np.float64)
 
     def errors(self, sol, ref: np.ndarray | None = None) -> dict:
-        return image_errors(self.image(sol), self.ref if ref is None else ref, self.mask)
+        return reference_errors(self.image(sol), self.ref if ref is None else ref, self.mask)
 
 
 def surface_values(sol, n_out: int = 256) -> np.ndarray:
@@ -207,7 +183,7 @@ def run_adaptive(depths=UNIFORM_DEPTHS, tolerances=ADAPTIVE_TOLERANCES) -> dict:
     ref_img = cb.image(ref)
     for r in rows:
         key = ("uniform", r["depth"]) if r["mesh"] == "uniform" else ("adaptive", r["tolerance"])
-        r["rel_smooth_vs_uniform"] = image_errors(cb.image(sols[key]), ref_img, cb.mask)["rel_smooth"]
+        r["rel_smooth_vs_uniform"] = reference_errors(cb.image(sols[key]), ref_img, cb.mask)["rel_smooth"]
         r["surface_vs_uniform"] = surface_error(sols[key], ref)
         r["direct_surface_vs_uniform"] = surface_error(direct[key], ref_direct)
     for measure, count in (

@@ -207,7 +207,9 @@ def test_radiance_scale_leaves_out_emitters_and_gutters(tmp_path):
         own_area.append(np.full(int(keep.sum()), area / keep.sum()))
     tri = bk.mesh_indices.astype(np.int64)
     pos = bk.mesh_positions.astype(np.float64)
-    tri_area = 0.5 * np.linalg.norm(np.cross(pos[tri[:, 1]] - pos[tri[:, 0]], pos[tri[:, 2]] - pos[tri[:, 0]]), axis=1)
+    tri_area = 0.5 * np.linalg.norm(
+        np.cross(pos[tri[:, 1]] - pos[tri[:, 0]], pos[tri[:, 2]] - pos[tri[:, 0]]), axis=1
+    )
     vert_area = np.bincount(tri.ravel(), np.repeat(tri_area / 3, 3), minlength=len(pos))
     m_keep = ~emissive[bk.mesh_patch]
     v = np.concatenate([bk.mesh_radiance.max(axis=1)[m_keep], *own])

@@ -450,7 +450,11 @@ def test_seams_clamped_against_naive_scaling_on_the_cornell_box():
         assert clamped["mean"] * 10 <= naive["mean"]
     for scale in (0.841, 0.6, 0.42):  # knots do not nest: a few spots, the mean stays tiny
         clamped, naive = table[f"bilinear/clamped/{scale}"], table[f"bilinear/naive/{scale}"]
-        assert clamped["max"] < naive["max"] and clamped["mean"] * 10 <= naive["mean"], (scale, clamped, naive)
+        assert clamped["max"] < naive["max"] and clamped["mean"] * 10 <= naive["mean"], (
+            scale,
+            clamped,
+            naive,
+        )
     # scale 1 is one bake for both modes (tile and page caches share it): harmonised too
     assert table["scan/naive/1.0"]["max"] <= 1e-6
 

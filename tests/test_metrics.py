@@ -115,3 +115,22 @@ def test_edge_mismatch():
     assert metrics.edge_mismatch(np.zeros((0, 3)), np.zeros((0, 3))) == (0.0, 0.0)
     with pytest.raises(ValueError):
         metrics.edge_mismatch(np.zeros((2, 3)), np.zeros((3, 3)))
+
+
+def test_smooth_lit_mask_leaves_out_edges_and_dark_pixels():
+    ref = np.zeros((16, 16, 3))
+    ref[:, 4:] = 1.0  # a lit region with one vertical edge at column 4, columns 0-3 dark
+    m = metrics.smooth_lit_mask(ref)
+    assert not m[:, :5].any()  # dark, and the lit column next to the edge
+    assert m[:, 6:].all()
+
+
+def test_reference_errors_known_values():
+    ref = np.full((16, 16, 3), 0.5)
+    img = ref * 1.1  # 10 % too bright everywhere
+    e = metrics.reference_errors(img, ref)
+    assert e["rel_smooth"] == pytest.approx(0.1)
+    assert e["rel_blocks"] == pytest.approx(0.1)
+    assert e["bias"] == pytest.approx(0.1)
+    with pytest.raises(ValueError):
+        metrics.reference_errors(img[:8], ref)
