@@ -544,6 +544,16 @@ def test_same_baked_pages_are_not_uploaded_twice(renderer):
     np.testing.assert_array_equal(renderer.render(cam, (W, H), "iat"), first)
 
 
+def _fresh_iat_render(ctx, baked, cam) -> np.ndarray:
+    """``baked`` drawn in iat mode by a new Renderer (nothing kept from earlier uploads)."""
+    fresh = Renderer(ctx)
+    try:
+        fresh.set_baked(baked)
+        return fresh.render(cam, (W, H), "iat")
+    finally:
+        fresh.release()
+
+
 def test_threshold_walk_on_one_renderer_matches_fresh_renderers(renderer, egl_ctx):
     """Mesh parts are prefixes of one depth-sorted mesh, written once and drawn by count; pages are
     written without conversion. A threshold walk down and up on one renderer draws, at every step,
@@ -560,12 +570,7 @@ def test_threshold_walk_on_one_renderer_matches_fresh_renderers(renderer, egl_ct
         bk = b.bake(BakePolicy(threshold=t))
         renderer.set_baked(bk)
         got = renderer.render(cam, (W, H), "iat")
-        fresh = Renderer(egl_ctx)
-        try:
-            fresh.set_baked(bk)
-            want = fresh.render(cam, (W, H), "iat")
-        finally:
-            fresh.release()
+        want = _fresh_iat_render(egl_ctx, bk, cam)
         assert (want > 0).any(axis=2).sum() > 500
         np.testing.assert_array_equal(got, want, err_msg=f"threshold {t}")
         assert renderer.stats()["triangles"] == len(bk.mesh_indices) + len(bk.tex_indices)
@@ -591,12 +596,7 @@ def test_scale_walk_keeps_the_page_texture_and_matches_fresh_renderers(renderer,
             if renderer._pages not in created:
                 created.append(renderer._pages)
             got = renderer.render(cam, (W, H), "iat")
-            fresh = Renderer(egl_ctx)
-            try:
-                fresh.set_baked(bk)
-                want = fresh.render(cam, (W, H), "iat")
-            finally:
-                fresh.release()
+            want = _fresh_iat_render(egl_ctx, bk, cam)
             assert (want > 0).any(axis=2).sum() > 300
             np.testing.assert_array_equal(got, want, err_msg=f"{fmt} threshold {t} scale {s}")
             m, pt = bk.memory, renderer.page_texture
