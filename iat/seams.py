@@ -8,8 +8,8 @@ triangle's hypotenuse too, thanks to :func:`iat.flatten.extend_triangle`), so tw
 render the same function along a shared segment exactly when their edge texel rows
 describe the same polyline there.
 
-:func:`harmonise_tiles` makes them do so, after flatten + (clamped) scaling and before
-packing:
+:func:`harmonise_rings` makes them do so, on the tiles' boundary rings (:func:`tile_ring`,
+written back by :func:`apply_ring`), after flatten + (clamped) scaling and before packing:
 
 - **pairs** (:class:`EdgePairs`, once per solution): every two patch boundary edges that
   share a world-space segment (whole edges, or partial overlaps: T-junctions between
@@ -71,7 +71,6 @@ __all__ = [
     "apply_ring",
     "edge_pairs",
     "harmonise_rings",
-    "harmonise_tiles",
     "harmonised_boxes",
     "ring_index",
     "seam_measure",
@@ -312,7 +311,7 @@ def _relative_step(a: np.ndarray, b: np.ndarray, peak: float) -> np.ndarray:
 def harmonise_rings(
     rings: dict, sides: np.ndarray, textured: np.ndarray, is_quad: np.ndarray, pairs: EdgePairs
 ) -> tuple[dict, dict]:
-    """Harmonise boundary rings (the work of :func:`harmonise_tiles`, on rings only).
+    """Make neighbours' boundary rings describe the same polyline along every shared segment.
 
     rings : {patch: (ring length, 3) ring} of every patch to take part: textured ones, and mesh
       ones (``textured`` False: their ring is the mesh along their edges, never written)
@@ -427,31 +426,6 @@ def harmonise_rings(
     changed = ne[:, 0] | ne[:, 1] | ne[:, 2]
     hit = (np.add.reduceat(changed, off[involved]) > 0) & textured[involved]
     return {p: R[off[p] : off[p] + ring_len[p]] for p in involved[hit].tolist()}, info
-
-
-def harmonise_tiles(
-    tiles: dict,
-    sides: np.ndarray,
-    textured: np.ndarray,
-    is_quad: np.ndarray,
-    pairs: EdgePairs,
-    mesh_tiles=None,
-) -> tuple[dict, dict]:
-    """Make neighbours' edge texel rows describe the same polyline along every shared segment.
-
-    tiles : {patch: (m, m, 3) tile} of the textured patches (read, never written)
-    sides : (P,) texels per side of every patch's edge function: the textured tile side, or for
-      a mesh patch ``2**depth + 1`` (its ``mesh_tiles`` row); textured : (P,) bool
-    mesh_tiles : {patch: (n, n, 3)} scale-1 tiles of the mesh patches that neighbour a textured
-      one (their edge rows are the mesh along the edge), or None to leave mesh neighbours out
-    Returns ``(new, info)``: ``new`` {patch: harmonised (m, m, 3) float32 copy} for the patches
-    that changed; info: pairs used, passes, texels written.
-    """
-    rings = {p: tile_ring(t, not is_quad[p]) for p, t in tiles.items()}
-    for p, t in (mesh_tiles or {}).items():
-        rings[p] = tile_ring(t, not is_quad[p])
-    new, info = harmonise_rings(rings, sides, textured, is_quad, pairs)
-    return {p: apply_ring(tiles[p], ring, not is_quad[p]) for p, ring in new.items()}, info
 
 
 # ---------------------------------------------------------------------------
