@@ -163,11 +163,10 @@ def _mesh_vertex_areas(baked) -> np.ndarray:
     """(M,) a third of the area of the mesh-part triangles around each vertex."""
     pos = np.asarray(baked.mesh_positions, dtype=np.float64).reshape(-1, 3)
     tri = np.asarray(baked.mesh_indices, dtype=np.int64).reshape(-1, 3)
-    out = np.zeros(len(pos))
-    if len(tri):
-        e = np.cross(pos[tri[:, 1]] - pos[tri[:, 0]], pos[tri[:, 2]] - pos[tri[:, 0]])
-        np.add.at(out, tri.ravel(), np.repeat(np.linalg.norm(e, axis=1) / 6.0, 3))
-    return out
+    from .scene import triangle_areas
+
+    third = np.repeat(triangle_areas(pos, tri) / 3.0, 3)
+    return np.bincount(tri.ravel(), third, minlength=len(pos)).astype(np.float64)
 
 
 def _weighted_percentile(values: np.ndarray, weights: np.ndarray, q: float) -> float:
