@@ -36,6 +36,7 @@ run: setup
 	fi
 
 test: setup
+	$(BIN)/lint-imports --no-cache
 	$(XVFB) $(BIN)/python -m pytest -q tests
 
 lint: setup

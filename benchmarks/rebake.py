@@ -61,7 +61,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from iat.bake import BakePolicy, Baker  # noqa: E402
+from iat.bake.baker import BakePolicy, Baker  # noqa: E402
 
 GOAL_MS, LIVE_MS = 16.0, 100.0
 LADDER = [float(2.0 ** (-q / 4)) for q in range(9)]
@@ -85,7 +85,7 @@ def bench_options(max_depth: int, tolerance: float):
 
 def synthetic(scene, leaves: int, max_depth: int = 7, seed: int = 0):
     """The scene's patches, refined at random (2:1 balanced) until >= ``leaves`` leaves."""
-    from iat import quadtree as qt
+    from iat.geometry import quadtree as qt
     from iat.radiosity.solution import Solution
 
     rng = np.random.default_rng(seed)
@@ -107,9 +107,9 @@ def synthetic(scene, leaves: int, max_depth: int = 7, seed: int = 0):
 
 
 def load(args):
-    from iat.bench import cached_solve
-    from iat.inputs import is_solution_path, open_solution
-    from iat.scene import load_scene
+    from iat.io.scene import load_scene
+    from iat.radiosity.cache import cached_solve
+    from iat.radiosity.inputs import is_solution_path, open_solution
 
     src = Path(args.input)
     if is_solution_path(src):
@@ -151,7 +151,7 @@ def percentiles(xs) -> dict:
 def run(args) -> dict:
     import moderngl
 
-    from iat.render import Renderer
+    from iat.render.renderer import Renderer
 
     scene, sol, source = load(args)
     elements = int(len(sol.leaf_patch))

@@ -48,10 +48,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from iat.metrics import reference_errors, smooth_lit_mask  # noqa: E402
+from iat.io.scene import load_scene  # noqa: E402
+from iat.measure.metrics import reference_errors, smooth_lit_mask  # noqa: E402
 from iat.radiosity import SolveOptions, solve  # noqa: E402
 from iat.radiosity.visibility import CHUNK, Visibility  # noqa: E402
-from iat.scene import load_scene  # noqa: E402
 
 OUT_JSON = ROOT / "benchmarks" / "solver.json"
 OUT_MD = ROOT / "benchmarks" / "solver.md"
@@ -68,8 +68,8 @@ class Cornell:
     """The Cornell box, its camera, its Mitsuba reference and a renderer (EGL)."""
 
     def __init__(self):
-        from iat.reference import render_reference_cached
-        from iat.render import Renderer
+        from iat.measure.reference import render_reference_cached
+        from iat.render.renderer import Renderer
 
         self.scene = load_scene(ROOT / "sample_models" / "cornell_box.glb")
         self.camera = self.scene.default_camera()
@@ -90,9 +90,10 @@ def surface_values(sol, n_out: int = 256) -> np.ndarray:
     n_out x n_out grid of cells in each patch's (u, v) (no lattice point of any depth, so no
     solution is sampled only at its own vertices), concatenated over the patches, and (same
     length) the area each point stands for and its patch."""
-    from iat.radiosity.solver import LUMINANCE, _Lattice, _sample_lattice
+    from iat.radiosity.options import LUMINANCE
+    from iat.radiosity.sampling import Lattice, sample_lattice
 
-    lat = _Lattice(sol.forest, np.asarray(sol.vert_key))
+    lat = Lattice(sol.forest, np.asarray(sol.vert_key))
     vals = np.asarray(sol.vert_radiance, dtype=np.float64)
     g = (np.arange(n_out) + 0.5) / n_out
     uu, vv = (x.ravel() for x in np.meshgrid(g, g, indexing="ij"))
@@ -104,7 +105,7 @@ def surface_values(sol, n_out: int = 256) -> np.ndarray:
             keep = u + v <= 1.0 + 1e-12
             u, v = u[keep], v[keep]
         flat = lat.grid(p, vals).reshape(-1, 3)
-        out.append(_sample_lattice(flat, sol.n, u, v) @ LUMINANCE)
+        out.append(sample_lattice(flat, sol.n, u, v) @ LUMINANCE)
         c = corners[p]
         area = 0.5 * np.linalg.norm(np.cross(c[1] - c[0], c[2] - c[0]))
         if sol.patch_is_quad[p]:
@@ -211,7 +212,7 @@ def shadow_scene():
     """A 2 x 2 m floor (4 quads) under a point light 2 m up, with a 0.5 m square occluder halfway:
     one hard-edged shadow and a smooth 1/r^2 fall-off, the case adaptive meshing is for (the
     scene of ``tests/test_radiosity.floor_scene``)."""
-    from iat.scene import Light, Material, Scene
+    from iat.io.scene import Light, Material, Scene
 
     polys = []
     for i in range(2):

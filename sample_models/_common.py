@@ -39,7 +39,7 @@ if str(_ROOT) not in sys.path:  # run as a script: make `iat` importable from th
     sys.path.insert(0, str(_ROOT))
 
 from iat.camera import Camera  # noqa: E402
-from iat.glb import GlbBuilder  # noqa: E402
+from iat.io.glb import GlbBuilder  # noqa: E402
 
 __all__ = [
     "Camera",

@@ -36,7 +36,7 @@ if __package__ in (None, ""):  # run as a script: make `iat` importable from the
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from iat.camera import Camera  # noqa: E402
-from iat.glb import GlbBuilder  # noqa: E402
+from iat.io.glb import GlbBuilder
 
 DEFAULT_PATH = Path(__file__).resolve().with_name("cornell_box.glb")
 

@@ -133,7 +133,7 @@ def reference_image(regen_refs):
         path = REFS / f"{name}.npy"
         image = np.asarray(image, dtype=np.float32)
         if regen_refs:
-            from iat.imageio import save_npy
+            from iat.io.images import save_npy
 
             save_npy(path, image)
             return

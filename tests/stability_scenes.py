@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from iat import quadtree as qt
+from iat.geometry import quadtree as qt
+from iat.io.scene import Light, Material, Scene
 from iat.radiosity.solution import Solution
-from iat.scene import Light, Material, Scene
 
 GREY = Material("grey", albedo=np.full(3, 0.5))
 

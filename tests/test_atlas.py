@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from iat.atlas import align_up, blit, blit_boxes, mip_chain_texels, mip_levels, pack
+from iat.bake.atlas import align_up, blit, blit_boxes, mip_chain_texels, mip_levels, pack
 from iat.errors import BakeError
 
 

@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from iat import quadtree as qt
-from iat.bake import (
+from iat.bake.baker import (
     BYTES_PER_TEXEL,
     BakePolicy,
     Baker,
@@ -19,8 +18,9 @@ from iat.bake import (
     seam_error,
 )
 from iat.errors import BakeError, OptionError
+from iat.geometry import quadtree as qt
+from iat.io.scene import Material, Scene
 from iat.radiosity.solution import Solution
-from iat.scene import Material, Scene
 from tests.test_flatten import SHAPES, linear_field, make_solution, patch_world, wavy_field
 
 # -- helpers --------------------------------------------------------------------------------
@@ -472,7 +472,7 @@ def test_progress_reports_and_cancels(grid_sol):
 def test_gpu_iat_image_matches_the_mesh_image_on_a_linear_field(egl_ctx):
     """End to end through iat.render: atlas uv, half-texel border and triangle fill on the GPU."""
     from iat.camera import Camera
-    from iat.render import Renderer
+    from iat.render.renderer import Renderer
 
     sol = grid_scene_solution(linear_field, seed=3)
     cam = Camera(
@@ -504,7 +504,7 @@ def test_gpu_pages_are_the_stored_pages_in_the_gpu_dtype(grid_sol, fmt):
     page / page_scale, rgb9e5: the 9e5 values as float16, exact), read-only and cached; ``pages``
     (float32, exact for rgba16f) is made on first access and equals the GPU form decoded within
     the format's rounding."""
-    from iat.bake import GPU_DTYPES, from_gpu, to_gpu
+    from iat.bake.baker import GPU_DTYPES, from_gpu, to_gpu
 
     b = Baker(grid_sol)
     bk = b.bake(BakePolicy(threshold=0, pixel_format=fmt))
@@ -531,7 +531,7 @@ def test_gpu_pages_are_the_stored_pages_in_the_gpu_dtype(grid_sol, fmt):
 
 
 def test_to_gpu_clamps_half_floats_and_rounds_srgb():
-    from iat.bake import from_gpu, quantise_rgba8, to_gpu
+    from iat.bake.baker import from_gpu, quantise_rgba8, to_gpu
 
     x = np.array([[1e5, 1.0, 0.0], [2.0**-20, 0.5, 3.0]], np.float32)
     h = to_gpu(x, "rgba16f")
@@ -543,8 +543,8 @@ def test_to_gpu_clamps_half_floats_and_rounds_srgb():
 
 
 def test_host_bytes_counts_pages_boxes_tiles_and_temporaries():
-    from iat import atlas
-    from iat.bake import host_bytes, host_memory_bytes
+    from iat.bake import atlas
+    from iat.bake.baker import host_bytes, host_memory_bytes
 
     sides = np.array([5, 5, 9])
     pk = atlas.pack(np.stack([sides, sides], axis=1), 64, 2, 2)

@@ -17,9 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iat import bench, chart
 from iat.camera import Camera
 from iat.radiosity import SolveOptions
+from iat.radiosity.cache import cached_solve
+from iat.tools import bench, chart
 
 ROOT = Path(__file__).resolve().parents[1]
 CORNELL = ROOT / "sample_models" / "cornell_box.glb"
@@ -130,18 +131,24 @@ def test_bench_markdown_table(result):
 def test_solution_cache(tmp_path):
     model = tmp_path / "box.glb"
     shutil.copy(CORNELL, model)
-    _, sol1, info1 = bench.cached_solve(model, SMALL, tmp_path)
+    _, sol1, info1 = cached_solve(model, SMALL, tmp_path)
     assert not info1["cached"] and Path(info1["cache_file"]).is_file()
-    _, sol2, info2 = bench.cached_solve(model, SMALL, tmp_path)
+    _, sol2, info2 = cached_solve(model, SMALL, tmp_path)
     assert info2["cached"] and info2["solve_s"] == pytest.approx(info1["solve_s"])
     np.testing.assert_array_equal(sol1.vert_radiance, sol2.vert_radiance)
     # other options: another file
-    _, _, info3 = bench.cached_solve(model, SolveOptions(max_depth=3), tmp_path)
+    _, _, info3 = cached_solve(model, SolveOptions(max_depth=3), tmp_path)
     assert not info3["cached"] and info3["cache_file"] != info1["cache_file"]
-    # a model newer than its cached solution is solved again
+    # the key is the file's content: a touched model is still cached, an edited one is solved again
     t = Path(info1["cache_file"]).stat().st_mtime
     os.utime(model, (t + 10, t + 10))
-    _, _, info4 = bench.cached_solve(model, SMALL, tmp_path)
+    assert cached_solve(model, SMALL, tmp_path)[2]["cached"]
+    import pygltflib
+
+    g = pygltflib.GLTF2().load(model)
+    g.asset.generator = "edited"
+    g.save(model)
+    _, _, info4 = cached_solve(model, SMALL, tmp_path)
     assert not info4["cached"]
 
 
@@ -274,19 +281,21 @@ def test_bench_main_json_and_markdown(tmp_path, monkeypatch, capsys):
     import argparse
     import functools
 
+    from iat.cli.commands import cmd_bench
+
     monkeypatch.chdir(tmp_path)  # the default solution cache is ./out/bench
     monkeypatch.setattr(
         bench, "run_bench", functools.partial(bench.run_bench, solve_options=SMALL, repeats=1)
     )
     args = argparse.Namespace(models=["cornell_box"], json=True, frames=2, size="48x32")
-    assert bench.main(args) == 0
+    assert cmd_bench(args) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["settings"]["frames"] == 2 and data["settings"]["size"] == [48, 32]
     assert data["models"][0]["triangles_iat"] < data["models"][0]["triangles_mesh"]
     assert data["models"][0]["solve_cached"] is False
     assert list((tmp_path / "out" / "bench").glob("cornell_box-*.npz"))
     args.json = False
-    assert bench.main(args) == 0
+    assert cmd_bench(args) == 0
     out = capsys.readouterr().out
     assert "| cornell_box (IAT) |" in out and "fps 48x32" in out and "(cached)" in out
 

@@ -101,7 +101,7 @@ def test_bake_json_and_render_modes(tmp_path, cornell_solution):
         images[mode] = np.load(out)
         assert images[mode].shape == (72, 96, 3) and images[mode].dtype == np.float32
     # IAT against mesh of the same solution: the same picture (report §4.1)
-    from iat.metrics import psnr
+    from iat.measure.metrics import psnr
 
     assert psnr(images["iat"], images["mesh"]) > 30
     png = tmp_path / "c.png"
@@ -140,7 +140,7 @@ def test_load_draws_a_progress_bar_on_a_terminal(tmp_path, monkeypatch, capsys):
     """G2: ``iat info`` (and solve, bake, render through the same helper) draws the load's bar."""
     import io
 
-    from iat import cli
+    from iat.cli import commands as cli
 
     class Terminal(io.StringIO):
         def isatty(self):

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iat.render import PREVIEW_AMBIENT, Renderer
-from iat.scene import load_scene
+from iat.io.scene import load_scene
+from iat.render.renderer import PREVIEW_AMBIENT, Renderer
 
 ROOT = Path(__file__).resolve().parents[1]
 

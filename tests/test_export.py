@@ -14,9 +14,9 @@ import pytest
 from PIL import Image
 from pygltflib import GLTF2
 
-from iat.bake import BakePolicy, Baker
+from iat.bake.baker import BakePolicy, Baker
 from iat.errors import BakeError
-from iat.export import export_glb, radiance_scale
+from iat.export.gltf import export_glb, radiance_scale
 from tests.test_bake import detail_scene, grid_scene_solution
 from tests.test_flatten import wavy_field
 

@@ -11,9 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from iat import quadtree as qt
-from iat.errors import OptionError
-from iat.flatten import (
+from iat.bake.flatten import (
     METHODS,
     SolutionIndex,
     TileCache,
@@ -26,6 +24,8 @@ from iat.flatten import (
     tile_side,
     tile_uv,
 )
+from iat.errors import OptionError
+from iat.geometry import quadtree as qt
 from iat.radiosity.solution import Solution
 
 # -- synthetic solutions (also used by test_bake / test_export) ----------------------------------
@@ -378,7 +378,7 @@ def test_scale_one_is_identity_and_errors(lin_sol):
 def _reference_scale(tile, scale, mode, method, triangle):
     from PIL import Image
 
-    from iat.flatten import _axis_weights
+    from iat.bake.flatten import _axis_weights
 
     n = tile.shape[0]
     m = scaled_side(n, scale)

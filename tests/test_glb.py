@@ -17,7 +17,7 @@ from PIL import Image
 from pygltflib import GLTF2
 
 from iat.camera import Camera
-from iat.glb import GlbBuilder, look_rotation, quat_from_matrix
+from iat.io.glb import GlbBuilder, look_rotation, quat_from_matrix
 from sample_models import cornell_box
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -328,7 +328,7 @@ def test_write_removes_stale_temporaries_of_killed_writers(tmp_path, monkeypatch
     in progress elsewhere) and other names stay (docs/stability.md, G4)."""
     import time
 
-    from iat.imageio import STALE_TEMPORARY_S, temporary_pattern
+    from iat.fsutil import STALE_TEMPORARY_S, temporary_pattern
 
     path, _ = _old_file(tmp_path)
     names = []

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from iat.bake import BakePolicy, Baker
+from iat.bake.baker import BakePolicy, Baker
 from iat.camera import Camera
 from iat.errors import LoadError
-from iat.export import export_glb, radiance_scale
-from iat.glb import GlbBuilder
-from iat.glb_view import GlbView, is_iat_export, load_glb, render_glb
+from iat.export.gltf import export_glb, radiance_scale
+from iat.io.glb import GlbBuilder
+from iat.render.glb_view import GlbView, is_iat_export, load_glb, render_glb
 from tests.test_bake import detail_scene, grid_scene_solution
 from tests.test_flatten import linear_field, wavy_field
 
@@ -70,7 +70,7 @@ def test_load_reads_what_export_wrote(mixed, tmp_path):
 
 def test_draws_an_export_like_iat_mode(mixed, egl_ctx, tmp_path):
     """Same pixels as the IAT renderer up to the 8-bit sRGB PNG of the pages (and COLOR_0 in f32)."""
-    from iat.render import Renderer
+    from iat.render.renderer import Renderer
 
     _, bk = mixed
     path = export_glb(bk, tmp_path / "m.glb")
@@ -97,7 +97,7 @@ def test_draws_an_export_like_iat_mode(mixed, egl_ctx, tmp_path):
 
 
 def test_layered_export_multiplies_detail_and_illumination(egl_ctx, tmp_path):
-    from iat.render import Renderer
+    from iat.render.renderer import Renderer
 
     sol, sc, _ = detail_scene()
     bk = Baker(sol, sc).bake(BakePolicy(threshold=0, mipmaps=False))
@@ -209,7 +209,7 @@ def test_own_context_and_errors(tmp_path):
 
 def test_linear_field_round_trip_is_within_8_bit(egl_ctx, tmp_path):
     """Threshold 0 on a linear field: the GLB drawn here is the IAT image to 8-bit sRGB precision."""
-    from iat.render import Renderer
+    from iat.render.renderer import Renderer
 
     sol = grid_scene_solution(linear_field, seed=3)
     bk = Baker(sol).bake(BakePolicy(threshold=0, mipmaps=False))

@@ -28,11 +28,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iat.bake import BakePolicy, Baker, seam_error
-from iat.bench import cached_solve
-from iat.imageio import auto_exposure, save_png, srgb_encode, tonemap
-from iat.metrics import flip, psnr
+from iat.bake.baker import BakePolicy, Baker, seam_error
+from iat.color import auto_exposure, srgb_encode, tonemap
+from iat.io.images import save_png
+from iat.measure.metrics import flip, psnr
 from iat.radiosity import SolveOptions
+from iat.radiosity.cache import cached_solve
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "out" / "acceptance"
@@ -89,7 +90,7 @@ def psnr8(test, ref, exposure) -> float:
 
 @pytest.fixture
 def renderer(egl_ctx):
-    from iat.render import Renderer
+    from iat.render.renderer import Renderer
 
     r = Renderer(egl_ctx)
     yield r
@@ -162,7 +163,7 @@ def test_threshold_semantics_and_texels_per_depth():
     scene, sol = solved("cornell_box", SPLIT)
     depth = sol.patch_depth().astype(int)
     baker = Baker(sol, scene)
-    from iat import quadtree as qt
+    from iat.geometry import quadtree as qt
 
     vpatch = qt.decode_key(sol.vert_key, sol.n)[0]
     tri_patch = vpatch[sol.tri_vertices[:, 0]]
@@ -194,7 +195,7 @@ def test_threshold_semantics_and_texels_per_depth():
 
 def _ramp_solution(depth: int):
     """One unit quad in z = 0, uniformly split to ``depth``, radiance linear in (x, y), not fp16-exact."""
-    from iat import quadtree as qt
+    from iat.geometry import quadtree as qt
     from iat.radiosity.solution import Solution
 
     corners = np.array([[[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]], float)
@@ -271,7 +272,7 @@ def test_half_texel_placement_ramp_is_exact_up_to_the_polygon_edges(depth, rende
 
 def test_atlas_boxes_of_a_real_bake_do_not_overlap_and_gutters_repeat_edges():
     """Integration check on the house (the packing properties are in tests/test_atlas.py)."""
-    from iat.atlas import align_up
+    from iat.bake.atlas import align_up
 
     scene, sol = solved("house", QUICK)
     bk = Baker(sol, scene).bake(BakePolicy(threshold=0, detail=False, gutter=2, page_size=256))
@@ -357,7 +358,7 @@ POLICIES = {
 
 @pytest.mark.parametrize("label", list(POLICIES))
 def test_memory_report_equals_the_gl_texture_bytes(label, egl_ctx):
-    from iat.render import Renderer
+    from iat.render.renderer import Renderer
 
     scene, sol = solved("cornell_box", SPLIT)
     bk = Baker(sol, scene).bake(POLICIES[label])
@@ -376,7 +377,7 @@ def test_memory_report_equals_the_gl_texture_bytes(label, egl_ctx):
 
 
 def test_memory_report_equals_gl_bytes_after_switching_mipmaps_off(egl_ctx):
-    from iat.render import Renderer
+    from iat.render.renderer import Renderer
 
     scene, sol = solved("cornell_box", SPLIT)
     b = Baker(sol, scene)
@@ -392,7 +393,7 @@ def test_memory_report_equals_gl_bytes_after_switching_mipmaps_off(egl_ctx):
 
 
 def test_rgb9e5_pages_upload_with_the_reported_bytes(egl_ctx):
-    from iat.render import Renderer
+    from iat.render.renderer import Renderer
 
     scene, sol = solved("cornell_box", SPLIT)
     bk = Baker(sol, scene).bake(BakePolicy(threshold=0, detail=False, pixel_format="rgb9e5"))
@@ -414,7 +415,7 @@ def test_seams_clamped_against_naive_scaling_on_the_cornell_box():
     0.25 on the (split) Cornell box. Clamped bakes are harmonised (iat/seams.py): the coarser
     neighbour's edge polyline is copied onto the finer one, so at the power-of-two scales both
     sides render one function; naive bakes are left as the report made them."""
-    from iat.seams import seam_measure
+    from iat.bake.seams import seam_measure
 
     scene, sol = solved("cornell_box", SPLIT)
     baker = Baker(sol, scene)
@@ -544,8 +545,8 @@ def _validator():
 def test_exported_glb_validates_loads_and_draws_like_iat_mode(name, threshold, renderer, tmp_path):
     import trimesh
 
-    from iat.export import export_glb, radiance_scale
-    from iat.glb_view import GlbView
+    from iat.export.gltf import export_glb, radiance_scale
+    from iat.render.glb_view import GlbView
 
     scene, sol = solved(name, QUICK)
     cam = scene.cameras[0]
@@ -588,7 +589,7 @@ def test_exported_glb_validates_loads_and_draws_like_iat_mode(name, threshold, r
 
 
 def test_exported_colours_use_the_8_bit_range_on_the_cornell_box(renderer):
-    from iat.export import radiance_scale
+    from iat.export.gltf import radiance_scale
 
     scene, sol = solved("cornell_box", QUICK)
     bk = Baker(sol, scene).bake(BakePolicy(threshold=0, detail=False))

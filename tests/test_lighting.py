@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iat import lighting as L
 from iat.errors import LoadError, OptionError
+from iat.io.scene import load_scene
+from iat.lighting import edits as L
 from iat.radiosity import SolveOptions, resolve, solve
-from iat.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 CORNELL = ROOT / "sample_models" / "cornell_box.glb"

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from iat import metrics
+from iat.measure import metrics
 
 
 def _rand(seed=0, shape=(24, 32, 3)):

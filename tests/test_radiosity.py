@@ -7,11 +7,13 @@ import json
 import numpy as np
 import pytest
 
-from iat import quadtree as qt
 from iat.errors import OptionError, SolutionFileError
+from iat.geometry import quadtree as qt
+from iat.io.scene import Light, Material, Scene
 from iat.radiosity import Solution, SolveOptions, resolve, solve
-from iat.radiosity.solver import LUMINANCE, _averaging_matrix, evaluate_direct
-from iat.scene import Light, Material, Scene
+from iat.radiosity.meshing import averaging_matrix
+from iat.radiosity.options import LUMINANCE
+from iat.radiosity.solver import evaluate_direct
 
 
 # -- scenes built in memory ------------------------------------------------------------
@@ -99,7 +101,7 @@ def triangle_box(albedo):
 
 def _reflected_power(sol: Solution, scene: Scene) -> np.ndarray:
     """(3,) power reflected by all patches: pi x area x (area-weighted mean reflected radiance)."""
-    m = _averaging_matrix(sol.forest, sol.vert_key, sol.patch_corners, scene.patch_area)
+    m = averaging_matrix(sol.forest, sol.vert_key, sol.patch_corners, scene.patch_area)
     patch = qt.decode_key(sol.vert_key, sol.n)[0]
     refl = sol.vert_radiance.astype(np.float64) - scene.patch_emission[patch]
     return (np.pi * (m @ refl) * scene.patch_area[:, None]).sum(axis=0)
@@ -270,14 +272,14 @@ def test_point_light_touching_a_wall_shoots_what_the_wall_received():
     """D3: the power the floor shoots for a point light 0.1 mm above it is what it received (I x the
     solid angle the floor subtends, 2 pi at the limit), not the 1/d^2 vertex peak spread over its
     elements (10^4 times more before the fix)."""
-    from iat.radiosity.solver import _Run
+    from iat.radiosity.solver import SolveRun
     from iat.radiosity.visibility import Visibility
 
     scene = floor_scene(occluder=False, light_height=1.0)
     scene.lights = [Light(kind="point", position=[0.0, 1e-4, 0.0], intensity=1.0)]  # over a vertex
     opts = SolveOptions(max_depth=4, min_element_size=0.0)
     with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
-        run = _Run(scene, opts, None, vis, 0.0)
+        run = SolveRun(scene, opts, None, vis, 0.0)
         run.mesh_by_direct_light()
         shot = run.patch_power(run.unshot).sum()
         peak = run.patch_power(run.reflected).sum()
@@ -456,7 +458,7 @@ def two_light_box(intensity=1.0, panel=100.0):
 
 
 def _patch_luminance(sol, scene):
-    m = _averaging_matrix(sol.forest, sol.vert_key, sol.patch_corners, scene.patch_area)
+    m = averaging_matrix(sol.forest, sol.vert_key, sol.patch_corners, scene.patch_area)
     return m @ (sol.vert_radiance.astype(np.float64) @ LUMINANCE)
 
 

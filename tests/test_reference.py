@@ -5,9 +5,9 @@ import pytest
 
 pytest.importorskip("mitsuba", reason="mitsuba (Mitsuba 3) not installed: no path-traced references")
 
-from iat import reference  # noqa: E402
 from iat.camera import Camera  # noqa: E402
-from iat.scene import Light, Material, Scene  # noqa: E402
+from iat.io.scene import Light, Material, Scene  # noqa: E402
+from iat.measure import reference  # noqa: E402
 
 
 def _quad_z0(x0, x1, y0, y1):

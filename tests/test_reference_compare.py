@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from iat.metrics import reference_errors, smooth_lit_mask
+from iat.measure.metrics import reference_errors, smooth_lit_mask
 from iat.radiosity import SolveOptions, solve
 
 MODEL = Path(__file__).resolve().parent.parent / "sample_models" / "cornell_box.glb"
@@ -22,9 +22,9 @@ SIZE = (96, 96)
 
 def test_cornell_box_against_mitsuba(egl_ctx):
     pytest.importorskip("mitsuba")
-    from iat.reference import render_reference_cached
-    from iat.render import Renderer
-    from iat.scene import load_scene
+    from iat.io.scene import load_scene
+    from iat.measure.reference import render_reference_cached
+    from iat.render.renderer import Renderer
 
     scene = load_scene(MODEL)
     camera = scene.default_camera()

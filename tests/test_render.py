@@ -15,10 +15,11 @@ import numpy as np
 import pytest
 
 from iat.camera import Camera
+from iat.color import auto_exposure, srgb_encode, tonemap
 from iat.errors import RenderError
-from iat.imageio import auto_exposure, load_png, save_npy, save_png, srgb_encode, tonemap
-from iat.render import PREVIEW_AMBIENT, Renderer, lattice_to_world, shader_dir, shader_source
-from iat.scene import Material, Scene
+from iat.io.images import load_png, save_npy, save_png
+from iat.io.scene import Material, Scene
+from iat.render.renderer import PREVIEW_AMBIENT, Renderer, lattice_to_world, shader_dir, shader_source
 
 W, H = 64, 48
 CAM = Camera(eye=[0.0, 0.0, 3.0], target=[0.0, 0.0, 0.0], yfov=60.0, znear=0.1, zfar=10.0)
@@ -466,7 +467,7 @@ def _internal_format(renderer) -> int:
     """GL_TEXTURE_INTERNAL_FORMAT of level 0 of the page texture (read with glGetTexLevelParameteriv)."""
     import ctypes
 
-    from iat.render import _libgl
+    from iat.render.renderer import _libgl
 
     gl = _libgl()
     gl.glGetTexLevelParameteriv.argtypes = [
@@ -486,7 +487,7 @@ def test_rgba8_pages_are_srgb_and_dark_texels_survive(renderer, mipmaps):
     """rgba8 texels are sRGB8 of page / page_scale in a GL_SRGB8_ALPHA8 texture: decoded to linear
     before filtering, so a texel at 0.125 % of the scale (sRGB code 4; linear UNORM8 would round it
     to 0, black) renders as the value the baker stored; mipmaps are built in linear space."""
-    from iat.bake import quantise_rgba8
+    from iat.bake.baker import quantise_rgba8
 
     scale = 8.0
     page = np.empty((4, 4, 3), np.float32)
@@ -505,7 +506,7 @@ def test_rgba8_pages_are_srgb_and_dark_texels_survive(renderer, mipmaps):
 
 
 def test_rgb9e5_pages_upload_as_rgb9e5_and_render_the_stored_values(renderer):
-    from iat.bake import quantise_rgb9e5
+    from iat.bake.baker import quantise_rgb9e5
 
     page = page_from_field(5, 5) * np.float32([3.0, 0.01, 700.0])  # channels 5 decades apart
     q = quantise_rgb9e5(page)
@@ -522,7 +523,7 @@ def test_rgb9e5_pages_upload_as_rgb9e5_and_render_the_stored_values(renderer):
 def test_same_baked_pages_are_not_uploaded_twice(renderer):
     """The Baker's cached pages (read-only) already on the GPU are not written again; other pages are.
     Shown with real GL: texels overwritten behind the renderer's back stay until other pages come."""
-    from iat.bake import BakePolicy, Baker
+    from iat.bake.baker import BakePolicy, Baker
     from tests.test_bake import grid_scene_solution
 
     b = Baker(grid_scene_solution())
@@ -558,7 +559,7 @@ def test_threshold_walk_on_one_renderer_matches_fresh_renderers(renderer, egl_ct
     """Mesh parts are prefixes of one depth-sorted mesh, written once and drawn by count; pages are
     written without conversion. A threshold walk down and up on one renderer draws, at every step,
     exactly what a fresh renderer draws for that bake."""
-    from iat.bake import BakePolicy, Baker
+    from iat.bake.baker import BakePolicy, Baker
     from tests.test_bake import grid_scene_solution
 
     sol = grid_scene_solution()
@@ -581,7 +582,7 @@ def test_scale_walk_keeps_the_page_texture_and_matches_fresh_renderers(renderer,
     by powers of two, exactly) instead of re-creating the texture: a scale walk down and up (every
     format, mip levels on) draws, at every step, exactly what a fresh renderer draws; the texture is
     re-created only to grow or for another format, and ``page_texture`` tells allocated from used."""
-    from iat.bake import BakePolicy, Baker
+    from iat.bake.baker import BakePolicy, Baker
     from tests.test_bake import grid_scene_solution
 
     b = Baker(grid_scene_solution())

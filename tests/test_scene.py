@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from PIL import Image
 
 from iat.errors import Cancelled, IATWarning, LoadError, OptionError
-from iat.scene import (
+from iat.io.scene import (
     Light,
     Scene,
     load_scene,
@@ -300,7 +300,7 @@ def test_grid_of_quads_pairs_along_diagonals(tmp_path):
 
 def test_degenerate_faces_dropped_when_others_remain(tmp_path, caplog):
     obj = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nf 1 2 3 4\nf 1 2 5\nf 1 1 3\n"
-    with caplog.at_level(logging.INFO, logger="iat.scene"):
+    with caplog.at_level(logging.INFO, logger="iat.io.scene"):
         s = load_scene(write(tmp_path / "degen.obj", obj))
     assert s.n_patches == 1 and s.patch_area[0] == pytest.approx(1.0)
     assert "dropped 2 zero-area faces" in caplog.text
@@ -486,7 +486,7 @@ def test_point_and_spot_lights(tmp_path, caplog):
     )
     g.node(translation=[0.0, 4.0, 0.0], children=[spot])
     g.node(extensions={"KHR_lights_punctual": {"light": dl}})
-    with caplog.at_level(logging.WARNING, logger="iat.scene"):
+    with caplog.at_level(logging.WARNING, logger="iat.io.scene"):
         s = load_scene(g.save(tmp_path / "lights.glb"))
     assert "directional light 'sun' skipped" in caplog.text
     assert [lt.kind for lt in s.lights] == ["point", "spot"]
@@ -788,7 +788,7 @@ def test_gltf_primitives_and_repeated_mesh_names_keep_their_materials(tmp_path, 
     m3 = g.mesh(QUAD + [0, 0, 3], QUAD_TRIS, name="thing")  # no material: the default one
     for m in (m1, m2, m3):
         g.node(mesh=m)
-    with caplog.at_level(logging.WARNING, logger="iat.scene"):
+    with caplog.at_level(logging.WARNING, logger="iat.io.scene"):
         s = load_scene(g.save(tmp_path / "prims.glb"))
     assert caplog.text == ""
     assert s.n_patches == 4

@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from iat import quadtree as qt
-from iat import seams
-from iat.bake import BakePolicy, Baker, seam_error
+from iat.bake import seams
+from iat.bake.baker import BakePolicy, Baker, seam_error
+from iat.geometry import quadtree as qt
 from iat.radiosity.solution import Solution
 from tests.test_flatten import wavy_field
 
@@ -234,7 +234,7 @@ def test_every_pixel_format_stores_both_sides_alike(pixel_format, monkeypatch):
     before, after = seam_error(off, sol)["max"], seam_error(on, sol)["max"]
     # shared knots hold one value, hence one code; the finer side's extra knots lie on the
     # coarse polyline up to the format's rounding: the seam is at most two roundings
-    from iat.bake import quantise_rgb9e5, quantise_rgba8
+    from iat.bake.baker import quantise_rgb9e5, quantise_rgba8
 
     v = sol.vert_radiance.astype(np.float64)
     q = {
@@ -268,7 +268,7 @@ def _seam_step(img, world, x_seam=1.0):
 
 def test_gl_render_shows_no_step_across_the_seam(egl_ctx, monkeypatch):
     from iat.camera import Camera
-    from iat.render import Renderer
+    from iat.render.renderer import Renderer
     from tests.test_iat_acceptance import _pixel_centres_on_plane_z0
 
     sol = uniform_solution(TWO, [True, True], [5, 2], max_depth=5)
@@ -314,9 +314,9 @@ def _boxes_by_recipe(baker, baked, pol):
     """GPU pages and float32 pages as the harmonised boxes were first made: each harmonised tile
     materialised (``apply_ring``), padded with ``np.pad(mode="edge")``, divided by the albedo on
     detail patches, converted with ``to_gpu`` and blitted."""
-    from iat import atlas
-    from iat.bake import from_gpu, to_gpu
-    from iat.flatten import scaled_side, tile_side
+    from iat.bake import atlas
+    from iat.bake.baker import from_gpu, to_gpu
+    from iat.bake.flatten import scaled_side, tile_side
 
     idx = baker.index
     ps = np.flatnonzero(baked.patch_textured)

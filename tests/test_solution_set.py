@@ -12,13 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iat import lighting as L
-from iat.bake import BakedSet, BakePolicy, Baker
+from iat.bake.baker import BakedSet, BakePolicy, Baker
+from iat.color import srgb_encode
 from iat.errors import BakeError, OptionError
-from iat.imageio import srgb_encode
+from iat.io.scene import load_scene
+from iat.lighting import edits as L
+from iat.lighting.solution_set import SolutionSet, blend_weights, even_times, load_set, same_mesh, solve_set
 from iat.radiosity import SolveOptions, solve
-from iat.scene import load_scene
-from iat.solution_set import SolutionSet, blend_weights, even_times, load_set, same_mesh, solve_set
 
 ROOT = Path(__file__).resolve().parents[1]
 CORNELL = ROOT / "sample_models" / "cornell_box.glb"
@@ -182,7 +182,7 @@ def test_cpu_blend_for_export(bset, sset):
 # -- blending on the GPU ---------------------------------------------------------------------------
 @pytest.fixture
 def renderer(egl_ctx):
-    from iat.render import Renderer
+    from iat.render.renderer import Renderer
 
     r = Renderer(egl_ctx)
     yield r

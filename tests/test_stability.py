@@ -34,15 +34,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iat import quadtree as qt
-from iat.atlas import mip_levels
-from iat.bake import BakePolicy, Baker, quantise_rgb9e5, quantise_rgba8, seam_error
+from iat.bake.atlas import mip_levels
+from iat.bake.baker import BakePolicy, Baker, quantise_rgb9e5, quantise_rgba8, seam_error
+from iat.bake.flatten import flatten, sample_tile
 from iat.camera import Camera
 from iat.errors import BakeError, IATError, LoadError, OptionError, RenderError, SolutionFileError
-from iat.flatten import flatten, sample_tile
+from iat.geometry import quadtree as qt
+from iat.io.scene import load_scene
 from iat.radiosity import Solution, SolveOptions, solve
-from iat.radiosity.solver import RAY_EPS
-from iat.scene import load_scene
+from iat.radiosity.options import RAY_EPS
 from tests import stability_scenes as ss
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -89,14 +89,14 @@ def _write_figures(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def renderer(egl_ctx):
-    from iat.render import Renderer
+    from iat.render.renderer import Renderer
 
     r = Renderer(egl_ctx)
     yield r
     r.release()
 
 
-def _lum(x):
+def luminance_of(x):
     return np.asarray(x, dtype=np.float64) @ np.array([0.2126, 0.7152, 0.0722])
 
 
@@ -365,7 +365,7 @@ def test_geometry_non_manifold_and_open_meshes(tmp_path):
         rad = sol.vert_radiance
         assert np.isfinite(rad).all() and (rad >= 0).all()
         power[name] = float(
-            _lum(_area_weighted_mean(sol, np.arange(scene.n_patches)) * scene.patch_area.sum())
+            luminance_of(_area_weighted_mean(sol, np.arange(scene.n_patches)) * scene.patch_area.sum())
         )
         record(
             "non_manifold_open",
@@ -395,7 +395,8 @@ def test_geometry_double_sided_thin_wall(tmp_path):
     expect = _direct_point(scene.lights[0], pos[on_lit], np.tile([-1.0, 0, 0], (on_lit.sum(), 1)), 0.5)
     direct_err = float(((rad[on_lit, 0] - expect) / expect).min())  # indirect light only adds
     behind = (p == floor) & (pos[:, 0] > 0.1)
-    ratio_mean = float(_lum(_area_weighted_mean(sol, [back])) / _lum(_area_weighted_mean(sol, [lit])))
+    lum_back = luminance_of(_area_weighted_mean(sol, [back]))
+    ratio_mean = float(lum_back / luminance_of(_area_weighted_mean(sol, [lit])))
     ratio_max = float(rad[p == back].max() / rad[on_lit].max())
     record(
         "double_sided_wall",
@@ -439,7 +440,7 @@ _MILLION = r"""
 import json, resource, sys, time, tracemalloc
 import numpy as np
 from tests.stability_scenes import grid_mesh, write_binary_stl, point_light
-from iat.scene import load_scene
+from iat.io.scene import load_scene
 from iat.radiosity import solve, SolveOptions
 V, F = grid_mesh(708)  # 1 002 528 triangles
 path = write_binary_stl(sys.argv[1], V, F)
@@ -624,7 +625,7 @@ def test_lighting_no_light_renders_black(renderer):
     for mode in ("mesh", "iat"):
         img = renderer.render(cam, (32, 24), mode)
         assert np.isfinite(img).all() and img.max() == 0.0
-    from iat.imageio import auto_exposure, tonemap
+    from iat.color import auto_exposure, tonemap
 
     assert auto_exposure(img) == 1.0 and tonemap(img, None).max() == 0
 
@@ -961,7 +962,7 @@ def test_baking_atlas_pages_full_spill_to_more_pages(renderer):
 
 def test_baking_more_pages_than_the_gl_layer_limit_is_an_error(egl_ctx):
     """D7 (fixed): more atlas pages than GL_MAX_ARRAY_TEXTURE_LAYERS is an error, not a black image."""
-    from iat.render import Renderer
+    from iat.render.renderer import Renderer
 
     limit = int(egl_ctx.info["GL_MAX_ARRAY_TEXTURE_LAYERS"])
     corners = ss.grid_corners(limit + 1, 1)
@@ -1018,7 +1019,7 @@ sys.path.insert(0, sys.argv[1])
 resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))  # 3 GiB: the bake below needs ~25
 import numpy as np
 from tests import stability_scenes as ss
-from iat.bake import Baker, BakePolicy
+from iat.bake.baker import Baker, BakePolicy
 from iat.errors import IATError
 sol = ss.synthetic_solution(ss.grid_corners(4, 3), lambda p, x: np.ones((len(p), 3)), max_depth=2)
 try:
@@ -1129,7 +1130,7 @@ def bad_inputs(tmp_path_factory, small_solution_file):
 
 
 def _run_cli(argv, capsys, caplog) -> tuple[int, list[str], list]:
-    from iat.cli import main
+    from iat.cli.commands import main
 
     capsys.readouterr()
     caplog.clear()
@@ -1251,7 +1252,7 @@ def test_files_view_without_a_display_every_bad_input_is_one_line_and_exit_2(
 def test_files_missing_file_is_file_not_found_everywhere(tmp_path, capsys, caplog, monkeypatch):
     """G5 (fixed): a missing file is "<path>: file not found" from load_scene, open_solution and
     Solution.load, and from every command (info, solve, bake, render, view)."""
-    from iat.inputs import open_solution
+    from iat.radiosity.inputs import open_solution
 
     model, solution = tmp_path / "gone.glb", tmp_path / "gone.npz"
     for fn, path in (
@@ -1323,8 +1324,8 @@ class _DiskFull:
 
 def _writers(tmp_path, small_solution_file):
     """name -> (target path, write function) for the three files IAT writes."""
-    from iat.export import export_glb
-    from iat.imageio import save_png
+    from iat.export.gltf import export_glb
+    from iat.io.images import save_png
 
     sol = Solution.load(small_solution_file)
     baked = Baker(sol).bake(BakePolicy(threshold=0))
@@ -1363,7 +1364,7 @@ def test_files_atomic_writers_fsync_the_temporary_before_the_rename(
 ):
     """G3 (fixed): Solution.save, export_glb and save_png all go through imageio.atomic_write: the
     temporary `.<name>.<random>.tmp` is fsynced, then renamed over the target, nothing else."""
-    from iat.imageio import temporary_pattern
+    from iat.fsutil import temporary_pattern
 
     writers = _writers(tmp_path, small_solution_file)
     real_fsync, real_replace = os.fsync, os.replace
@@ -1414,7 +1415,7 @@ write(target)
 
 
 def test_files_killed_writers_leave_the_previous_file_intact(tmp_path, small_solution_file):
-    from iat.imageio import STALE_TEMPORARY_S, temporary_pattern
+    from iat.fsutil import STALE_TEMPORARY_S, temporary_pattern
 
     """SIGKILL half-way through each writer (no cleanup can run): the previous file is intact; the
     half-written temporary `.<name>.<random>.tmp` stays behind next to it until the next successful

@@ -259,7 +259,7 @@ class _GatedBaker:
 
 
 def test_bake_worker_bakes_the_newest_request_and_survives_errors():
-    from iat.bake import BakePolicy
+    from iat.bake.baker import BakePolicy
     from viewer.state import BakeWorker
 
     baker = _GatedBaker()
@@ -309,7 +309,7 @@ def test_the_scale_slider_snaps_to_the_prewarmed_ladder():
 
 
 def test_neighbour_policies_are_the_sliders_next_steps():
-    from iat.bake import BakePolicy
+    from iat.bake.baker import BakePolicy
     from viewer.state import neighbour_policies, scale_neighbours
 
     q, r = 2.0**0.25, 2.0 ** (-1 / 4)
@@ -335,7 +335,7 @@ def test_bake_worker_prewarms_the_neighbours_so_the_next_step_is_a_cache_hit():
     """Idle, the worker bakes the last policy's neighbours (threshold +-1, the ladder scales on
     either side) into the Baker's caches, publishing nothing; a step to any of them then finds its
     pages cached: no resampling, no seam pass, no blit."""
-    from iat.bake import BakePolicy, Baker
+    from iat.bake.baker import BakePolicy, Baker
     from tests.test_bake import grid_scene_solution
     from viewer.state import BakeSource, BakeWorker, neighbour_policies
 
@@ -417,7 +417,7 @@ def test_a_request_made_during_prewarm_is_served_first():
     """A request submitted while a neighbour is being pre-warmed: the neighbour's bake stops at its
     next stage, the request is baked next, the old policy's other neighbours are dropped, and the
     new policy's neighbours are pre-warmed after it."""
-    from iat.bake import BakePolicy
+    from iat.bake.baker import BakePolicy
     from viewer.state import BakeWorker
 
     baker = _SlowNeighbourBaker()
@@ -448,7 +448,7 @@ def test_a_request_made_during_prewarm_is_served_first():
 
 
 def test_open_job_solves_caches_and_reports_errors(tmp_path, monkeypatch):
-    from iat.bake import BakePolicy
+    from iat.bake.baker import BakePolicy
     from iat.radiosity import SolveOptions
     from viewer.state import BakeWorker, OpenJob, default_model
 
@@ -486,7 +486,7 @@ def test_open_job_solves_caches_and_reports_errors(tmp_path, monkeypatch):
 
 
 def test_open_job_cancel_stops_the_solve(tmp_path, monkeypatch):
-    from iat.bake import BakePolicy
+    from iat.bake.baker import BakePolicy
     from iat.radiosity import SolveOptions
     from viewer.state import OpenJob, default_model
 
@@ -505,7 +505,7 @@ def test_open_job_cancel_stops_the_solve(tmp_path, monkeypatch):
 
 def test_open_job_reports_the_load_and_cancels_it(tmp_path, monkeypatch):
     """G2: the open job shows the model load's progress (``loading: ...``) and a cancel stops the load."""
-    from iat.bake import BakePolicy
+    from iat.bake.baker import BakePolicy
     from iat.radiosity import SolveOptions
     from viewer.state import OpenJob, default_model
 

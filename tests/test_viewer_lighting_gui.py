@@ -43,8 +43,8 @@ STATES = {
 
 
 def make_model(path: Path) -> Path:
-    from iat import lighting
-    from iat.scene import load_scene
+    from iat.io.scene import load_scene
+    from iat.lighting import edits as lighting
 
     src = ROOT / "sample_models" / "cornell_box.glb"
     scene = lighting.add_light(load_scene(src), "point", [0.12, 0.40, 0.30], intensity=0.12, name="bulb")
@@ -59,9 +59,9 @@ def test_viewer_lighting_end_to_end(tmp_path, monkeypatch, gui_child):
     from imgui_bundle.immapp import testing
     from PIL import Image
 
-    from iat.bake import BakedSet
+    from iat.bake.baker import BakedSet
+    from iat.io.scene import load_scene
     from iat.radiosity import SolveOptions
-    from iat.scene import load_scene
     from viewer import panels
     from viewer.app import ViewerApp
     from viewer.state import project_points

@@ -34,13 +34,13 @@ def cli(argv: list[str] | None = None) -> int:
     opts = None if args.max_depth is None else SolveOptions(max_depth=args.max_depth)
     try:
         if args.bench:
-            from .app import benchmark_rebake_frames
+            from viewer.app import benchmark_rebake_frames
 
             res = benchmark_rebake_frames(args.path, size=args.size, max_depth=args.max_depth or 4)
             print(json.dumps(res, indent=1))
             return 0 if res["ok"] else 1
         if args.screenshots:
-            from .app import capture_screenshots
+            from viewer.app import capture_screenshots
 
             for f in capture_screenshots(args.screenshots, args.path, size=args.size, solve_options=opts):
                 print(f)
@@ -48,7 +48,7 @@ def cli(argv: list[str] | None = None) -> int:
     except RuntimeError as e:
         print(f"python -m viewer: {e}", file=sys.stderr)
         return 2
-    from .app import main
+    from viewer.app import main
 
     return main(args.path, size=args.size, solve_options=opts)
 

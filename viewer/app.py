@@ -43,9 +43,8 @@ import glfw  # isort: skip
 
 from iat.errors import IATError
 from iat.radiosity import SolveOptions
-
-from . import panels
-from .navigation import (
+from viewer import panels
+from viewer.navigation import (
     CameraPath,
     InputState,
     Navigator,
@@ -54,7 +53,7 @@ from .navigation import (
     paths_file,
     save_paths,
 )
-from .state import (
+from viewer.state import (
     AppState,
     BakeSource,
     BakeWorker,
@@ -249,7 +248,7 @@ class ViewerApp:
     def _post_init(self) -> None:
         import moderngl
 
-        from iat.render import Renderer
+        from iat.render.renderer import Renderer
 
         self.ctx = moderngl.create_context()
         self.renderer = Renderer(self.ctx)
@@ -336,7 +335,7 @@ class ViewerApp:
 
     def _reset_lighting(self, opened: Opened) -> None:
         """A new model: a fresh light editor, background re-solve and day-cycle state."""
-        from iat.lighting import LightEditor, Relighter, lighting_states
+        from iat.lighting.edits import LightEditor, Relighter, lighting_states
 
         s = self.state
         if s.relighter is not None:
@@ -686,7 +685,7 @@ class ViewerApp:
             if ed is None or not ed.base.path:
                 s.set_error("nothing open to save lights of")
             else:
-                from iat.lighting import save_gltf
+                from iat.lighting.edits import save_gltf
 
                 scene, sources, src = ed.scene, list(ed.sources), ed.base.path  # a snapshot: edits go on
                 self._in_background(
@@ -704,7 +703,7 @@ class ViewerApp:
             hello_imgui.get_runner_params().app_shall_exit = True
 
     def _export(self, path: str) -> None:
-        from iat.export import export_glb
+        from iat.export.gltf import export_glb
 
         s = self.state
         if s.baked is None:
@@ -852,7 +851,7 @@ class ViewerApp:
 
 def _is_set(baked) -> bool:
     """A BakedSet (day cycle) rather than a single Baked."""
-    from iat.bake import BakedSet
+    from iat.bake.baker import BakedSet
 
     return isinstance(baked, BakedSet)
 
@@ -876,7 +875,7 @@ def main(path: str | None = None, *, size=(1280, 800), solve_options: SolveOptio
 
 def _sweep_values(name: str, deepest: int, steps: int) -> list:
     """The slider positions a sweep visits, in order (a drag back and forth)."""
-    from .state import METHODS
+    from viewer.state import METHODS
 
     if name == "threshold":
         up = list(range(deepest + 2))
@@ -929,7 +928,7 @@ def benchmark_rebake_frames(
     ``judged_by``, ``limit_ms``, the model. Needs a display (xvfb-run); raises RuntimeError
     without one.
     """
-    from .state import OpenJob
+    from viewer.state import OpenJob
 
     target = Path(path) if path else default_model()
     opts = SolveOptions(max_depth=max_depth)

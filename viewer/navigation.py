@@ -402,7 +402,7 @@ def save_paths(file: str | os.PathLike, paths: dict[str, CameraPath] | Iterable[
     """Write ``{name: [camera dict, ...]}`` as JSON, atomically; returns the path."""
     items = paths.values() if isinstance(paths, dict) else paths
     doc = {p.name: p.to_json() for p in items}
-    from iat.imageio import atomic_write
+    from iat.fsutil import atomic_write
 
     return atomic_write(file, lambda f: f.write(json.dumps(doc, indent=1).encode("utf-8")))
 

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 from imgui_bundle import ImVec2, ImVec4, hello_imgui, imgui, implot
 
-from .navigation import paths_file
-from .state import METHODS, MODE_LABELS, MODES, AppState, snap_scale
+from viewer.navigation import paths_file
+from viewer.state import METHODS, MODE_LABELS, MODES, AppState, snap_scale
 
 RED = ImVec4(0.85, 0.2, 0.2, 1.0)
 GREEN = ImVec4(0.3, 0.75, 0.35, 1.0)
@@ -576,7 +576,7 @@ def menus(state: AppState) -> None:
                     "no native file dialog here (install zenity): type the path in the Model panel"
                 )
         if imgui.menu_item_simple("Open the Cornell box"):
-            from .state import default_model
+            from viewer.state import default_model
 
             state.request_open = str(default_model())
         if imgui.menu_item_simple("Export GLB...", enabled=state.baked is not None):
@@ -697,7 +697,7 @@ def hud_lines(state: AppState) -> list[str]:
 
 def _light_markers(state: AppState, dl) -> None:
     """A circle per light (filled for the selected one), its name, and a spot light's direction."""
-    from .state import project_points
+    from viewer.state import project_points
 
     ed, cam = state.editor, state.camera
     if not state.show_lights or ed is None or cam is None or not ed.lights:

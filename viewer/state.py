@@ -9,7 +9,7 @@ through :class:`iat.render.Renderer`.
 Long work runs off the UI thread:
 
 - :class:`OpenJob` loads a model or solution, solves a model that has none
-  (progress, ETA, cancel; solutions are cached under :func:`cache_dir`), builds
+  (progress, ETA, cancel; solutions are cached under :func:`iat.radiosity.cache.cache_dir`), builds
   the :class:`~iat.bake.Baker` and makes the first bake;
 - :class:`BakeWorker` re-bakes the latest requested :class:`~iat.bake.BakePolicy`
   on one worker thread (pure numpy); the UI thread picks the result up with
@@ -30,8 +30,6 @@ Light picking and dragging in the view is pure geometry here (:func:`project_poi
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import json
 import logging
 import os
 import threading
@@ -43,13 +41,13 @@ from typing import Any
 
 import numpy as np
 
-from iat.bake import BakePolicy, Baker
+from iat.bake.baker import BakePolicy, Baker
 from iat.camera import Camera
 from iat.errors import Cancelled, IATError, LoadError
 from iat.radiosity import SolveOptions
+from iat.radiosity.cache import load_cached, solution_cache_path
 from iat.worker import LatestWorker
-
-from .navigation import CameraPath, Navigator, PathPlayer, PathRecorder
+from viewer.navigation import CameraPath, Navigator, PathPlayer, PathRecorder
 
 log = logging.getLogger(__name__)
 
@@ -62,27 +60,6 @@ FRAME_HISTORY = 240  # frames kept for the frame-time plot
 def default_model() -> Path:
     """The default sample scene: ``sample_models/cornell_box.glb`` of the repository."""
     return Path(__file__).resolve().parent.parent / "sample_models" / "cornell_box.glb"
-
-
-def cache_dir() -> Path:
-    """Where solved models are cached: ``$IAT_CACHE_DIR``, else ``~/.cache/iat/solutions``."""
-    env = os.environ.get("IAT_CACHE_DIR")
-    if env:
-        return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "iat" / "solutions"
-
-
-def solution_cache_path(model: str | os.PathLike, options: SolveOptions) -> Path:
-    """Cache file of ``model`` solved with ``options``: keyed by the file's bytes, the options and
-    the solver's source (:func:`iat.radiosity.solver_fingerprint`)."""
-    from iat.radiosity import solver_fingerprint
-
-    h = hashlib.sha256()
-    h.update(Path(model).read_bytes())
-    h.update(json.dumps(options.to_dict(), sort_keys=True).encode())
-    h.update(solver_fingerprint().encode())
-    return cache_dir() / f"{Path(model).stem}-{h.hexdigest()[:16]}.npz"
 
 
 def error_text(e: BaseException) -> str:
@@ -486,9 +463,9 @@ class OpenJob(_Job):
         return text if isinstance(e, IATError) or self.path in text else f"{self.path}: {text}"
 
     def _work(self) -> Opened:
-        from iat.inputs import is_solution_path, open_solution
-        from iat.radiosity import Solution, solve
-        from iat.scene import load_scene
+        from iat.io.scene import load_scene
+        from iat.radiosity import solve
+        from iat.radiosity.inputs import is_solution_path, open_solution
 
         p = Path(self.path)
         if not p.exists():
@@ -505,16 +482,10 @@ class OpenJob(_Job):
             scene = load_scene(p, max_edge=self.options.max_edge, progress=self._load_progress)
             solution = None
             cpath = solution_cache_path(p, self.options) if self.use_cache else None
-            if cpath is not None and cpath.exists():
-                try:
-                    solution = Solution.load(cpath)
-                    if len(solution.patch_is_quad) != scene.n_patches:
-                        solution = None
-                    else:
-                        cached = str(cpath)
-                        solve_seconds = float(solution.stats.get("time", 0.0) or 0.0)
-                except IATError:
-                    solution = None
+            solution = load_cached(cpath, scene.n_patches) if cpath is not None else None
+            if solution is not None:
+                cached = str(cpath)
+                solve_seconds = float(solution.stats.get("time", 0.0) or 0.0)
             if solution is None:
                 self.message, self.fraction = "solving", 0.0
                 self.solve_started = time.perf_counter()
@@ -565,7 +536,7 @@ class SetJob(_Job):
         super().__init__("day cycle", "iat-day-cycle")
 
     def _work(self):
-        from iat.solution_set import solve_set
+        from iat.lighting.solution_set import solve_set
 
         return solve_set(self.scene, self.states, self.options, self._progress, mesh=self.mesh)
 

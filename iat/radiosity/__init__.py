@@ -4,8 +4,8 @@ import functools
 import hashlib
 from pathlib import Path
 
-from .solution import Solution
-from .solver import SolveOptions, resolve, solve
+from iat.radiosity.solution import Solution
+from iat.radiosity.solver import SolveOptions, resolve, solve
 
 __all__ = ["SolveOptions", "Solution", "resolve", "solve", "solver_fingerprint"]
 

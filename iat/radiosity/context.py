@@ -1,4 +1,4 @@
-"""Per-solve constant data and the gather kernels (:class:`_Context`): receiver geometry, form
+"""Per-solve constant data and the gather kernels (:class:`Context`): receiver geometry, form
 factors, visibility-weighted gathers from a shooting patch, direct light of emitters and point /
 spot lights (with the element-integrated correction of :mod:`.pointlight`)."""
 
@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import quadtree as qt
-from .formfactor import point_polygon
-from .options import (
+from iat.geometry import quadtree as qt
+from iat.radiosity.formfactor import point_polygon
+from iat.radiosity.options import (
     CULL_RAYS,
     DIRECT_SAMPLE_FACTOR,
     F_DIRECTION,
@@ -27,27 +27,27 @@ from .options import (
     RAY_EPS_PATCH,
     SolveOptions,
 )
-from .pointlight import lumped_light
-from .sampling import (
-    _GAUSS_QUAD,
-    _GAUSS_TRI,
-    _concentric,
-    _hash_uniform,
-    _lum,
-    _sample_lattice,
-    _Shooter,
-    _side,
-    _weighted_lattice_sums,
+from iat.radiosity.pointlight import lumped_light
+from iat.radiosity.sampling import (
+    GAUSS_QUAD,
+    GAUSS_TRI,
+    Shooter,
+    concentric_disk,
+    hash_uniform,
+    luminance_of,
+    pattern_side,
+    sample_lattice,
+    weighted_lattice_sums,
 )
-from .visibility import Visibility
+from iat.radiosity.visibility import Visibility
 
 
-class _Cancel(Exception):
+class SolveCancelled(Exception):
     """Internal: the progress callback asked to stop."""
 
 
 @dataclass
-class _Geo:
+class ReceiverGeometry:
     """Receiver geometry of a set of vertices (all (n, ...) arrays)."""
 
     key: np.ndarray  # (n,) int64 vertex keys
@@ -66,13 +66,13 @@ class _Geo:
             self._origin32 = np.ascontiguousarray(self.origin, dtype=np.float32)
         return self._origin32
 
-    def take(self, idx) -> _Geo:
-        return _Geo(
+    def take(self, idx) -> ReceiverGeometry:
+        return ReceiverGeometry(
             self.key[idx], self.patch[idx], self.pos[idx], self.normal[idx], self.ff[idx], self.origin[idx]
         )
 
 
-def _ranges(start: np.ndarray, patches: np.ndarray) -> np.ndarray:
+def ranges_of(start: np.ndarray, patches: np.ndarray) -> np.ndarray:
     """Concatenated ``arange(start[p], start[p + 1])`` over ``patches`` (sorted)."""
     a, b = start[patches], start[patches + 1]
     n = b - a
@@ -84,7 +84,7 @@ def _ranges(start: np.ndarray, patches: np.ndarray) -> np.ndarray:
     return np.arange(int(n.sum()), dtype=np.int64) + off
 
 
-class _Context:
+class Context:
     """Per-solve constant data and the shared gather kernels."""
 
     def __init__(self, scene, opts: SolveOptions, vis: Visibility):
@@ -93,7 +93,7 @@ class _Context:
         self.is_quad = scene.patch_is_quad
         self.normal = scene.patch_normal
         self.area = scene.patch_area
-        self.albedo = _albedo(scene)
+        self.albedo = solver_albedo(scene)
         self.emission = scene.patch_emission
         self.n_patches = len(self.area)
         self.n_corners = np.where(self.is_quad, 4, 3)
@@ -126,7 +126,7 @@ class _Context:
         self.tangent = np.stack([t1, np.cross(self.normal, t1)], axis=1)  # (P, 2, 3)
         # receiver corners' heights (P, 4) over their own patch centre, for the plane tests
         self._valid_corner = np.arange(4)[None, :] < self.n_corners[:, None]
-        self._shooters: dict[int, _Shooter] = {}
+        self._shooters: dict[int, Shooter] = {}
         self._cand: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         # per shooter: rays traced to each receiver patch and how many were unoccluded
         self._vis_rays: dict[int, np.ndarray] = {}
@@ -136,7 +136,7 @@ class _Context:
     def polygon(self, s: int) -> np.ndarray:
         return self.corners[s, : self.n_corners[s]]
 
-    def geometry(self, keys: np.ndarray) -> _Geo:
+    def geometry(self, keys: np.ndarray) -> ReceiverGeometry:
         keys = np.asarray(keys, dtype=np.int64)
         p, i, j = qt.decode_key(keys, self.n)
         pos = qt.lattice_to_world(self.corners, self.is_quad, p, i, j, self.n)
@@ -151,7 +151,7 @@ class _Context:
         start = None
         if len(keys) == 0 or np.all(keys[1:] > keys[:-1]):
             start = np.searchsorted(keys, qt.make_key(np.arange(self.n_patches + 1), 0, 0, self.n))
-        return _Geo(keys, p, pos, nrm, ff, origin, start)
+        return ReceiverGeometry(keys, p, pos, nrm, ff, origin, start)
 
     def pattern(self, s: int, m: int, shot: int) -> np.ndarray:
         """(m*m, 2) stratified jittered (u, v) in [0, 1)^2 for patch s (fixed per seed, patch, shot)."""
@@ -159,9 +159,9 @@ class _Context:
         a, b = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
         return np.stack([(a.ravel() + rng.random(m * m)) / m, (b.ravel() + rng.random(m * m)) / m], axis=1)
 
-    def shooter(self, s: int) -> _Shooter:
+    def shooter(self, s: int) -> Shooter:
         if s not in self._shooters:
-            self._shooters[s] = _Shooter(
+            self._shooters[s] = Shooter(
                 self.corners[s],
                 bool(self.is_quad[s]),
                 self.normal[s],
@@ -197,15 +197,15 @@ class _Context:
             ok = ~hidden if ok is None else ok & ~hidden
         return ok
 
-    def receivers(self, s: int, geo: _Geo, allowed: np.ndarray | None = None) -> np.ndarray:
+    def receivers(self, s: int, geo: ReceiverGeometry, allowed: np.ndarray | None = None) -> np.ndarray:
         """Sorted indices into ``geo`` of vertices that can receive from patch s (front side,
         other patch, on an ``allowed`` patch)."""
         full, part = self.candidates(s)
         if allowed is not None:
             full, part = full & allowed, part & allowed
         if geo.start is not None:
-            idx_full = _ranges(geo.start, np.flatnonzero(full))
-            idx_part = _ranges(geo.start, np.flatnonzero(part))
+            idx_full = ranges_of(geo.start, np.flatnonzero(full))
+            idx_part = ranges_of(geo.start, np.flatnonzero(part))
         else:
             idx_full = np.flatnonzero(full[geo.patch])
             idx_part = np.flatnonzero(part[geo.patch])
@@ -213,7 +213,7 @@ class _Context:
         return np.sort(np.concatenate([idx_full, idx_part[front]]))
 
     def form_factors(
-        self, s: int, geo: _Geo, cull: bool = False, patches: np.ndarray | None = None
+        self, s: int, geo: ReceiverGeometry, cull: bool = False, patches: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """Receivers of s in ``geo`` with a form factor > 0 (indices) and their analytic form
         factors, on the allowed patches (see :meth:`allowed`). With ``geo.cache`` (a mesh's
@@ -267,7 +267,7 @@ class _Context:
             f[near] = point_polygon(x[near], nr[near], poly)
         if far.any():
             sh = self.shooter(s)
-            (gu, gv), gw = _GAUSS_QUAD if sh.is_quad else _GAUSS_TRI
+            (gu, gv), gw = GAUSS_QUAD if sh.is_quad else GAUSS_TRI
             d0 = sh.origin - x[far]
             k = sh.kernel(gu, gv, d0, nr[far]) * sh.jacobian(gu, gv)
             f[far] = k @ gw
@@ -285,7 +285,7 @@ class _Context:
     def gather(
         self,
         s: int,
-        geo: _Geo,
+        geo: ReceiverGeometry,
         m: int,
         shot: int = 0,
         field: np.ndarray | None = None,
@@ -344,7 +344,7 @@ class _Context:
             fb = f[a : a + GATHER_BLOCK]
             b = len(ii)
             x, nr = geo.ff[ii], geo.normal[ii]
-            rot = _hash_uniform(np.zeros(1, dtype=np.int64) if correlated else geo.key[ii], salt, 4)
+            rot = hash_uniform(np.zeros(1, dtype=np.int64) if correlated else geo.key[ii], salt, 4)
             # area samples: stratified (u, v), rotated per receiver (or once for all)
             ua = (pat[None, :, 0] + rot[:, :1]) % 1.0
             va = (pat[None, :, 1] + rot[:, 1:2]) % 1.0
@@ -396,9 +396,9 @@ class _Context:
                 # shooter) for near receivers, the shooter's mean for far ones
                 fu, fw = sh.foot_uv(x)
                 w_near = np.minimum(1.0, 2.0 * fb)[:, None]
-                cv = w_near * _sample_lattice(flat, nl, fu, fw) + (1.0 - w_near) * field_mean  # (b, 3)
+                cv = w_near * sample_lattice(flat, nl, fu, fw) + (1.0 - w_near) * field_mean  # (b, 3)
                 # sum over samples of (field - cv) * wraw = sum(field * wraw) - cv * sum(wraw)
-                res = _weighted_lattice_sums(flat_t, nl, lu, lv, wraw, bi, b) - cv * wvis[:, None]
+                res = weighted_lattice_sums(flat_t, nl, lu, lv, wraw, bi, b) - cv * wvis[:, None]
                 val = fv[:, None] * cv + res
                 if clamp_lo is not None:
                     val = np.maximum(val, clamp_lo)
@@ -416,7 +416,7 @@ class _Context:
         """MIS weights (k, S) and lattice parameters of the cosine-direction samples of the
         receivers ``sub`` (rows of the block) that hit the shooter (weight 0 elsewhere)."""
         r = rot if correlated else rot[sub]
-        dx, dy = _concentric((pat[None, :, 0] + r[:, 2:3]) % 1.0, (pat[None, :, 1] + r[:, 3:4]) % 1.0)
+        dx, dy = concentric_disk((pat[None, :, 0] + r[:, 2:3]) % 1.0, (pat[None, :, 1] + r[:, 3:4]) % 1.0)
         dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
         t1, t2 = self.tangent[rpatch[sub], 0], self.tangent[rpatch[sub], 1]
         xs, ns = x[sub], nr[sub]
@@ -448,7 +448,7 @@ class _Context:
         wd = np.where(hit, kd / (n_s / jd + n_s * kd + 1e-300), 0.0)
         return wd, np.broadcast_to(ud, wd.shape), np.broadcast_to(vd, wd.shape)
 
-    def light_kernel(self, light, geo: _Geo) -> tuple[np.ndarray, np.ndarray]:
+    def light_kernel(self, light, geo: ReceiverGeometry) -> tuple[np.ndarray, np.ndarray]:
         """(n,) ``cos * att * vis / r^2`` at the vertices of ``geo`` for a point or spot light (the
         irradiance per unit intensity, with visibility), and (n,) ``max(cos, 0) / r^2`` (no cone, no
         visibility): what :func:`.pointlight.lumped_light` weighs an element's solid angle with."""
@@ -477,12 +477,12 @@ class _Context:
         k[ok] = cos[ok] * att[ok] / (r[ok] * r[ok]) * ~occ
         return k, free
 
-    def light_irradiance(self, light, geo: _Geo) -> np.ndarray:
+    def light_irradiance(self, light, geo: ReceiverGeometry) -> np.ndarray:
         """(n, 3) irradiance from a point or spot light, with visibility (exact at each vertex)."""
         return self.light_kernel(light, geo)[0][:, None] * light.radiant_intensity[None, :]
 
     def light_correction(
-        self, forest: qt.Forest, keys: np.ndarray, geo: _Geo, lights=None, signs=None
+        self, forest: qt.Forest, keys: np.ndarray, geo: ReceiverGeometry, lights=None, signs=None
     ) -> np.ndarray:
         """(V, 3) what to add to the reflected direct radiance of the vertices ``keys`` of
         ``forest`` to get the radiance their patches must *shoot* for the point / spot lights
@@ -521,12 +521,14 @@ class _Context:
             out += sign * (lumped - k)[:, None] * light.radiant_intensity[None, :]
         return self.albedo[geo.patch] * out / np.pi
 
-    def emitter_gather(self, e: int, geo: _Geo) -> np.ndarray:
+    def emitter_gather(self, e: int, geo: ReceiverGeometry) -> np.ndarray:
         """(n,) ``F * vis`` from emissive patch e, as the direct pass computes it (per-vertex
         rotated patterns, ``DIRECT_SAMPLE_FACTOR`` x the per-side samples, shot 0)."""
-        return self.gather(int(e), geo, DIRECT_SAMPLE_FACTOR * _side(self.opts.samples))
+        return self.gather(int(e), geo, DIRECT_SAMPLE_FACTOR * pattern_side(self.opts.samples))
 
-    def direct(self, keys: np.ndarray, check: Callable[[], None], geo: _Geo | None = None) -> np.ndarray:
+    def direct(
+        self, keys: np.ndarray, check: Callable[[], None], geo: ReceiverGeometry | None = None
+    ) -> np.ndarray:
         """(n, 3) reflected direct radiance (emission excluded) at vertex keys."""
         out = np.zeros((len(keys), 3))
         if len(keys) == 0:
@@ -547,23 +549,23 @@ class _Context:
         a = float(self.area.sum())
         if a <= 0 or not len(self.albedo):
             return math.inf
-        return float(_lum(self.albedo).max()) * self.emitted_power() / (np.pi * a)
+        return float(luminance_of(self.albedo).max()) * self.emitted_power() / (np.pi * a)
 
     def emitted_power(self) -> float:
         """Luminance power emitted by emissive patches and lights (W, luminance-weighted)."""
         p = float(np.pi * (self.emission @ LUMINANCE * self.area).sum())
         for lt in self.lights:
-            p += _light_power(lt)
+            p += light_power(lt)
         return p
 
 
-def _light_power(lt) -> float:
+def light_power(lt) -> float:
     """Luminance power of a light (by magnitude: a difference of two lights may be negative)."""
     solid = 4 * np.pi if lt.kind == "point" else 2 * np.pi * (1 - math.cos(lt.outer_cone))
     return abs(float(lt.radiant_intensity @ LUMINANCE)) * solid
 
 
-def _albedo(scene) -> np.ndarray:
+def solver_albedo(scene) -> np.ndarray:
     """(P, 3) the albedo the solver uses: the scene's, clamped to [0, 1] (albedo 1 is kept: an
     albedo-1 closed room never converges, and the solve stops at ``max_shots`` saying how much
     light is left unshot; > 1 would create energy at every bounce)."""

@@ -1,4 +1,4 @@
-"""Meshing: the split test on the quad-trees (:func:`_refine`), probe points, the interpolation
+"""Meshing: the split test on the quad-trees (:func:`split_test`), probe points, the interpolation
 a naive solver would use (for the bias it would cause), coarse receiver grids and the (P, V)
 averaging matrix."""
 
@@ -7,14 +7,14 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
-from .. import quadtree as qt
-from .context import _Cancel, _Context
-from .options import ABS_FLOOR, BIG_LEVELS, BIG_TOLERANCE, GAIN_LIMIT
-from .sampling import _lum
+from iat.geometry import quadtree as qt
+from iat.radiosity.context import Context, SolveCancelled
+from iat.radiosity.options import ABS_FLOOR, BIG_LEVELS, BIG_TOLERANCE, GAIN_LIMIT
+from iat.radiosity.sampling import luminance_of
 
 
 # -- meshing helpers ------------------------------------------------------------
-def _probe_keys(forest: qt.Forest) -> tuple[np.ndarray, np.ndarray]:
+def probe_keys(forest: qt.Forest) -> tuple[np.ndarray, np.ndarray]:
     """(L, 5) int64 keys of the points that become corners when a leaf splits, and (L, 5) bool validity.
 
     Quads: centre and the four edge midpoints. Triangles: the three edge midpoints.
@@ -39,8 +39,8 @@ def _probe_keys(forest: qt.Forest) -> tuple[np.ndarray, np.ndarray]:
     return qt.make_key(forest.leaf_patch[:, None], pi, pj, forest.n), valid
 
 
-def _probe_interp(forest: qt.Forest) -> np.ndarray:
-    """(L, 5, 4) int64 corner slots whose mean interpolates each probe of :func:`_probe_keys`."""
+def probe_interp(forest: qt.Forest) -> np.ndarray:
+    """(L, 5, 4) int64 corner slots whose mean interpolates each probe of :func:`probe_keys`."""
     q = forest.leaf_is_quad
     down = ~q & forest.leaf_flip
     out = np.empty((forest.n_leaves, 5, 4), dtype=np.int64)
@@ -54,7 +54,7 @@ def _probe_interp(forest: qt.Forest) -> np.ndarray:
     return out
 
 
-def _leaf_longest_edge(forest: qt.Forest, corners: np.ndarray) -> np.ndarray:
+def leaf_longest_edge(forest: qt.Forest, corners: np.ndarray) -> np.ndarray:
     """(L,) float64 longest world edge of each leaf."""
     c = qt.leaf_corner_lattice(forest)
     w = qt.lattice_to_world(
@@ -71,7 +71,7 @@ def _leaf_longest_edge(forest: qt.Forest, corners: np.ndarray) -> np.ndarray:
     return e.max(axis=1)
 
 
-def _parent_interpolation(keys: np.ndarray, is_quad: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+def parent_interpolation(keys: np.ndarray, is_quad: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """For non-root vertex keys: (k, 4) keys of the parent-edge ends (or parent corners) and (k, 4) weights.
 
     A vertex first appears as the midpoint of an edge (or the centre of a quad) of
@@ -102,7 +102,7 @@ def _parent_interpolation(keys: np.ndarray, is_quad: np.ndarray, n: int) -> tupl
     return qt.make_key(p[:, None], ci, cj, n), w
 
 
-def _coarse_keys(is_quad: np.ndarray, level: int, n: int) -> np.ndarray:
+def coarse_keys(is_quad: np.ndarray, level: int, n: int) -> np.ndarray:
     """(Vc,) sorted keys of every patch's lattice grid at ``level`` (triangles: i + j <= n)."""
     k, s = 1 << level, n >> level
     a, b = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
@@ -113,7 +113,7 @@ def _coarse_keys(is_quad: np.ndarray, level: int, n: int) -> np.ndarray:
     return np.sort(np.concatenate([keys[is_quad].ravel(), keys[~is_quad][:, tri].ravel()]))
 
 
-def _coarse_weights(keys: np.ndarray, coarse: np.ndarray, is_quad: np.ndarray, level: int, n: int):
+def coarse_weights(keys: np.ndarray, coarse: np.ndarray, is_quad: np.ndarray, level: int, n: int):
     """(V, Vc) sparse CSR: values at ``keys`` interpolated (bilinear / barycentric) in the
     level-``level`` cells of their patches from values at the grid keys ``coarse``."""
     p, i, j = qt.decode_key(keys, n)
@@ -136,7 +136,7 @@ def _coarse_weights(keys: np.ndarray, coarse: np.ndarray, is_quad: np.ndarray, l
     return sparse.csr_matrix((w[ok], (rows[ok], cols[ok])), shape=(len(keys), len(coarse)))
 
 
-def _averaging_matrix(forest: qt.Forest, keys: np.ndarray, corners: np.ndarray, area: np.ndarray):
+def averaging_matrix(forest: qt.Forest, keys: np.ndarray, corners: np.ndarray, area: np.ndarray):
     """(P, V) scipy.sparse CSR: row p averages vertex values over patch p (area-weighted leaf means)."""
     idx = qt.lookup(keys, qt.leaf_corner_keys(forest))
     la = qt.leaf_area(forest, corners)
@@ -148,7 +148,7 @@ def _averaging_matrix(forest: qt.Forest, keys: np.ndarray, corners: np.ndarray, 
     return sparse.csr_matrix((wc.ravel(), (rows, idx.ravel())), shape=(len(area), len(keys)))
 
 
-class _Cache:
+class VertexCache:
     """Values (n, 3) at sorted vertex keys (n,), grown by :meth:`add`."""
 
     def __init__(self, keys=None, vals=None):
@@ -172,7 +172,7 @@ class _Cache:
         self.keys, self.vals = k[order], v[order]
 
 
-def _refine(ctx: _Context, forest: qt.Forest, cache: _Cache, evaluate, report, label: str, span):
+def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, report, label: str, span):
     """Split elements until nothing deviates by more than the tolerance (see the module docstring).
 
     cache : reflected radiance (n, 3) at vertex keys, extended with ``evaluate(new_keys)``.
@@ -180,20 +180,20 @@ def _refine(ctx: _Context, forest: qt.Forest, cache: _Cache, evaluate, report, l
     evaluated (or the given one) is returned.
     """
     opts, D = ctx.opts, ctx.opts.max_depth
-    emission_y = _lum(ctx.emission)
+    emission_y = luminance_of(ctx.emission)
     good, passes = forest, 0
     try:
         while True:
             keys = qt.vertex_keys(forest)
             cand = forest.leaf_level < D
             if ctx.min_size > 0 and cand.any():
-                cand[cand] = _leaf_longest_edge(forest.take(cand), ctx.corners) / 2 >= ctx.min_size
+                cand[cand] = leaf_longest_edge(forest.take(cand), ctx.corners) / 2 >= ctx.min_size
             sub = forest.take(cand)
             big = None
             if ctx.max_size > 0 and sub.n_leaves:
-                big = _leaf_longest_edge(sub, ctx.corners) > ctx.max_size
+                big = leaf_longest_edge(sub, ctx.corners) > ctx.max_size
                 big &= sub.leaf_level < D - BIG_LEVELS
-            pk, pvalid = _probe_keys(sub)
+            pk, pvalid = probe_keys(sub)
             need = qt.sorted_unique(np.concatenate([keys, pk[pvalid]]))
             new = need[cache.find(need) < 0]
             report(
@@ -205,10 +205,10 @@ def _refine(ctx: _Context, forest: qt.Forest, cache: _Cache, evaluate, report, l
             if not cand.any():
                 break
             # split test on luminance of the outgoing radiance (emission + reflected)
-            refl_y = _lum(cache.vals)
+            refl_y = luminance_of(cache.vals)
             # (the mean is capped by the most the scene can reflect on average: a point light touching a
             # wall puts I / d^2 on one vertex, which would lift the floor above all other light)
-            mean_y = min(_area_mean(forest, keys, cache.find(keys), refl_y, ctx), ctx.max_mean_reflected())
+            mean_y = min(area_mean(forest, keys, cache.find(keys), refl_y, ctx), ctx.max_mean_reflected())
             eps_abs = max(ABS_FLOOR * mean_y, 1e-30)
             y = refl_y + emission_y[qt.decode_key(cache.keys, ctx.n)[0]]
             vy = np.concatenate([y[cache.find(qt.leaf_corner_keys(sub))], y[cache.find(pk)]], axis=1)
@@ -221,7 +221,7 @@ def _refine(ctx: _Context, forest: qt.Forest, cache: _Cache, evaluate, report, l
                 lo = np.where(vm, vy, np.inf).min(axis=1)
                 score = hi - lo
             else:
-                slots = _probe_interp(sub)
+                slots = probe_interp(sub)
                 ck = vy[:, :4]
                 interp = (
                     np.take_along_axis(ck, slots.reshape(len(ck), -1), axis=1)
@@ -238,32 +238,32 @@ def _refine(ctx: _Context, forest: qt.Forest, cache: _Cache, evaluate, report, l
             mask = np.zeros(forest.n_leaves, dtype=bool)
             mask[cand] = split
             forest = qt.balance(qt.split(forest, mask))
-    except _Cancel:
+    except SolveCancelled:
         return good, passes, True
     return forest, passes, False
 
 
-def _interpolation_bias(
-    keys: np.ndarray, old_keys: np.ndarray, cache: _Cache, ctx: _Context
+def measure_interpolation_bias(
+    keys: np.ndarray, old_keys: np.ndarray, cache: VertexCache, ctx: Context
 ) -> tuple[float, int]:
     """Mean relative error (sum |interpolated - exact| / sum exact, luminance of reflected radiance)
     that parent interpolation would have given the vertices of ``keys`` not in ``old_keys``."""
     late = keys[qt.lookup(old_keys, keys) < 0]
     if len(late) == 0:
         return 0.0, 0
-    pkeys, pw = _parent_interpolation(late, ctx.is_quad, ctx.n)
+    pkeys, pw = parent_interpolation(late, ctx.is_quad, ctx.n)
     pi = cache.find(pkeys)
     ok = (pi >= 0).all(axis=1) & (cache.find(late) >= 0)
     if not ok.any():
         return 0.0, 0
-    y = _lum(cache.vals)
+    y = luminance_of(cache.vals)
     interp = (y[pi[ok]] * pw[ok]).sum(axis=1)
     exact = y[cache.find(late[ok])]
     tot = exact.sum()
     return (float(np.abs(interp - exact).sum() / tot) if tot > 0 else 0.0), int(ok.sum())
 
 
-def _area_mean(forest: qt.Forest, keys: np.ndarray, kidx: np.ndarray, y: np.ndarray, ctx: _Context) -> float:
+def area_mean(forest: qt.Forest, keys: np.ndarray, kidx: np.ndarray, y: np.ndarray, ctx: Context) -> float:
     """Area-weighted mean over the scene of per-vertex values ``y[kidx]`` (leaf-corner means)."""
     if forest.n_leaves == 0:
         return 0.0
@@ -276,7 +276,7 @@ def _area_mean(forest: qt.Forest, keys: np.ndarray, kidx: np.ndarray, y: np.ndar
     return float((leaf_mean * la).sum() / max(la.sum(), 1e-300))
 
 
-def _shot_gain(forest: qt.Forest, cache: _Cache, ctx: _Context) -> np.ndarray:
+def probe_shot_gain(forest: qt.Forest, cache: VertexCache, ctx: Context) -> np.ndarray:
     """(P,) ratio of each patch's reflected power integrated with the probes (a quadratic rule per
     leaf: 3 x 3 Simpson on quads, the edge midpoints on triangles) to the power of its piecewise
     linear interpolant (the corner means), from the luminance values in ``cache``; leaves without
@@ -285,9 +285,9 @@ def _shot_gain(forest: qt.Forest, cache: _Cache, ctx: _Context) -> np.ndarray:
     P = len(ctx.area)
     if forest.n_leaves == 0 or len(cache.keys) == 0:
         return np.ones(P)
-    y = _lum(cache.vals)
+    y = luminance_of(cache.vals)
     ci = cache.find(qt.leaf_corner_keys(forest))
-    pk, pvalid = _probe_keys(forest)
+    pk, pvalid = probe_keys(forest)
     pi = cache.find(pk)
     q = forest.leaf_is_quad
     cvalid = np.ones(ci.shape, dtype=bool)

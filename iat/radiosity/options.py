@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
-from ..errors import OptionError
+from iat.errors import OptionError
 
 #: Rec. 709 luminance weights for "power" and variation tests
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -90,7 +89,6 @@ AMBIENT_RAYS = 16
 #: upper bound of the measured reflected fraction in the ambient term
 MAX_REFLECTANCE = 0.95
 
-Progress = Callable[[float, str], "bool | None"]
 
 
 @dataclass

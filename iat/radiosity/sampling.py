@@ -1,5 +1,5 @@
 """Sampling kernels of the solver: hashed jitter, the concentric disc map, Gauss rules, the geometry of
-a shooting patch (:class:`_Shooter`) and radiance fields on a patch lattice (:class:`_Lattice`)."""
+a shooting patch (:class:`Shooter`) and radiance fields on a patch lattice (:class:`Lattice`)."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ import math
 
 import numpy as np
 
-from .. import quadtree as qt
-from .options import LUMINANCE
+from iat.geometry import quadtree as qt
+from iat.radiosity.options import LUMINANCE
 
 
-def _hash_uniform(keys: np.ndarray, salt: int, k: int = 2) -> np.ndarray:
+def hash_uniform(keys: np.ndarray, salt: int, k: int = 2) -> np.ndarray:
     """(n, k) float64 in [0, 1): k splitmix64 hashes of (key, salt)."""
     z = np.asarray(keys, dtype=np.int64).astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
     z ^= np.uint64(salt & 0xFFFFFFFFFFFFFFFF)
@@ -26,7 +26,7 @@ def _hash_uniform(keys: np.ndarray, salt: int, k: int = 2) -> np.ndarray:
     return np.stack(out, axis=1)
 
 
-def _concentric(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def concentric_disk(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Shirley-Chiu concentric map of the unit square onto the unit disc."""
     a, b = 2.0 * u - 1.0, 2.0 * v - 1.0
     first = np.abs(a) > np.abs(b)
@@ -42,12 +42,12 @@ _G2 = 0.5 + np.array([-0.5, 0.5]) / math.sqrt(3.0)
 #: ((u, v) (1, G) each, weights (G,)) of the Gauss rules in lattice parameters: 2 x 2 on the
 #: unit square (weights x Jacobian), Dunavant's degree-4 rule on triangles (weights x area:
 #: the triangles' Jacobian is their area)
-_GAUSS_QUAD = (
+GAUSS_QUAD = (
     (np.repeat(_G2, 2)[None, :], np.tile(_G2, 2)[None, :]),
     np.full(4, 0.25),
 )
 _DA, _DB = 0.445948490915965, 0.091576213509771
-_GAUSS_TRI = (
+GAUSS_TRI = (
     (
         np.array([[_DA, 1 - 2 * _DA, _DA, _DB, 1 - 2 * _DB, _DB]]),
         np.array([[_DA, _DA, 1 - 2 * _DA, _DB, _DB, 1 - 2 * _DB]]),
@@ -60,7 +60,7 @@ def _cross2(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     return p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0]
 
 
-class _Shooter:
+class Shooter:
     """Geometry of one patch as a shooter: kernel terms, inside test, inverse parametrisation,
     area Jacobian.
 
@@ -228,7 +228,7 @@ class _Shooter:
         return np.maximum(np.sqrt(np.maximum(j2, 0.0)), 1e-300)
 
 
-def _sample_lattice(flat: np.ndarray, n: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+def sample_lattice(flat: np.ndarray, n: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """(k, 3) piecewise-linear interpolation at lattice parameters u, v (k,) of a lattice
     grid given flat, ((N+1)**2, 3).
 
@@ -249,11 +249,11 @@ def _sample_lattice(flat: np.ndarray, n: int, u: np.ndarray, v: np.ndarray) -> n
     return flat[i_base] * w_base[:, None] + flat[i00 + n + 1] * w10[:, None] + flat[i00 + 1] * w01[:, None]
 
 
-def _weighted_lattice_sums(
+def weighted_lattice_sums(
     flat_t: np.ndarray, n: int, u: np.ndarray, v: np.ndarray, w: np.ndarray, rows: np.ndarray, n_rows: int
 ) -> np.ndarray:
     """(n_rows, 3) sums over samples grouped by ``rows`` of ``w`` x the lattice field at (u, v):
-    ``bincount(rows, w * _sample_lattice(flat, n, u, v)[:, c])`` per channel, from the
+    ``bincount(rows, w * sample_lattice(flat, n, u, v)[:, c])`` per channel, from the
     transposed field ``flat_t`` (3, (N+1)**2), with 1-D gathers and no (k, 3) temporaries."""
     x, y = u * n, v * n
     a = np.minimum(x.astype(np.int64), n - 1)
@@ -277,7 +277,7 @@ def _weighted_lattice_sums(
     return out
 
 
-class _Lattice:
+class Lattice:
     """Per-patch radiance on the full lattice from vertex values (the shooters' radiance fields)."""
 
     def __init__(self, forest: qt.Forest, keys: np.ndarray):
@@ -323,9 +323,9 @@ class _Lattice:
         return g
 
 
-def _side(samples: int) -> int:
+def pattern_side(samples: int) -> int:
     return max(1, math.ceil(math.sqrt(samples) - 1e-9))
 
 
-def _lum(x: np.ndarray) -> np.ndarray:
+def luminance_of(x: np.ndarray) -> np.ndarray:
     return np.asarray(x) @ LUMINANCE

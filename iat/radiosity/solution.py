@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import quadtree as qt
-from ..errors import SolutionFileError
-from ..imageio import atomic_write
+from iat.errors import SolutionFileError
+from iat.fsutil import atomic_write
+from iat.geometry import quadtree as qt
 
 SOLUTION_FORMAT = "iat-solution"
 SOLUTION_VERSION = 1

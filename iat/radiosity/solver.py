@@ -27,7 +27,7 @@ B. **Progressive refinement on the settled mesh.** Each vertex's unshot radiance
    leaves) times its *gain*, the power of its light integrated with the probes of the last
    split test (a quadratic rule per leaf) over that of the linear interpolant, so that an
    element left coarse under concave light, which interpolates below it, does not take that
-   light out of the indirect light (:func:`.meshing._shot_gain`; 1 where point lights shine and
+   light out of the indirect light (:func:`.meshing.probe_shot_gain`; 1 where point lights shine and
    on a given mesh). The patch with the most unshot power (pi x area x
    area-weighted mean of |unshot|, from a sparse (P, V) averaging matrix) shoots: every
    vertex in front of it receives ``rho * <F * vis * L>`` -- the analytic
@@ -35,7 +35,7 @@ B. **Progressive refinement on the settled mesh.** Each vertex's unshot radiance
    shots) times the visible fraction and the shooter's radiance, estimated from
    stratified samples on the shooter's area and, for near receivers, cosine-distributed
    directions from the vertex (multiple importance sampling, see
-   :meth:`_Context.gather`), with embreex shadow rays (:mod:`.visibility`). Whole
+   :meth:`Context.gather`), with embreex shadow rays (:mod:`.visibility`). Whole
    patches are culled per shot first: behind the shooter or facing away, or -- for a
    shooter's later shots -- found fully occluded by its earlier ones (at least
    ``CULL_RAYS`` rays, none unoccluded). Faint shots use fewer samples. *Receiver
@@ -93,57 +93,39 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .. import quadtree as qt
-from ..errors import IATWarning, OptionError
-from .context import _albedo, _Cancel, _Context, _Geo, _light_power, _ranges  # noqa: F401
-from .meshing import (  # noqa: F401
-    _area_mean,
-    _averaging_matrix,
-    _Cache,
-    _coarse_keys,
-    _coarse_weights,
-    _interpolation_bias,
-    _leaf_longest_edge,
-    _parent_interpolation,
-    _probe_interp,
-    _probe_keys,
-    _refine,
-    _shot_gain,
+from iat.errors import IATWarning, OptionError
+from iat.geometry import quadtree as qt
+from iat.progress import Progress
+from iat.radiosity.context import Context, SolveCancelled, light_power, solver_albedo
+from iat.radiosity.meshing import (
+    VertexCache,
+    averaging_matrix,
+    coarse_keys,
+    coarse_weights,
+    measure_interpolation_bias,
+    probe_shot_gain,
+    split_test,
 )
-from .options import (  # noqa: F401  (the constants are re-exported: read them here or in .options)
+from iat.radiosity.options import (
     ABS_FLOOR,
     AMBIENT_RAYS,
-    BIG_LEVELS,
-    BIG_TOLERANCE,
     COARSE_EPS,
     COARSE_SIZE,
-    CULL_RAYS,
-    DIRECT_SAMPLE_FACTOR,
-    F_DIRECTION,
-    FF_CACHE_ENTRIES,
-    FF_EPS,
-    FF_FAR,
-    GAIN_LIMIT,
     GATHER_BLOCK,
     LUMINANCE,
-    MAX_ELEMENT_FRACTION,
     MAX_REFLECTANCE,
-    MIN_ELEMENT_FRACTION,
-    RAY_EPS,
-    RAY_EPS_PATCH,
     REFINE_SAMPLE_FACTOR,
     RESOLVE_MAX_CHANGE,
     SHOT_FULL_SHARE,
     SHOT_SAMPLE_FACTOR,
-    Progress,
     SolveOptions,
 )
-from .sampling import _concentric, _Lattice, _lum, _sample_lattice, _Shooter, _side  # noqa: F401
-from .solution import Solution
-from .visibility import Visibility
+from iat.radiosity.sampling import Lattice, concentric_disk, luminance_of, pattern_side
+from iat.radiosity.solution import Solution
+from iat.radiosity.visibility import Visibility
 
 
-def _sources(ctx: _Context) -> dict:
+def _sources(ctx: Context) -> dict:
     """JSON-able description of the light sources of a solve (for :func:`resolve`)."""
     return {
         "lights": [_sources_light(lt) for lt in ctx.lights],
@@ -163,7 +145,7 @@ def _sources_light(lt) -> dict:
 
 
 def _light_from(d: dict):
-    """A light-like object (what :meth:`_Context.light_irradiance` reads) from :func:`_sources`."""
+    """A light-like object (what :meth:`Context.light_irradiance` reads) from :func:`_sources`."""
     return SimpleNamespace(
         kind=d["kind"],
         position=np.asarray(d["position"], dtype=np.float64),
@@ -174,15 +156,15 @@ def _light_from(d: dict):
     )
 
 
-class _Run:
+class SolveRun:
     """The state of one solve: the mesh, per-vertex reflected and unshot radiance, stats."""
 
     def __init__(self, scene, opts: SolveOptions, progress, vis: Visibility, t_start: float):
         self.scene, self.opts, self.vis, self.t_start = scene, opts, vis, t_start
         self.progress = progress
-        self.ctx = ctx = _Context(scene, opts, vis)
+        self.ctx = ctx = Context(scene, opts, vis)
         self.P = len(ctx.area)
-        self.m_side = _side(opts.samples)
+        self.m_side = pattern_side(opts.samples)
         self.state = {"cancelled": False, "last": 0.0, "fraction": 0.0, "message": ""}
         self.stats: dict = {
             "interpolation_bias": 0.0,
@@ -216,7 +198,7 @@ class _Run:
         st["fraction"], st["message"] = fraction, message
         if self.progress is not None and self.progress(float(min(max(fraction, 0.0), 1.0)), message) is False:
             st["cancelled"] = True
-            raise _Cancel
+            raise SolveCancelled
 
     def _step(self, message: str) -> None:
         """Report a new stage at the current fraction (so a big model is never silent for long);
@@ -224,7 +206,7 @@ class _Run:
         if not self.state["cancelled"]:
             try:
                 self.report(self.state["fraction"], message)
-            except _Cancel:
+            except SolveCancelled:
                 pass  # the stages below see state["cancelled"] and keep what was evaluated
 
     def check(self) -> None:  # cheap poll inside long loops, at most 20 times a second
@@ -237,8 +219,8 @@ class _Run:
     def set_mesh(self, forest: qt.Forest, keys: np.ndarray) -> None:
         ctx, mesh = self.ctx, self.mesh
         mesh["forest"], mesh["keys"] = forest, keys
-        mesh["M"] = _averaging_matrix(forest, keys, ctx.corners, ctx.area)
-        mesh["lattice"] = _Lattice(forest, keys)
+        mesh["M"] = averaging_matrix(forest, keys, ctx.corners, ctx.area)
+        mesh["lattice"] = Lattice(forest, keys)
         mesh["start"] = np.searchsorted(keys, qt.make_key(np.arange(self.P + 1), 0, 0, ctx.n))
         mesh["geo"] = ctx.geometry(keys)
         mesh["geo"].cache = {}
@@ -247,7 +229,7 @@ class _Run:
         if self.coarse is None:  # the coarse receiver grids do not depend on the mesh
             self.coarse = []
             for level in range(min(len(COARSE_EPS), ctx.opts.max_depth)):
-                ck = _coarse_keys(ctx.is_quad, level, ctx.n)
+                ck = coarse_keys(ctx.is_quad, level, ctx.n)
                 cgeo = ctx.geometry(ck)
                 cgeo.cache = {}
                 self.coarse.append(
@@ -260,7 +242,7 @@ class _Run:
                     }
                 )
         mesh["coarse_w"] = [
-            _coarse_weights(keys, c["keys"], ctx.is_quad, lv, ctx.n) for lv, c in enumerate(self.coarse)
+            coarse_weights(keys, c["keys"], ctx.is_quad, lv, ctx.n) for lv, c in enumerate(self.coarse)
         ]
 
     @property
@@ -276,8 +258,8 @@ class _Run:
         ctx = self.ctx
         t0 = time.perf_counter()
         roots = qt.roots(ctx.is_quad, self.opts.max_depth)
-        self.direct_cache = _Cache()
-        forest, passes, _ = _refine(
+        self.direct_cache = VertexCache()
+        forest, passes, _ = split_test(
             ctx,
             roots,
             self.direct_cache,
@@ -287,7 +269,7 @@ class _Run:
             (0.0, 0.2),
         )
         keys = qt.vertex_keys(forest)
-        bias, bias_n = _interpolation_bias(keys, qt.vertex_keys(roots), self.direct_cache, ctx)
+        bias, bias_n = measure_interpolation_bias(keys, qt.vertex_keys(roots), self.direct_cache, ctx)
         self.stats.update(
             mesh_passes=int(passes), interpolation_bias=bias, interpolation_bias_vertices=bias_n
         )
@@ -323,14 +305,14 @@ class _Run:
         self.report(0.0, f"direct light on the given mesh: {len(self.keys)} vertices")
         try:
             self.reflected = self.ctx.direct(self.keys, self.check, self.mesh["geo"])
-        except _Cancel:
+        except SolveCancelled:
             self.reflected = np.zeros((len(self.keys), 3))
         self.offset = self.light_correction()
         self.unshot = self.reflected + self.offset
         self.timings["meshing_s"] = time.perf_counter() - t0
 
     def light_correction(self, forest=None, keys=None, geo=None, lights=None, signs=None) -> np.ndarray:
-        """(V, 3) :meth:`_Context.light_correction` on the current mesh (or the given one): added to
+        """(V, 3) :meth:`Context.light_correction` on the current mesh (or the given one): added to
         the exact reflected direct radiance, it gives the unshot radiance whose power is what the
         elements received from the point / spot lights. Zero when cancelled."""
         forest = self.forest if forest is None else forest
@@ -340,18 +322,18 @@ class _Run:
             return np.zeros((len(keys), 3))
         try:
             return self.ctx.light_correction(forest, keys, geo, lights, signs)
-        except _Cancel:
+        except SolveCancelled:
             return np.zeros((len(keys), 3))
 
-    def shot_gain(self, cache: _Cache) -> np.ndarray:
-        """(P,) :func:`_shot_gain` of the current mesh from the values in ``cache``: the power of each
+    def shot_gain(self, cache: VertexCache) -> np.ndarray:
+        """(P,) :func:`probe_shot_gain` of the current mesh from the values in ``cache``: the power of each
         patch's light integrated with its probes over that of its linear interpolant, which its
         shots multiply (an element that stays coarse under concave light interpolates below it).
         1 on patches lit by point or spot lights (their ``offset`` already shoots the light the
         elements hold) and when the solve was cancelled."""
         if self.state["cancelled"]:
             return np.ones(self.P)
-        gain = _shot_gain(self.forest, cache, self.ctx)
+        gain = probe_shot_gain(self.forest, cache, self.ctx)
         if len(self.offset) and np.any(self.offset):
             lit = np.zeros(self.P, dtype=bool)
             lit[qt.decode_key(self.keys, self.ctx.n)[0][np.any(self.offset != 0, axis=1)]] = True
@@ -361,7 +343,7 @@ class _Run:
     # -- shooting -----------------------------------------------------------------
     def patch_power(self, unshot: np.ndarray) -> np.ndarray:
         """(P,) luminance power of each patch's unshot field (by magnitude: it may be signed)."""
-        return np.pi * _lum(self.mesh["M"] @ np.abs(unshot)) * self.ctx.area
+        return np.pi * luminance_of(self.mesh["M"] @ np.abs(unshot)) * self.ctx.area
 
     def shoot(self, span, target: float) -> None:
         """Shoot until the unshot power is below ``target`` or max_shots."""
@@ -418,9 +400,10 @@ class _Run:
             idx, f = ctx.form_factors(s, cgeo)
             fmax = np.zeros(self.P)
             np.maximum.at(fmax, cgeo.patch[idx], f)
-            y = mesh["M"] @ _lum(self.reflected) + _lum(ctx.emission)
+            y = mesh["M"] @ luminance_of(self.reflected) + luminance_of(ctx.emission)
             floor = ABS_FLOOR * float((y * ctx.area).sum() / max(ctx.area.sum(), 1e-300))
-            rel = fmax * float(_lum(np.abs(field_mean))) * _lum(ctx.albedo) / (y + max(floor, 1e-30))
+            lum_mean = float(luminance_of(np.abs(field_mean)))
+            rel = fmax * lum_mean * luminance_of(ctx.albedo) / (y + max(floor, 1e-30))
             dist = np.linalg.norm(ctx.centre - ctx.centre[s], axis=1) - ctx.radius[s]
             size = ctx.radius / np.maximum(dist, 1e-300)
             size[dist <= 0] = np.inf
@@ -467,7 +450,7 @@ class _Run:
         # what each source shot: its shot field times the gain its shots had
         grids = {int(p): lattice_b.grid(int(p), shot_field) * self.gain[p] for p in sources}
         means = (mesh["M"] @ shot_field) * self.gain[:, None]
-        total_cache = _Cache(keys, self.reflected.copy())
+        total_cache = VertexCache(keys, self.reflected.copy())
         # samples per source by the share of the power it has shot (as the shots themselves), but
         # REFINE_SAMPLE_FACTOR x more per side: one pattern serves all new vertices, so its error
         # is a coherent offset of them all, which the shots' per-vertex patterns average out
@@ -490,7 +473,7 @@ class _Run:
                 on[geo.patch] = True
                 # what the coarse grids received, interpolated as at the old vertices
                 for level, c in enumerate(self.coarse or []):
-                    out += _coarse_weights(new, c["keys"], ctx.is_quad, level, ctx.n) @ c["acc"]
+                    out += coarse_weights(new, c["keys"], ctx.is_quad, level, ctx.n) @ c["acc"]
                 # and a gather of what each source shot at the vertices of these patches
                 for p in sources:
                     p = int(p)
@@ -505,14 +488,16 @@ class _Run:
             return out
 
         old_keys = keys
-        forest, passes, _ = _refine(ctx, self.forest, total_cache, evaluate_total, self.report, label, span)
+        forest, passes, _ = split_test(
+            ctx, self.forest, total_cache, evaluate_total, self.report, label, span
+        )
         self.stats["refine_passes"] += passes
         keys = qt.vertex_keys(forest)
         self.timings["refining_s"] += time.perf_counter() - t0
         if len(keys) == len(old_keys):
             self.gain = self.shot_gain(total_cache)
             return
-        b, bn = _interpolation_bias(keys, old_keys, total_cache, ctx)
+        b, bn = measure_interpolation_bias(keys, old_keys, total_cache, ctx)
         n_old = self.stats["interpolation_bias_total_vertices"]
         if bn:  # vertex-weighted mean over the refinement stages
             self.stats["interpolation_bias_total"] = (
@@ -552,7 +537,7 @@ class _Run:
                     self.shoot(span, arg)
                 elif self.opts.refine_indirect and self.shots:
                     self.refine_total(arg, span)
-        except _Cancel:
+        except SolveCancelled:
             pass
 
     # -- the result ---------------------------------------------------------------
@@ -561,9 +546,9 @@ class _Run:
         a closed room, less near an opening), from ``AMBIENT_RAYS`` directions in one pattern for
         all vertices (so it varies smoothly)."""
         ctx, geo = self.ctx, self.mesh["geo"]
-        m = _side(AMBIENT_RAYS)
+        m = pattern_side(AMBIENT_RAYS)
         pat = ctx.pattern(self.P, m, 0)  # (a patch index no shooter has)
-        dx, dy = _concentric(pat[:, 0], pat[:, 1])
+        dx, dy = concentric_disk(pat[:, 0], pat[:, 1])
         dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
         out = np.zeros(len(geo.key))
         for a in range(0, len(geo.key), GATHER_BLOCK):
@@ -613,7 +598,7 @@ class _Run:
         if opts.ambient and opts.max_shots > 0 and len(keys) and not self.state["cancelled"]:
             try:
                 amb, refl_frac = self.ambient(fallback_reflectance)
-            except _Cancel:
+            except SolveCancelled:
                 amb = np.zeros((len(keys), 3))
             reflected = reflected + amb
         radiance = ctx.emission[vpatch] + reflected
@@ -624,7 +609,7 @@ class _Run:
         if not self.state["cancelled"]:
             try:
                 self.report(1.0, f"done: {self.shots} shots, {len(keys)} vertices")
-            except _Cancel:
+            except SolveCancelled:
                 pass
         elapsed = time.perf_counter() - self.t_start
         vis = self.vis
@@ -654,7 +639,7 @@ class _Run:
             "min_element_size": float(ctx.min_size),
             "emitted_power": float(self.power0),
             "ambient_luminance_fraction": float(
-                np.pi * (ctx.area * _lum(self.mesh["M"] @ amb)).sum() / self.power0
+                np.pi * (ctx.area * luminance_of(self.mesh["M"] @ amb)).sum() / self.power0
             )
             if self.power0 > 0 and area_tot > 0
             else 0.0,
@@ -680,7 +665,7 @@ def _options(options) -> SolveOptions:
 def _check_scene(scene) -> None:
     """Raise OptionError for a scene the solver cannot solve (an in-memory scene is not checked
     by a loader): non-finite geometry or light, non-finite albedo, negative emission. Albedo
-    outside [0, 1] is clamped by the solve (:func:`_albedo`) with an
+    outside [0, 1] is clamped by the solve (:func:`solver_albedo`) with an
     :class:`iat.errors.IATWarning` naming the materials."""
     c = scene.corner_positions
     if not np.isfinite(c).all():
@@ -752,7 +737,7 @@ def solve(
     if progress is not None:  # building the ray-tracing scene takes seconds on big models
         progress(0.0, f"preparing: {scene.n_patches} patches")  # a cancel is seen at the next report
     with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
-        run = _Run(scene, opts, progress, vis, t_start)
+        run = SolveRun(scene, opts, progress, vis, t_start)
         target = opts.convergence * run.power0
         if mesh is None:
             run.mesh_by_direct_light()
@@ -799,7 +784,7 @@ def resolve(
     _check_mesh(previous, scene, "resolve")
     opts = SolveOptions.from_dict(previous.options) if options is None else options
     opts = replace(_options(opts), max_depth=int(previous.max_depth)).validate()
-    if not np.allclose(previous.patch_albedo, _albedo(scene), rtol=1e-6, atol=1e-9):
+    if not np.allclose(previous.patch_albedo, solver_albedo(scene), rtol=1e-6, atol=1e-9):
         raise OptionError("resolve: the albedos changed since the previous solution; solve again")
     src = previous.stats.get("sources") if isinstance(previous.stats, dict) else None
     if not src:
@@ -829,14 +814,14 @@ def resolve(
             added.append(d)
         del removed[i]
     delta_power = float(np.pi * (np.abs(diff @ LUMINANCE) * area).sum())
-    delta_power += sum(_light_power(lt) for lt in added + removed)
+    delta_power += sum(light_power(lt) for lt in added + removed)
     new_power = float(np.pi * (emission @ LUMINANCE * area).sum())
-    new_power += sum(_light_power(lt) for lt in scene.lights if lt.kind in ("point", "spot"))
+    new_power += sum(light_power(lt) for lt in scene.lights if lt.kind in ("point", "spot"))
     if delta_power > RESOLVE_MAX_CHANGE * new_power:
         return solve(scene, opts, progress, mesh=previous)
     t_start = time.perf_counter()
     with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
-        run = _Run(scene, opts, progress, vis, t_start)
+        run = SolveRun(scene, opts, progress, vis, t_start)
         ctx = run.ctx
         run.take_mesh(previous)
         keys, geo = run.keys, run.mesh["geo"]
@@ -854,7 +839,7 @@ def resolve(
                     incoming += sign * ctx.light_irradiance(lt, geo) / np.pi
                     run.check()
             delta = ctx.albedo[geo.patch] * incoming
-        except _Cancel:
+        except SolveCancelled:
             delta = np.zeros((len(keys), 3))
         run.timings["meshing_s"] = time.perf_counter() - t0
         run.reflected = old_reflected + delta
@@ -893,5 +878,5 @@ def evaluate_direct(scene, keys: np.ndarray, options: SolveOptions | None = None
     """
     opts = (SolveOptions() if options is None else options).validate()
     with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
-        ctx = _Context(scene, opts, vis)
+        ctx = Context(scene, opts, vis)
         return ctx.direct(np.asarray(keys, dtype=np.int64), lambda: None)

@@ -50,8 +50,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .camera import Camera
-from .scene import Scene
+from iat.camera import Camera
+from iat.io.scene import Scene
 
 __all__ = [
     "mitsuba_variant",
@@ -367,7 +367,7 @@ def render_reference_cached(
         except (OSError, ValueError):
             pass  # damaged cache file: render again
     img = render_reference(scene, camera, size, spp, seed, max_depth, rr_depth=rr_depth, two_sided=two_sided)
-    from .imageio import atomic_write
+    from iat.fsutil import atomic_write
 
     atomic_write(path, lambda f: np.save(f, img, allow_pickle=False))
     return img

@@ -71,8 +71,8 @@ import mmap
 
 import numpy as np
 
-from . import quadtree as qt
-from .errors import OptionError
+from iat.errors import OptionError
+from iat.geometry import quadtree as qt
 
 __all__ = [
     "METHODS",

@@ -42,16 +42,14 @@ import logging
 import re
 import urllib.parse
 import warnings
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .camera import Camera
-from .errors import Cancelled, IATWarning, LoadError, OptionError
-
-Progress = Callable[[float, str], "bool | None"]
+from iat.camera import Camera
+from iat.errors import Cancelled, IATWarning, LoadError, OptionError
+from iat.progress import Progress
 
 
 @dataclass

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .errors import LoadError, SolutionFileError
-from .scene import Scene, load_scene
+from iat.errors import LoadError, SolutionFileError
+from iat.io.scene import Scene, load_scene
 
 SOLUTION_SUFFIXES = (".npz",)
 
@@ -28,7 +28,7 @@ def open_solution(path: str | Path, options=None, progress=None, load_progress=N
     progress : the solve's ``progress(fraction, message) -> bool`` (a model only).
     load_progress : the model load's (:func:`iat.scene.load_scene`); False cancels.
     """
-    from .radiosity import Solution, SolveOptions, solve
+    from iat.radiosity import Solution, SolveOptions, solve
 
     path = Path(path)
     if is_solution_path(path):
@@ -58,7 +58,7 @@ def scene_from_solution(sol) -> Scene:
     """A Scene rebuilt from a solution's patches (albedo only, no lights, no detail)."""
     import numpy as np
 
-    from .scene import Material
+    from iat.io.scene import Material
 
     p = len(sol.patch_is_quad)
     verts = sol.patch_corners.reshape(-1, 3)

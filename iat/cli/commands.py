@@ -17,39 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import IATError, IATWarning, OptionError
+from iat.cli.args import parse_size, parse_vec
+from iat.errors import IATError, IATWarning, OptionError
+from iat.progress import ProgressBar
 
 EXIT_USER_ERROR = 2
-
-
-# -- progress --------------------------------------------------------------------
-class ProgressBar:
-    """A ``progress(fraction, message) -> bool`` callback drawn as a tqdm bar with ETA on stderr."""
-
-    def __init__(self, desc: str, enabled: bool = True, close_when_done: bool = False):
-        self.enabled = bool(enabled) and sys.stderr.isatty()
-        self.desc = desc
-        self.close_when_done = close_when_done  # a stage followed by another: clear the bar at 1.0
-        self._bar = None
-
-    def __call__(self, fraction: float, message: str = "") -> bool:
-        if not self.enabled:
-            return True
-        if self._bar is None:
-            from tqdm import tqdm
-
-            self._bar = tqdm(total=1000, desc=self.desc, unit="‰", leave=False, file=sys.stderr)
-        self._bar.n = int(1000 * min(max(fraction, 0.0), 1.0))
-        self._bar.set_postfix_str(message[:40], refresh=False)
-        self._bar.refresh()
-        if self.close_when_done and fraction >= 1.0:
-            self.close()
-        return True
-
-    def close(self):
-        if self._bar is not None:
-            self._bar.close()
-            self._bar = None
 
 
 @contextmanager
@@ -65,9 +37,9 @@ def _progress_bar(args, desc: str, close_when_done: bool = False):
 def _solution_not_a_model(args, path) -> None:
     """``iat info SOL.npz`` / ``iat solve SOL.npz``: say what the file is and what would help (one line),
     instead of "unsupported file type '.npz'". A missing file is left to load_scene ("file not found")."""
-    from .errors import LoadError
-    from .inputs import is_solution_path
-    from .scene import SUPPORTED_EXTENSIONS
+    from iat.errors import LoadError
+    from iat.io.scene import SUPPORTED_EXTENSIONS
+    from iat.radiosity.inputs import is_solution_path
 
     path = Path(path)
     if not (is_solution_path(path) and path.is_file()):
@@ -89,35 +61,15 @@ def _solution_not_a_model(args, path) -> None:
 
 def _load(args, path, max_edge=None):
     """:func:`iat.scene.load_scene` with a progress bar."""
-    from .scene import load_scene
+    from iat.io.scene import load_scene
 
     _solution_not_a_model(args, path)
     with _progress_bar(args, f"load {Path(path).name}") as bar:
         return load_scene(path, max_edge=max_edge, progress=bar)
 
 
-def _parse_vec(text: str, name: str) -> np.ndarray:
-    try:
-        v = np.array([float(x) for x in text.split(",")])
-    except ValueError:
-        raise OptionError(f"{name} must be three numbers X,Y,Z, got {text!r}") from None
-    if v.shape != (3,) or not np.isfinite(v).all():
-        raise OptionError(f"{name} must be three finite numbers X,Y,Z, got {text!r}")
-    return v
-
-
-def _parse_size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(x) for x in text.lower().split("x"))
-    except ValueError:
-        raise OptionError(f"--size must be WxH, got {text!r}") from None
-    if not (1 <= w <= 16384 and 1 <= h <= 16384):
-        raise OptionError(f"--size out of range: {text}")
-    return w, h
-
-
 def _solve_options(args):
-    from .radiosity import SolveOptions
+    from iat.radiosity import SolveOptions
 
     kw = {}
     for name in ("max_depth", "tolerance", "max_edge", "samples", "convergence"):
@@ -128,7 +80,7 @@ def _solve_options(args):
 
 
 def _bake_policy(args):
-    from .bake import BakePolicy
+    from iat.bake.baker import BakePolicy
 
     kw = {}
     for name in ("threshold", "scale", "method", "budget_mb"):
@@ -139,7 +91,7 @@ def _bake_policy(args):
 
 
 def _open(args, what: str):
-    from .inputs import open_solution
+    from iat.radiosity.inputs import open_solution
 
     name = Path(args.input).name
     with (
@@ -177,12 +129,12 @@ def _set_output(out: Path, name: str) -> Path:
 
 
 def cmd_solve(args) -> int:
-    from .radiosity import solve
+    from iat.radiosity import solve
 
     opts = _solve_options(args)
     scene = _load(args, args.input, max_edge=opts.max_edge)
     if getattr(args, "states", False):
-        from .solution_set import solve_set
+        from iat.lighting.solution_set import solve_set
 
         with _progress_bar(args, f"solve states of {Path(args.input).name}") as bar:
             sset = solve_set(scene, None, opts, progress=bar, mesh=args.states_mesh)
@@ -210,8 +162,8 @@ def cmd_solve(args) -> int:
 
 def _open_set(args):
     """(scene, SolutionSet) of ``--set A.npz B.npz ...`` (times: ``--times``, the files, the model)."""
-    from .inputs import open_solution
-    from .solution_set import load_set
+    from iat.lighting.solution_set import load_set
+    from iat.radiosity.inputs import open_solution
 
     times = None
     if args.times:
@@ -239,8 +191,8 @@ def _check_set_args(args) -> None:
 
 
 def cmd_bake(args) -> int:
-    from .bake import Baker
-    from .export import export_glb
+    from iat.bake.baker import Baker
+    from iat.export.gltf import export_glb
 
     _check_set_args(args)
     if args.set is not None:
@@ -276,11 +228,11 @@ def _policy_dict(p) -> dict:
 
 
 def cmd_render(args) -> int:
-    from .camera import Camera
-    from .imageio import save_npy, save_png
-    from .render import Renderer
+    from iat.camera import Camera
+    from iat.io.images import save_npy, save_png
+    from iat.render.renderer import Renderer
 
-    size = _parse_size(args.size)
+    size = parse_size(args.size)
     out = Path(args.output)
     if out.suffix.lower() not in (".png", ".npy"):
         raise OptionError(f"output must end in .png or .npy, got {out.name}")
@@ -300,7 +252,7 @@ def cmd_render(args) -> int:
         if not (args.eye and args.target):
             raise OptionError("--eye and --target go together")
         cam = Camera(
-            eye=_parse_vec(args.eye, "--eye"), target=_parse_vec(args.target, "--target"), yfov=args.fov
+            eye=parse_vec(args.eye, "--eye"), target=parse_vec(args.target, "--target"), yfov=args.fov
         )
         lo, hi = scene.bounds
         r = float(np.linalg.norm(hi - lo))
@@ -317,14 +269,14 @@ def cmd_render(args) -> int:
         if sset is not None:  # one moment of a solution set, blended on the GPU
             r.set_solution_set(sset.solutions)
             if mode in ("iat", "split", "diff"):
-                from .bake import Baker
+                from iat.bake.baker import Baker
 
                 r.set_baked_set(Baker(sset.first, scene).bake_set(sset, _bake_policy(args)))
             r.set_blend(*sset.weights(args.at))
         elif sol is not None:
             r.set_solution(sol)
             if mode in ("iat", "split", "diff"):
-                from .bake import Baker
+                from iat.bake.baker import Baker
 
                 r.set_baked(Baker(sol, scene).bake(_bake_policy(args)))
         img = r.render(cam, size=size, mode=mode)
@@ -333,7 +285,7 @@ def cmd_render(args) -> int:
     if out.suffix.lower() == ".npy":
         save_npy(out, img)
     else:
-        from .imageio import auto_exposure
+        from iat.color import auto_exposure
 
         save_png(out, img, exposure=args.exposure if args.exposure else auto_exposure(img))
     info = {"output": str(out), "mode": mode, "size": list(size)}
@@ -345,21 +297,64 @@ def cmd_render(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from .bench import main as bench_main
+    """``iat bench [MODEL…] [--json] [--frames N] [--size WxH]``: Markdown on stdout, or JSON."""
+    from iat.tools.bench import format_table, run_bench
 
-    return bench_main(args)
+    size = parse_size(getattr(args, "size", "640x480") or "640x480")
+    frames = int(getattr(args, "frames", 60) or 60)
+    if frames < 1:
+        raise OptionError(f"--frames must be >= 1, got {frames}")
+    bar = ProgressBar("bench")
+    try:
+        result = run_bench(list(getattr(args, "models", []) or []), frames=frames, size=size, progress=bar)
+    finally:
+        bar.close()
+    if getattr(args, "json", False):
+        print(json.dumps(result, indent=2))
+    else:
+        sys.stdout.write(format_table(result))
+    return 0
 
 
 def cmd_chart(args) -> int:
-    from .chart import main as chart_main
+    """``iat chart [MODEL…] -o CHART.png [--size WxH] [--frames N]``: writes CHART.png and CHART.json."""
+    from iat.tools.chart import run_chart
 
-    return chart_main(args)
+    size = parse_size(getattr(args, "size", "160x120") or "160x120")
+    frames = int(getattr(args, "frames", 10) or 10)
+    if frames < 1:
+        raise OptionError(f"--frames must be >= 1, got {frames}")
+    bar = ProgressBar("chart")
+    try:
+        result = run_chart(
+            list(getattr(args, "models", []) or []), args.output, size=size, frames=frames, progress=bar
+        )
+    finally:
+        bar.close()
+    print(f"wrote {result['png']} and {result['json']}")
+    for row in result["models"]:
+        front = row["pareto"].get("flip_vs_finest/gpu_mb", [])
+        print(f"{row['model']}: {len(row['points'])} points, {len(front)} on the memory Pareto front")
+    return 0
+
+
+def _app(name: str):
+    """The application registered as entry point ``name`` in group ``iat.apps`` (the viewer is
+    ``view``): the library never imports an app, the app's package says where it is."""
+    from importlib.metadata import entry_points
+
+    found = entry_points(group="iat.apps", name=name)
+    if not found:
+        from iat.errors import RenderError
+
+        raise RenderError(f"no '{name}' application is installed (entry point group 'iat.apps')")
+    return next(iter(found)).load()
 
 
 def cmd_view(args) -> int:
     import os
 
-    from .errors import LoadError, RenderError
+    from iat.errors import LoadError, RenderError
 
     if args.input is not None:
         path = Path(args.input)
@@ -367,15 +362,13 @@ def cmd_view(args) -> int:
             raise LoadError("file not found" if not path.exists() else "not a regular file", path)
     if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
         if args.input is not None:  # nothing can be shown: name a bad file before the display
-            from .inputs import is_solution_path, open_solution
+            from iat.radiosity.inputs import is_solution_path, open_solution
 
             open_solution(path) if is_solution_path(path) else _load(args, path)
         raise RenderError(
             "no display (DISPLAY is not set): run under xvfb-run or on a desktop, or use 'iat render'"
         )
-    from viewer.app import main as view_main
-
-    return view_main(args.input)
+    return _app("view")(args.input)
 
 
 def _emit(args, data: dict) -> None:

@@ -48,18 +48,17 @@ from __future__ import annotations
 import importlib.resources
 import logging
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .bake import BYTES_PER_TEXEL, GPU_DTYPES, HALF_MAX, to_gpu  # noqa: F401  (HALF_MAX re-exported)
-from .errors import RenderError
+from iat.bake.baker import BYTES_PER_TEXEL, GPU_DTYPES, to_gpu
+from iat.errors import RenderError
 
 log = logging.getLogger(__name__)
 
 try:  # the lattice -> world map lives in quadtree.py once it exists
-    from .quadtree import lattice_to_world
+    from iat.geometry.quadtree import lattice_to_world
 except ImportError:  # pragma: no cover - depends on the order modules land in
 
     def lattice_to_world(
@@ -108,21 +107,13 @@ _MIN_BUFFER = 64  # bytes; GL buffers are never created empty
 
 
 # -- shader lookup ----------------------------------------------------------------------------
-def shader_dir() -> Path | Any:
-    """Where the ``.glsl`` files are: ``iat/shaders`` in a wheel, else ``shaders/`` of the repo.
-
-    Returns a :class:`pathlib.Path` or an ``importlib.resources`` Traversable.
-    """
-    try:
-        packaged = importlib.resources.files("iat") / "shaders"
-        if packaged.is_dir() and (packaged / "mesh.glsl").is_file():
-            return packaged
-    except (ModuleNotFoundError, FileNotFoundError, NotADirectoryError):  # pragma: no cover
-        pass
-    repo = Path(__file__).resolve().parent.parent / "shaders"
-    if (repo / "mesh.glsl").is_file():
-        return repo
-    raise RenderError(f"shader directory not found (looked in the iat package and {repo})")
+def shader_dir() -> Any:
+    """The ``.glsl`` files: ``iat/render/shaders`` (package data), as an ``importlib.resources``
+    Traversable (a :class:`pathlib.Path` in a source tree)."""
+    d = importlib.resources.files("iat.render") / "shaders"
+    if not (d / "mesh.glsl").is_file():
+        raise RenderError(f"shader directory not found: {d}")
+    return d
 
 
 def shader_source(name: str, stage: str) -> str:

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import BakeError
+from iat.errors import BakeError
 
 __all__ = ["Packing", "align_up", "blit", "blit_boxes", "mip_chain_texels", "mip_levels", "pack"]
 

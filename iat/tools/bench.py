@@ -17,7 +17,7 @@ triangle-bound case that the report's Onyx was in.
 The solve uses the solver's defaults (:data:`BENCH_SOLVE` holds no overrides;
 26 k-41 k elements on the samples, minutes on 2 cores), the bake the default
 :class:`~iat.bake.BakePolicy`.
-Solutions are cached in ``cache_dir/<model>-<options hash>.npz`` and solved
+Solutions are cached (:func:`iat.radiosity.cache.cached_solve`, content-keyed) and solved
 again when the model file is newer or the options differ.
 
 Library: :func:`run_bench` returns a JSON-able dict, :func:`format_table` turns
@@ -26,30 +26,28 @@ it into Markdown; :func:`main` is the CLI wrapper.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import logging
 import math
 import os
 import platform
 import time
-from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
 
-from .camera import Camera
-from .errors import LoadError
+from iat.camera import Camera
+from iat.errors import LoadError
+from iat.progress import Progress
+from iat.radiosity.cache import cached_solve
 
 log = logging.getLogger(__name__)
 
-Progress = Callable[[float, str], "bool | None"]
 
 #: the sample models, in the order of the table
 DEFAULT_MODELS = ("cornell_box", "house", "cave", "lavapit", "pool")
 #: where the sample models live
-SAMPLE_DIR = Path(__file__).resolve().parents[1] / "sample_models"
+SAMPLE_DIR = Path(__file__).resolve().parents[2] / "sample_models"
 #: default solution cache
 DEFAULT_CACHE = Path("out") / "bench"
 #: the triangle-bound case: few pixels, so per-vertex work dominates the frame
@@ -69,7 +67,7 @@ def bench_solve_options(**overrides):
     """:class:`~iat.radiosity.SolveOptions` of :data:`BENCH_SOLVE` (fields the solver lacks are dropped)."""
     from dataclasses import fields
 
-    from .radiosity import SolveOptions
+    from iat.radiosity import SolveOptions
 
     known = {f.name for f in fields(SolveOptions)}
     return SolveOptions(**{k: v for k, v in {**BENCH_SOLVE, **overrides}.items() if k in known})
@@ -106,58 +104,6 @@ def default_models() -> tuple[list[Path], list[str]]:
         f = SAMPLE_DIR / f"{name}.glb"
         (found if f.is_file() else missing).append(f if f.is_file() else name)
     return found, missing
-
-
-def options_key(options) -> str:
-    """First 10 hex digits of a hash of the solve options and the solver's source (names a cached
-    solution: a solver change solves again)."""
-    from .radiosity import solver_fingerprint
-
-    d = json.dumps(asdict(options), sort_keys=True, default=str) + solver_fingerprint()
-    return hashlib.sha256(d.encode()).hexdigest()[:10]
-
-
-def cached_solve(model: str | Path, options=None, cache_dir: str | Path = DEFAULT_CACHE, progress=None):
-    """``(scene, solution, info)`` for a model, the solution read from or written to the cache.
-
-    options : SolveOptions (None: defaults). The cached file
-    ``cache_dir/<stem>-<options_key>.npz`` is used when it is newer than the model
-    file and was solved with the same options; otherwise the model is solved again.
-    info : ``{"load_s", "solve_s", "cached", "cache_file"}``; ``solve_s`` is the time the
-    solve took when it ran (read from the solution's stats when cached).
-    """
-    from .radiosity import Solution, SolveOptions, solve
-    from .scene import load_scene
-
-    options = SolveOptions() if options is None else options
-    model = Path(model)
-    t0 = time.perf_counter()
-    scene = load_scene(model, max_edge=options.max_edge)
-    load_s = time.perf_counter() - t0
-    cache = Path(cache_dir) / f"{model.stem}-{options_key(options)}.npz"
-    sol = None
-    if cache.is_file() and cache.stat().st_mtime >= model.stat().st_mtime:
-        try:
-            sol = Solution.load(cache)
-        except Exception as e:  # a damaged or old cache file: solve again
-            log.info("cache %s not used: %s", cache, e)
-            sol = None
-        if sol is not None and (
-            json.loads(json.dumps(sol.options, default=str))
-            != json.loads(json.dumps(asdict(options), default=str))
-            or len(sol.patch_is_quad) != scene.n_patches
-        ):
-            sol = None
-    cached = sol is not None
-    if sol is None:
-        t0 = time.perf_counter()
-        sol = solve(scene, options, progress=progress)
-        solve_s = time.perf_counter() - t0
-        sol.model_path = str(model.resolve())
-        sol.stats = {**sol.stats, "wall_s": solve_s}
-        sol.save(cache)
-    solve_s = float(sol.stats.get("wall_s", sol.stats.get("time_s", float("nan"))))
-    return scene, sol, {"load_s": load_s, "solve_s": solve_s, "cached": cached, "cache_file": str(cache)}
 
 
 # -- camera paths ------------------------------------------------------------------------------
@@ -327,8 +273,8 @@ def image_errors(renderer, cameras: list[Camera], size: tuple[int, int], with_fl
     Returns ``{"frames", "psnr_db" (over all frames' pixels), "psnr_db_min" (worst frame),
     "flip_mean", "flip_max", "rel_error_lit"}``.
     """
-    from .imageio import auto_exposure
-    from .metrics import flip, lit_mask, relative_error
+    from iat.color import auto_exposure
+    from iat.measure.metrics import flip, lit_mask, relative_error
 
     if with_flip:
         limit_flip_threads()
@@ -370,7 +316,7 @@ def _psnr_from(normalised_mse: float) -> float:
 def seam_errors(baked, solution) -> dict:
     """Seam error (:func:`iat.bake.seam_error`, absolute radiance along shared coplanar edges)
     of the IAT textures and of the solution's own mesh, for scale: ``{"iat": {...}, "mesh": {...}}``."""
-    from .bake import seam_error
+    from iat.bake.baker import seam_error
 
     return _jsonable({"iat": seam_error(baked, solution=solution), "mesh": seam_error(solution)})
 
@@ -432,8 +378,8 @@ def bench_model(
     progress: Progress | None = None,
 ) -> dict:
     """One model's row of the benchmark (see :func:`run_bench` for the fields)."""
-    from .bake import BakePolicy, Baker
-    from .render import Renderer
+    from iat.bake.baker import BakePolicy, Baker
+    from iat.render.renderer import Renderer
 
     def step(frac: float, msg: str) -> None:
         if progress is not None:
@@ -635,7 +581,7 @@ def run_bench(
     rebake_s, load_s: {scene, upload_mesh, upload_iat}, policy, report`` (the report's
     Figure 3 numbers for the matching model, or None).
     """
-    from .bake import BakePolicy
+    from iat.bake.baker import BakePolicy
 
     solve_options = bench_solve_options() if solve_options is None else solve_options
     policy = BakePolicy() if policy is None else policy
@@ -826,27 +772,3 @@ def _seam_value(seam: dict):
 def _policy_brief(p: dict) -> str:
     keys = ("threshold", "scale", "method", "budget_mb", "pixel_format", "mipmaps")
     return ", ".join(f"{k}={p[k]}" for k in keys if k in p)
-
-
-# -- CLI ---------------------------------------------------------------------------------------
-def main(args) -> int:
-    """``iat bench [MODEL…] [--json] [--frames N] [--size WxH]``: Markdown on stdout, or JSON."""
-    import sys
-
-    from .cli import ProgressBar, _parse_size
-    from .errors import OptionError
-
-    size = _parse_size(getattr(args, "size", "640x480") or "640x480")
-    frames = int(getattr(args, "frames", 60) or 60)
-    if frames < 1:
-        raise OptionError(f"--frames must be >= 1, got {frames}")
-    bar = ProgressBar("bench")
-    try:
-        result = run_bench(list(getattr(args, "models", []) or []), frames=frames, size=size, progress=bar)
-    finally:
-        bar.close()
-    if getattr(args, "json", False):
-        print(json.dumps(result, indent=2))
-    else:
-        sys.stdout.write(format_table(result))
-    return 0

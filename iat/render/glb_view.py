@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import LoadError, RenderError
+from iat.errors import LoadError, RenderError
 
 __all__ = ["GlbDocument", "GlbPrimitive", "GlbView", "is_iat_export", "load_glb", "render_glb"]
 
@@ -162,7 +162,7 @@ class GlbDocument:
 
     def default_camera(self):
         """A camera framing the bounds from +Z (exported files carry no camera)."""
-        from .camera import Camera
+        from iat.camera import Camera
 
         lo, hi = self.bounds
         c = (lo + hi) / 2

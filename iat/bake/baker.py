@@ -45,9 +45,8 @@ from typing import Any
 
 import numpy as np
 
-from . import atlas
-from .errors import BakeError, Cancelled, OptionError
-from .flatten import (
+from iat.bake import atlas
+from iat.bake.flatten import (
     METHODS,
     SCALE_MODES,
     SolutionIndex,
@@ -58,6 +57,7 @@ from .flatten import (
     scaled_side,
     tile_side,
 )
+from iat.errors import BakeError, Cancelled, OptionError
 
 __all__ = [
     "BYTES_PER_TEXEL",
@@ -406,7 +406,7 @@ class BakedSet:
     def at(self, t: float, times=None) -> Baked:
         """The blend at time ``t`` between the neighbouring key times (default: evenly spaced
         in [0, 1]); see :func:`iat.solution_set.blend_weights`."""
-        from .solution_set import blend_weights, even_times
+        from iat.lighting.solution_set import blend_weights, even_times
 
         times = even_times(self.n_states) if times is None else times
         return self.blend(*blend_weights(times, t))
@@ -716,7 +716,7 @@ def _box_source_tile(src) -> np.ndarray:
     tile, ring, is_tri, factor = src
     t = np.array(tile, dtype=np.float32, copy=True)
     if ring is not None:
-        from .seams import ring_index
+        from iat.bake.seams import ring_index
 
         rows, cols = ring_index(t.shape[0], is_tri)
         t[rows, cols] = ring
@@ -856,7 +856,7 @@ class Baker:
         one side are done together, in chunks whose float32 temporary is reused; only the GPU
         form is kept. ``source = (tile, ring, is_tri, factor)`` rebuilds the float32 box.
         """
-        from .seams import ring_index
+        from iat.bake.seams import ring_index
 
         rings = rings or {}
         out: list = [None] * len(ps)
@@ -1046,7 +1046,7 @@ class Baker:
                     f"machine's {have / 2**30:.1f} GiB; lower the scale, raise the threshold or set a budget"
                 )
             try:
-                from .seams import harmonised_boxes  # neighbours' tile edges matched (iat/seams.py)
+                from iat.bake.seams import harmonised_boxes
 
                 boxes, gpu_boxes = harmonised_boxes(self, ps, policy, align, tm)
                 tm["tiles"] = time.perf_counter() - t0
@@ -1177,7 +1177,7 @@ class Baker:
         Returns a :class:`BakedSet`: pages ``(n_states, n_pages, H, W, 3)``, placements, uv and
         geometry identical for every state (checked). rgba8 sets share one page scale.
         """
-        from .solution_set import same_mesh
+        from iat.lighting.solution_set import same_mesh
 
         t_start = time.perf_counter()
         solutions = list(getattr(solutions, "solutions", solutions))
@@ -1309,7 +1309,7 @@ def seam_error(
     size), either direction. Returns dict(max=, mean=, edges=, samples=) of the absolute
     radiance difference (max over channels); zeros when no edge is shared.
     """
-    from .radiosity.solution import Solution
+    from iat.radiosity.solution import Solution
 
     none = {"max": 0.0, "mean": 0.0, "edges": 0, "samples": 0}
     t = np.linspace(0.0, 1.0, int(samples))
@@ -1371,7 +1371,7 @@ def seam_error(
         return uvc[e_p[e], ea[e]][:, None] * (1 - w) + uvc[e_p[e], eb[e]][:, None] * w  # (E, S, 2)
 
     if is_sol:
-        from .flatten import flatten
+        from iat.bake.flatten import flatten
 
         used = np.unique(np.concatenate([e_p[e1], e_p[e2]]))
         tiles = flatten(sol, ps[used], method)

@@ -63,7 +63,7 @@ from collections import OrderedDict
 
 import numpy as np
 
-from .flatten import TileCache, extend_triangle, scaled_side, tile_side
+from iat.bake.flatten import TileCache, extend_triangle, scaled_side, tile_side
 
 __all__ = [
     "MAX_ANGLE_DEG",
@@ -566,8 +566,8 @@ def seam_measure(
     Returns dict(max=, mean=, segments=, samples=, textured=: the same over textured-textured
     segments only); zeros when none.
     """
-    from .bake import _sample_pages
-    from .flatten import flatten, sample_tile
+    from iat.bake.baker import _sample_pages
+    from iat.bake.flatten import flatten, sample_tile
 
     pairs = solution_pairs(solution) if pairs is None else pairs
     none = {"max": 0.0, "mean": 0.0, "segments": 0, "samples": 0}
@@ -654,8 +654,8 @@ def _main(argv=None) -> None:  # pragma: no cover - a measuring script
     import argparse
     import time
 
-    from .bake import BakePolicy, Baker, seam_error
-    from .radiosity import Solution
+    from iat.bake.baker import BakePolicy, Baker, seam_error
+    from iat.radiosity import Solution
 
     ap = argparse.ArgumentParser(description="seams and harmonisation cost of solutions (docs/baking.md)")
     ap.add_argument("solutions", nargs="+")

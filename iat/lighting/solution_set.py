@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import OptionError, SolutionFileError
+from iat.errors import OptionError, SolutionFileError
 
 log = logging.getLogger(__name__)
 
@@ -123,8 +123,8 @@ def merge_meshes(solutions):
     element split in any of them is split (then 2:1 balanced). Every vertex of every input is a
     vertex of the result, so a solve on it (``solve(scene, mesh=merged)``) resolves each input's
     features as finely as that input did."""
-    from . import quadtree as qt
-    from .radiosity.solution import Solution
+    from iat.geometry import quadtree as qt
+    from iat.radiosity.solution import Solution
 
     sols = list(solutions)
     first = sols[0]
@@ -255,7 +255,7 @@ def load_set(paths, times=None, names=None) -> SolutionSet:
       key times of the model's lighting states named in ``stats['lighting_state']``, else
       evenly spaced in [0, 1]
     """
-    from .radiosity.solution import Solution
+    from iat.radiosity.solution import Solution
 
     paths = [Path(p) for p in paths]
     if not paths:
@@ -280,7 +280,7 @@ def load_set(paths, times=None, names=None) -> SolutionSet:
 
 
 def _times_from_model(sols) -> np.ndarray | None:
-    from .lighting import lighting_states, state_times
+    from iat.lighting.edits import lighting_states, state_times
 
     model = sols[0].model_path
     wanted = [s.stats.get("lighting_state") for s in sols]
@@ -320,10 +320,10 @@ def solve_set(
       most sources).
     progress : ``progress(fraction, message) -> bool``; False cancels (raises Cancelled).
     """
-    from .errors import Cancelled
-    from .lighting import apply_lighting_state, lighting_states, state_times, union_lighting
-    from .radiosity import SolveOptions, resolve, solve
-    from .scene import Scene
+    from iat.errors import Cancelled
+    from iat.io.scene import Scene
+    from iat.lighting.edits import apply_lighting_state, lighting_states, state_times, union_lighting
+    from iat.radiosity import SolveOptions, resolve, solve
 
     states = lighting_states(scene) if states is None else dict(states)
     if not states:

@@ -27,13 +27,14 @@ from __future__ import annotations
 import json
 import logging
 import time
-from collections.abc import Callable
 from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
 
-from .bench import (
+from iat.progress import Progress
+from iat.radiosity.cache import cached_solve
+from iat.tools.bench import (
     DEFAULT_CACHE,
     FrameTimer,
     _jsonable,
@@ -41,7 +42,6 @@ from .bench import (
     _policy_dict,
     _texture_bytes,
     bench_solve_options,
-    cached_solve,
     default_models,
     interpolate_path,
     limit_flip_threads,
@@ -53,7 +53,6 @@ from .bench import (
 
 log = logging.getLogger(__name__)
 
-Progress = Callable[[float, str], "bool | None"]
 
 #: the default sweep (small enough for all five sample models in a few minutes on 2 cores)
 #: thresholds: None means (0, D // 2, D - 1, D) for the solve's max depth D (all textured ... deepest only)
@@ -109,14 +108,14 @@ def _geometry_bytes_mesh(sol) -> int:
 
 
 def _mean_flip(images, refs, exposures) -> float:
-    from .metrics import flip
+    from iat.measure.metrics import flip
 
     return float(np.mean([flip(a, b, exposure=e) for a, b, e in zip(images, refs, exposures, strict=True)]))
 
 
 def _psnr(images, refs, exposures) -> float:
     """PSNR over all frames, peak = each frame's display white (1 / exposure); capped at 200 dB."""
-    from .bench import _psnr_from
+    from iat.tools.bench import _psnr_from
 
     v = [
         float(np.mean((a.astype(np.float64) - b) ** 2)) * e * e
@@ -146,9 +145,9 @@ def chart_model(
     ``thresholds x scales x tolerance_methods``; every solution also gives a mesh point.
     reference_spp : samples per pixel of the Mitsuba reference (None: no reference).
     """
-    from .bake import BakePolicy, Baker
-    from .imageio import auto_exposure
-    from .render import Renderer
+    from iat.bake.baker import BakePolicy, Baker
+    from iat.color import auto_exposure
+    from iat.render.renderer import Renderer
 
     def step(f, m):
         if progress is not None:
@@ -300,7 +299,7 @@ def chart_model(
 def _references(scene, cams, size, spp: int, cache_dir) -> tuple[list | None, dict | None]:
     """Mitsuba references of ``cams`` (cached in ``cache_dir/refs``), or (None, None) without mitsuba."""
     try:
-        from .reference import mitsuba_variant, render_reference_cached
+        from iat.measure.reference import mitsuba_variant, render_reference_cached
     except ImportError:
         return None, None
     try:
@@ -533,26 +532,3 @@ def plot(result: dict, out: str | Path) -> Path:
     fig.savefig(out, dpi=90)
     plt.close(fig)
     return out
-
-
-def main(args) -> int:
-    """``iat chart [MODEL…] -o CHART.png [--size WxH] [--frames N]``: writes CHART.png and CHART.json."""
-    from .cli import ProgressBar, _parse_size
-    from .errors import OptionError
-
-    size = _parse_size(getattr(args, "size", "160x120") or "160x120")
-    frames = int(getattr(args, "frames", 10) or 10)
-    if frames < 1:
-        raise OptionError(f"--frames must be >= 1, got {frames}")
-    bar = ProgressBar("chart")
-    try:
-        result = run_chart(
-            list(getattr(args, "models", []) or []), args.output, size=size, frames=frames, progress=bar
-        )
-    finally:
-        bar.close()
-    print(f"wrote {result['png']} and {result['json']}")
-    for row in result["models"]:
-        front = row["pareto"].get("flip_vs_finest/gpu_mb", [])
-        print(f"{row['model']}: {len(row['points'])} points, {len(front)} on the memory Pareto front")
-    return 0

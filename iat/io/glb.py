@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from .camera import Camera
+from iat.camera import Camera
 
 __all__ = ["GlbBuilder", "quat_from_matrix", "look_rotation"]
 
@@ -552,7 +552,7 @@ class GlbBuilder:
         untouched and the temporary file removed; stale temporaries of killed writers (older
         than an hour) are removed after a successful write.
         """
-        from .imageio import atomic_write
+        from iat.fsutil import atomic_write
 
         data = self.to_bytes()  # serialisation errors happen before anything touches the disk
         return atomic_write(path, lambda f: f.write(data), make_parents=False)

@@ -54,9 +54,9 @@ from typing import Any
 
 import numpy as np
 
-from .errors import IATError, LoadError, OptionError
-from .scene import Light, Material, Scene
-from .worker import LatestWorker
+from iat.errors import IATError, LoadError, OptionError
+from iat.io.scene import Light, Material, Scene
+from iat.worker import LatestWorker
 
 log = logging.getLogger(__name__)
 
@@ -489,13 +489,13 @@ class LightEditor:
 # -- saving back to glTF ------------------------------------------------------------------------------
 def _quat_from_direction(direction) -> list[float]:
     """Rotation quaternion (x, y, z, w) taking the node's -Z to ``direction``."""
-    from .glb import look_rotation, quat_from_matrix
+    from iat.io.glb import look_rotation, quat_from_matrix
 
     return [float(x) for x in quat_from_matrix(look_rotation(np.asarray(direction, dtype=np.float64)))]
 
 
 def _atomic_write(path: Path, data: bytes) -> None:
-    from .imageio import atomic_write
+    from iat.fsutil import atomic_write
 
     atomic_write(path, lambda f: f.write(data))
 
@@ -557,7 +557,7 @@ def save_gltf(
     """
     from pygltflib import Node
 
-    from .scene import _Gltf
+    from iat.io.scene import _Gltf
 
     src, dst = Path(src), Path(dst)
     if not src.is_file():
@@ -651,12 +651,12 @@ def save_gltf(
                 doc.scenes[scene_index].nodes = list(doc.scenes[scene_index].nodes or []) + [node_i]
         else:
             node = doc.nodes[node_i]
-            from .scene import _node_local
+            from iat.io.scene import _node_local
 
             parent = world[node_i] @ np.linalg.inv(_node_local(node))
             target = np.eye(4)
             if rot is not None:
-                from .scene import _quat_matrix
+                from iat.io.scene import _quat_matrix
 
                 target[:3, :3] = _quat_matrix(rot)
             else:  # a point light keeps its orientation
@@ -665,7 +665,7 @@ def save_gltf(
                 target[:3, :3] = u @ vt
             target[:3, 3] = lt.position
             if np.allclose(parent, np.eye(4), atol=1e-12):
-                from .glb import quat_from_matrix
+                from iat.io.glb import quat_from_matrix
 
                 node.matrix = None
                 node.scale = None
@@ -764,7 +764,7 @@ class Relighter(LatestWorker):
     """
 
     def __init__(self, solution, scene, options=None, schedule=(8.0, 2.5), name: str = "iat-relight"):
-        from .radiosity import SolveOptions
+        from iat.radiosity import SolveOptions
 
         self.base = solution
         self.base_scene = scene
@@ -800,7 +800,7 @@ class Relighter(LatestWorker):
         return not self._superseded()
 
     def _work(self, request) -> None:
-        from .radiosity import resolve, solve
+        from iat.radiosity import resolve, solve
 
         scene, version, remesh = request
         t_job = time.perf_counter()

@@ -1,0 +1,5 @@
+import sys
+
+from iat.cli.commands import main
+
+sys.exit(main())

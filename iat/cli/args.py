@@ -1,0 +1,28 @@
+"""Parsers of the ``iat`` command's option values; each raises :class:`~iat.errors.OptionError`
+with a one-line message."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from iat.errors import OptionError
+
+
+def parse_vec(text: str, name: str) -> np.ndarray:
+    try:
+        v = np.array([float(x) for x in text.split(",")])
+    except ValueError:
+        raise OptionError(f"{name} must be three numbers X,Y,Z, got {text!r}") from None
+    if v.shape != (3,) or not np.isfinite(v).all():
+        raise OptionError(f"{name} must be three finite numbers X,Y,Z, got {text!r}")
+    return v
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise OptionError(f"--size must be WxH, got {text!r}") from None
+    if not (1 <= w <= 16384 and 1 <= h <= 16384):
+        raise OptionError(f"--size out of range: {text}")
+    return w, h
