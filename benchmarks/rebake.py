@@ -61,7 +61,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from iat.bake.baker import BakePolicy, Baker  # noqa: E402
+from iat.bake.baker import Baker  # noqa: E402
+from iat.bake.policy import BakePolicy  # noqa: E402
 
 GOAL_MS, LIVE_MS = 16.0, 100.0
 LADDER = [float(2.0 ** (-q / 4)) for q in range(9)]
@@ -226,7 +227,7 @@ def run(args) -> dict:
         gc.freeze()
         freeze_s = time.perf_counter() - t0
     if args.worker:
-        from viewer.state import BakeWorker
+        from viewer.bake_worker import BakeWorker
 
         worker = BakeWorker(baker, prewarm=not args.no_prewarm, warm_from=base)
 

@@ -90,7 +90,7 @@ def surface_values(sol, n_out: int = 256) -> np.ndarray:
     n_out x n_out grid of cells in each patch's (u, v) (no lattice point of any depth, so no
     solution is sampled only at its own vertices), concatenated over the patches, and (same
     length) the area each point stands for and its patch."""
-    from iat.radiosity.options import LUMINANCE
+    from iat.color import LUMINANCE_WEIGHTS
     from iat.radiosity.sampling import Lattice, sample_lattice
 
     lat = Lattice(sol.forest, np.asarray(sol.vert_key))
@@ -105,7 +105,7 @@ def surface_values(sol, n_out: int = 256) -> np.ndarray:
             keep = u + v <= 1.0 + 1e-12
             u, v = u[keep], v[keep]
         flat = lat.grid(p, vals).reshape(-1, 3)
-        out.append(sample_lattice(flat, sol.n, u, v) @ LUMINANCE)
+        out.append(sample_lattice(flat, sol.n, u, v) @ LUMINANCE_WEIGHTS)
         c = corners[p]
         area = 0.5 * np.linalg.norm(np.cross(c[1] - c[0], c[2] - c[0]))
         if sol.patch_is_quad[p]:
@@ -328,7 +328,7 @@ class RayRecorder:
 
     def __init__(self, limit: int = 1 << 22):
         self.limit, self.kept, self.batches = limit, 0, []
-        self._orig = Visibility.occluded
+        self.original = Visibility.occluded
 
     def __enter__(self):
         rec = self
@@ -342,13 +342,13 @@ class RayRecorder:
                     )
                 )
                 rec.kept += len(origins)
-            return rec._orig(vis, origins, dirs, tfar)
+            return rec.original(vis, origins, dirs, tfar)
 
         Visibility.occluded = occluded
         return self
 
     def __exit__(self, *exc):
-        Visibility.occluded = self._orig
+        Visibility.occluded = self.original
 
 
 def bare_replay_rays_per_s(scene, batches, rounds: int = 3) -> float:
@@ -366,11 +366,10 @@ def bare_replay_rays_per_s(scene, batches, rounds: int = 3) -> float:
         for o, d, t in batches:
             c = max(4096, min(CHUNK, -(-len(o) // vis.threads)))
             jobs += [(o[a : a + c], d[a : a + c], t[a : a + c, 0]) for a in range(0, len(o), c)]
-        run = vis._scene.run
         best = 0.0
         for _ in range(rounds + 1):  # the first round warms up
             t0 = time.perf_counter()
-            for f in [pool.submit(run, o, d, t, "OCCLUDED") for o, d, t in jobs]:
+            for f in [pool.submit(vis.occluded_chunk, o, d, t) for o, d, t in jobs]:
                 f.result()
             best = max(best, n / (time.perf_counter() - t0))
     return best

@@ -23,6 +23,15 @@ def srgb_encode(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(np.maximum(x, 0.0031308), 1.0 / 2.4) - 0.055)
 
 
+def srgb_decode(y: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`srgb_encode`: sRGB-encoded values in ``[0, 1]`` -> linear.
+
+    y : (...) float array -> (...) float64 in ``[0, 1]``
+    """
+    y = np.asarray(y, dtype=np.float64)
+    return np.where(y <= 0.04045, y / 12.92, np.power((np.maximum(y, 0.04045) + 0.055) / 1.055, 2.4))
+
+
 def auto_exposure(linear: np.ndarray) -> float:
     """Exposure that maps the 99th percentile of luminance to 0.8.
 

@@ -5,21 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from iat.bake.baker import (
-    BYTES_PER_TEXEL,
-    BakePolicy,
-    Baker,
-    MemoryReport,
-    bake,
-    choose_policy,
-    cost_model,
-    quantise_rgb9e5,
-    quantise_rgba8,
-    seam_error,
-)
+from iat.bake.baker import Baker, bake
+from iat.bake.budget import choose_policy, cost_model
+from iat.bake.formats import BYTES_PER_TEXEL, quantise_rgb9e5, quantise_rgba8
+from iat.bake.memory import MemoryReport
+from iat.bake.policy import BakePolicy
 from iat.errors import BakeError, OptionError
 from iat.geometry import quadtree as qt
 from iat.io.scene import Material, Scene
+from iat.measure.seams import seam_error
 from iat.radiosity.solution import Solution
 from tests.test_flatten import SHAPES, linear_field, make_solution, patch_world, wavy_field
 
@@ -504,7 +498,7 @@ def test_gpu_pages_are_the_stored_pages_in_the_gpu_dtype(grid_sol, fmt):
     page / page_scale, rgb9e5: the 9e5 values as float16, exact), read-only and cached; ``pages``
     (float32, exact for rgba16f) is made on first access and equals the GPU form decoded within
     the format's rounding."""
-    from iat.bake.baker import GPU_DTYPES, from_gpu, to_gpu
+    from iat.bake.formats import GPU_DTYPES, from_gpu, to_gpu
 
     b = Baker(grid_sol)
     bk = b.bake(BakePolicy(threshold=0, pixel_format=fmt))
@@ -531,7 +525,7 @@ def test_gpu_pages_are_the_stored_pages_in_the_gpu_dtype(grid_sol, fmt):
 
 
 def test_to_gpu_clamps_half_floats_and_rounds_srgb():
-    from iat.bake.baker import from_gpu, quantise_rgba8, to_gpu
+    from iat.bake.formats import from_gpu, quantise_rgba8, to_gpu
 
     x = np.array([[1e5, 1.0, 0.0], [2.0**-20, 0.5, 3.0]], np.float32)
     h = to_gpu(x, "rgba16f")
@@ -544,7 +538,7 @@ def test_to_gpu_clamps_half_floats_and_rounds_srgb():
 
 def test_host_bytes_counts_pages_boxes_tiles_and_temporaries():
     from iat.bake import atlas
-    from iat.bake.baker import host_bytes, host_memory_bytes
+    from iat.bake.memory import host_bytes, host_memory_bytes
 
     sides = np.array([5, 5, 9])
     pk = atlas.pack(np.stack([sides, sides], axis=1), 64, 2, 2)

@@ -14,7 +14,9 @@ import pytest
 from PIL import Image
 from pygltflib import GLTF2
 
-from iat.bake.baker import BakePolicy, Baker
+from iat.bake.baker import Baker
+from iat.bake.policy import BakePolicy
+from iat.color import srgb_encode
 from iat.errors import BakeError
 from iat.export.gltf import export_glb, radiance_scale
 from tests.test_bake import detail_scene, grid_scene_solution
@@ -48,7 +50,7 @@ def read_image(gltf: GLTF2, texture: int) -> np.ndarray:
 
 def srgb8(linear01):
     x = np.clip(np.asarray(linear01, dtype=np.float64), 0, 1)
-    return np.round(np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055) * 255).astype(int)
+    return np.round(srgb_encode(x) * 255).astype(int)
 
 
 def node_by_name(gltf: GLTF2, name: str):
@@ -192,7 +194,7 @@ def test_radiance_scale_leaves_out_emitters_and_gutters(tmp_path):
     # each tile read back at its atlas placement (the packer's, not the uv)
     ps = np.flatnonzero(bk.patch_textured)
     sides = (2 ** sol.patch_depth()[ps] + 1).astype(np.int64)
-    packing = baker._pack(ps, sides, bk.policy, 2 ** (bk.mip_levels - 1))
+    packing = baker.pack(ps, sides, bk.policy, 2 ** (bk.mip_levels - 1))
     own, own_area = [], []
     for p, m, (layer, x, y) in zip(ps, sides, packing.placements.tolist(), strict=True):
         if emissive[p]:

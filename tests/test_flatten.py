@@ -378,7 +378,7 @@ def test_scale_one_is_identity_and_errors(lin_sol):
 def _reference_scale(tile, scale, mode, method, triangle):
     from PIL import Image
 
-    from iat.bake.flatten import _axis_weights
+    from iat.bake.flatten import axis_weights
 
     n = tile.shape[0]
     m = scaled_side(n, scale)
@@ -396,7 +396,7 @@ def _reference_scale(tile, scale, mode, method, triangle):
     kern = "cubic" if method == "bicubic" else "bilinear"
     r = np.asarray(tile, dtype=np.float64)
     for axis in (1, 0):
-        idx, w = _axis_weights(r.shape[axis], pos, kern)
+        idx, w = axis_weights(r.shape[axis], pos, kern)
         x = np.moveaxis(r, axis, 0)
         acc = np.zeros((m,) + x.shape[1:])
         for t in range(idx.shape[1]):

@@ -9,8 +9,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from iat.bake.baker import BakePolicy, Baker
+from iat.bake.baker import Baker
+from iat.bake.policy import BakePolicy
 from iat.camera import Camera
+from iat.color import srgb_decode, srgb_encode
 from iat.errors import LoadError
 from iat.export.gltf import export_glb, radiance_scale
 from iat.io.glb import GlbBuilder
@@ -30,14 +32,14 @@ def png(rgb8: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def srgb_encode(x):
-    x = np.clip(np.asarray(x, dtype=np.float64), 0, 1)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+def srgb_encode01(x):
+    """sRGB-encoded values of linear ``x`` clamped to [0, 1]."""
+    return srgb_encode(np.clip(np.asarray(x, dtype=np.float64), 0, 1))
 
 
-def srgb_decode(c8):
-    c = np.asarray(c8, dtype=np.float64) / 255.0
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+def srgb_decode8(c8):
+    """Linear values of 8-bit sRGB codes."""
+    return srgb_decode(np.asarray(c8, dtype=np.float64) / 255.0)
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +91,7 @@ def test_draws_an_export_like_iat_mode(mixed, egl_ctx, tmp_path):
     # below the scale the two differ by the 8-bit sRGB rounding of the page texels (and of
     # COLOR_0's f32): compare in sRGB codes of radiance / scale
     below = lit & (ref < 0.98 * s).all(axis=-1)
-    codes = np.abs(srgb_encode(img / s) - srgb_encode(ref / s))[below] * 255
+    codes = np.abs(srgb_encode01(img / s) - srgb_encode01(ref / s))[below] * 255
     assert codes.max() <= 1.5, codes.max()
     # above the scale both clip: the file shows radiance_scale, at most
     assert img.max() <= s * (1 + 1e-5)
@@ -148,7 +150,7 @@ HEAD_ON = Camera(
 
 def test_sampler_filters_srgb_decode_factor_and_colour(egl_ctx, tmp_path):
     tex = np.array([[[255, 0, 0], [0, 255, 0]], [[0, 0, 255], [128, 128, 128]]], np.uint8)
-    lin = srgb_decode(tex)
+    lin = srgb_decode8(tex)
     nearest = {"magFilter": 9728, "minFilter": 9728, "wrapS": 33071, "wrapT": 33071}
     p = _quad_glb(tmp_path / "n.glb", nearest, tex, factor=(0.5, 1.0, 1.0, 1.0), colors=np.full((4, 3), 0.8))
     assert not is_iat_export(p)
@@ -183,7 +185,7 @@ def test_node_transforms_are_applied(egl_ctx, tmp_path):
     assert render_glb(p, HEAD_ON, (32, 32), egl_ctx).max() == 0  # moved out of view
     cam = doc.default_camera()
     img = render_glb(p, cam, (32, 32), egl_ctx)
-    np.testing.assert_allclose(img[16, 16], srgb_decode([200, 200, 200]), rtol=2e-3)
+    np.testing.assert_allclose(img[16, 16], srgb_decode8([200, 200, 200]), rtol=2e-3)
 
 
 def test_own_context_and_errors(tmp_path):
@@ -224,5 +226,5 @@ def test_linear_field_round_trip_is_within_8_bit(egl_ctx, tmp_path):
     lit = ref.max(axis=-1) > 0
     ok = lit & (ref < 0.98 * s).all(axis=-1)
     assert ok.mean() > 0.3
-    codes = np.abs(srgb_encode(img / s) - srgb_encode(ref / s))[ok] * 255
+    codes = np.abs(srgb_encode01(img / s) - srgb_encode01(ref / s))[ok] * 255
     assert codes.max() <= 1.5, codes.max()

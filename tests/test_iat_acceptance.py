@@ -28,12 +28,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iat.bake.baker import BakePolicy, Baker, seam_error
+from iat.bake.baker import Baker
+from iat.bake.policy import BakePolicy
 from iat.color import auto_exposure, srgb_encode, tonemap
 from iat.io.images import save_png
 from iat.measure.metrics import flip, psnr
+from iat.measure.seams import seam_error
 from iat.radiosity import SolveOptions
 from iat.radiosity.cache import cached_solve
+from tests.support.geometry import pixel_centres_on_plane_z0
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "out" / "acceptance"
@@ -214,21 +217,6 @@ def _ramp(p):
     )
 
 
-def _pixel_centres_on_plane_z0(cam, w, h):
-    """(h, w, 3) world points where the rays through the pixel centres meet z = 0 (row 0 at the top)."""
-    m = np.linalg.inv(cam.clip_from_world(w / h))
-    px, py = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
-    nx, ny = px / w * 2 - 1, 1 - py / h * 2
-
-    def unproject(z):
-        p = np.stack([nx, ny, np.full_like(nx, z), np.ones_like(nx)], -1) @ m.T
-        return p[..., :3] / p[..., 3:]
-
-    a, b = unproject(-1.0), unproject(1.0)
-    t = -a[..., 2] / (b[..., 2] - a[..., 2])
-    return a + t[..., None] * (b - a)
-
-
 @pytest.mark.parametrize("depth", [0, 2])
 def test_half_texel_placement_ramp_is_exact_up_to_the_polygon_edges(depth, renderer):
     """Texel centres on the polygon's corners: every pixel of the polygon, the outermost ones
@@ -248,7 +236,7 @@ def test_half_texel_placement_ramp_is_exact_up_to_the_polygon_edges(depth, rende
     worst = {}
     for label, cam in cams.items():
         img = renderer.render(cam, (w, h), mode="iat")
-        world = _pixel_centres_on_plane_z0(cam, w, h)
+        world = pixel_centres_on_plane_z0(cam, w, h)
         x, y = world[..., 0], world[..., 1]
         lit = img.max(axis=-1) > 0
         inside = (x > 0) & (x < 1) & (y > 0) & (y < 1)
@@ -365,7 +353,7 @@ def test_memory_report_equals_the_gl_texture_bytes(label, egl_ctx):
     r = Renderer(egl_ctx)  # fresh: no levels left over from another bake
     try:
         r.set_baked(bk)
-        tex = r._pages
+        tex = r.page_array
         got, levels = gl_texture_bytes(egl_ctx, tex)
     finally:
         r.release()
@@ -386,7 +374,7 @@ def test_memory_report_equals_gl_bytes_after_switching_mipmaps_off(egl_ctx):
         r.set_baked(b.bake(BakePolicy(threshold=0, detail=False)))
         off = b.bake(BakePolicy(threshold=0, detail=False, mipmaps=False))
         r.set_baked(off)
-        got, _ = gl_texture_bytes(egl_ctx, r._pages)
+        got, _ = gl_texture_bytes(egl_ctx, r.page_array)
     finally:
         r.release()
     assert got == off.memory.texture_bytes
@@ -400,7 +388,7 @@ def test_rgb9e5_pages_upload_with_the_reported_bytes(egl_ctx):
     r = Renderer(egl_ctx)
     try:
         r.set_baked(bk)
-        got, _ = gl_texture_bytes(egl_ctx, r._pages)
+        got, _ = gl_texture_bytes(egl_ctx, r.page_array)
     finally:
         r.release()
     assert got == bk.memory.texture_bytes
@@ -415,7 +403,7 @@ def test_seams_clamped_against_naive_scaling_on_the_cornell_box():
     0.25 on the (split) Cornell box. Clamped bakes are harmonised (iat/seams.py): the coarser
     neighbour's edge polyline is copied onto the finer one, so at the power-of-two scales both
     sides render one function; naive bakes are left as the report made them."""
-    from iat.bake.seams import seam_measure
+    from iat.measure.seams import seam_measure
 
     scene, sol = solved("cornell_box", SPLIT)
     baker = Baker(sol, scene)

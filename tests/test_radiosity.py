@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
+from iat.color import LUMINANCE_WEIGHTS as LUMINANCE
 from iat.errors import OptionError, SolutionFileError
 from iat.geometry import quadtree as qt
 from iat.io.scene import Light, Material, Scene
 from iat.radiosity import Solution, SolveOptions, resolve, solve
 from iat.radiosity.meshing import averaging_matrix
-from iat.radiosity.options import LUMINANCE
 from iat.radiosity.solver import evaluate_direct
 
 
@@ -272,7 +272,7 @@ def test_point_light_touching_a_wall_shoots_what_the_wall_received():
     """D3: the power the floor shoots for a point light 0.1 mm above it is what it received (I x the
     solid angle the floor subtends, 2 pi at the limit), not the 1/d^2 vertex peak spread over its
     elements (10^4 times more before the fix)."""
-    from iat.radiosity.solver import SolveRun
+    from iat.radiosity.run import SolveRun
     from iat.radiosity.visibility import Visibility
 
     scene = floor_scene(occluder=False, light_height=1.0)

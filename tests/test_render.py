@@ -17,9 +17,11 @@ import pytest
 from iat.camera import Camera
 from iat.color import auto_exposure, srgb_encode, tonemap
 from iat.errors import RenderError
+from iat.geometry.quadtree import lattice_to_world
 from iat.io.images import load_png, save_npy, save_png
 from iat.io.scene import Material, Scene
-from iat.render.renderer import PREVIEW_AMBIENT, Renderer, lattice_to_world, shader_dir, shader_source
+from iat.render.gl import shader_dir, shader_source
+from iat.render.renderer import PREVIEW_AMBIENT, Renderer
 
 W, H = 64, 48
 CAM = Camera(eye=[0.0, 0.0, 3.0], target=[0.0, 0.0, 0.0], yfov=60.0, znear=0.1, zfar=10.0)
@@ -382,7 +384,7 @@ def test_resetting_baked_does_not_grow_gl_objects_or_memory(renderer):
     renderer.set_baked(baked_of(big, "rgba32f", True))
     renderer.render(CAM, (W, H), "iat")
     n_objects = renderer.gl_object_count()
-    pages_glo = renderer._pages.glo
+    pages_glo = renderer.page_array.glo
     for _ in range(20):  # warm up the allocator
         renderer.set_baked(baked_of(big, "rgba32f", True))
     rss = _rss_bytes()
@@ -392,10 +394,10 @@ def test_resetting_baked_does_not_grow_gl_objects_or_memory(renderer):
         else:
             renderer.set_baked(baked_of(big, "rgba32f", True))
         assert renderer.gl_object_count() == n_objects
-    glo = renderer._pages.glo
+    glo = renderer.page_array.glo
     assert glo != pages_glo  # the shape changes reallocated the page texture
     renderer.set_baked(baked_of(big, "rgba32f", True))
-    assert renderer._pages.glo == glo  # same shape: written in place
+    assert renderer.page_array.glo == glo  # same shape: written in place
     growth = _rss_bytes() - rss
     assert growth < 64 * 2**20, f"RSS grew by {growth / 2**20:.0f} MiB over 200 re-sets"
     renderer.render(CAM, (W, H), "iat")
@@ -404,12 +406,12 @@ def test_resetting_baked_does_not_grow_gl_objects_or_memory(renderer):
 
 def test_geometry_buffers_keep_their_names_when_data_grows(renderer):
     renderer.set_solution(solution_of(np.full((4, 3), 0.5)))
-    names = {k: b.glo for k, b in renderer._solution.buffers.items()}
+    names = {k: b.glo for k, b in renderer.solution_geometry.buffers.items()}
     n = renderer.gl_object_count()
     bigger = solution_of(np.full((4, 3), 0.25))
     bigger.tri_vertices = np.tile(TRIS, (500, 1)).astype(np.int32)  # grows the index buffer
     renderer.set_solution(bigger)
-    assert {k: b.glo for k, b in renderer._solution.buffers.items()} == names
+    assert {k: b.glo for k, b in renderer.solution_geometry.buffers.items()} == names
     assert renderer.gl_object_count() == n
     assert renderer.render(CAM, (16, 12), "mesh")[6, 8, 0] == np.float32(0.25)
     assert renderer.stats()["triangles"] == 1000
@@ -467,16 +469,16 @@ def _internal_format(renderer) -> int:
     """GL_TEXTURE_INTERNAL_FORMAT of level 0 of the page texture (read with glGetTexLevelParameteriv)."""
     import ctypes
 
-    from iat.render.renderer import _libgl
+    from iat.render.gl import libgl
 
-    gl = _libgl()
+    gl = libgl()
     gl.glGetTexLevelParameteriv.argtypes = [
         ctypes.c_uint,
         ctypes.c_int,
         ctypes.c_uint,
         ctypes.POINTER(ctypes.c_int),
     ]
-    renderer._pages.use(0)
+    renderer.page_array.use(0)
     v = ctypes.c_int()
     gl.glGetTexLevelParameteriv(0x8C1A, 0, 0x1003, ctypes.byref(v))
     return v.value
@@ -487,7 +489,7 @@ def test_rgba8_pages_are_srgb_and_dark_texels_survive(renderer, mipmaps):
     """rgba8 texels are sRGB8 of page / page_scale in a GL_SRGB8_ALPHA8 texture: decoded to linear
     before filtering, so a texel at 0.125 % of the scale (sRGB code 4; linear UNORM8 would round it
     to 0, black) renders as the value the baker stored; mipmaps are built in linear space."""
-    from iat.bake.baker import quantise_rgba8
+    from iat.bake.formats import quantise_rgba8
 
     scale = 8.0
     page = np.empty((4, 4, 3), np.float32)
@@ -506,7 +508,7 @@ def test_rgba8_pages_are_srgb_and_dark_texels_survive(renderer, mipmaps):
 
 
 def test_rgb9e5_pages_upload_as_rgb9e5_and_render_the_stored_values(renderer):
-    from iat.bake.baker import quantise_rgb9e5
+    from iat.bake.formats import quantise_rgb9e5
 
     page = page_from_field(5, 5) * np.float32([3.0, 0.01, 700.0])  # channels 5 decades apart
     q = quantise_rgb9e5(page)
@@ -523,7 +525,8 @@ def test_rgb9e5_pages_upload_as_rgb9e5_and_render_the_stored_values(renderer):
 def test_same_baked_pages_are_not_uploaded_twice(renderer):
     """The Baker's cached pages (read-only) already on the GPU are not written again; other pages are.
     Shown with real GL: texels overwritten behind the renderer's back stay until other pages come."""
-    from iat.bake.baker import BakePolicy, Baker
+    from iat.bake.baker import Baker
+    from iat.bake.policy import BakePolicy
     from tests.test_bake import grid_scene_solution
 
     b = Baker(grid_scene_solution())
@@ -533,7 +536,7 @@ def test_same_baked_pages_are_not_uploaded_twice(renderer):
     renderer.set_baked(bk)
     first = renderer.render(cam, (W, H), "iat")
     assert (first > 0).any(axis=2).sum() > 500
-    tex = renderer._pages
+    tex = renderer.page_array
     tex.write(
         np.zeros((tex.height, tex.width, 4), np.float16).tobytes(),
         viewport=(0, 0, 0, tex.width, tex.height, 1),
@@ -559,7 +562,8 @@ def test_threshold_walk_on_one_renderer_matches_fresh_renderers(renderer, egl_ct
     """Mesh parts are prefixes of one depth-sorted mesh, written once and drawn by count; pages are
     written without conversion. A threshold walk down and up on one renderer draws, at every step,
     exactly what a fresh renderer draws for that bake."""
-    from iat.bake.baker import BakePolicy, Baker
+    from iat.bake.baker import Baker
+    from iat.bake.policy import BakePolicy
     from tests.test_bake import grid_scene_solution
 
     sol = grid_scene_solution()
@@ -582,7 +586,8 @@ def test_scale_walk_keeps_the_page_texture_and_matches_fresh_renderers(renderer,
     by powers of two, exactly) instead of re-creating the texture: a scale walk down and up (every
     format, mip levels on) draws, at every step, exactly what a fresh renderer draws; the texture is
     re-created only to grow or for another format, and ``page_texture`` tells allocated from used."""
-    from iat.bake.baker import BakePolicy, Baker
+    from iat.bake.baker import Baker
+    from iat.bake.policy import BakePolicy
     from tests.test_bake import grid_scene_solution
 
     b = Baker(grid_scene_solution())
@@ -594,8 +599,8 @@ def test_scale_walk_keeps_the_page_texture_and_matches_fresh_renderers(renderer,
             bk = b.bake(BakePolicy(threshold=t, scale=s, pixel_format=fmt))
             assert bk.mip_levels >= 2
             renderer.set_baked(bk)
-            if renderer._pages not in created:
-                created.append(renderer._pages)
+            if renderer.page_array not in created:
+                created.append(renderer.page_array)
             got = renderer.render(cam, (W, H), "iat")
             want = _fresh_iat_render(egl_ctx, bk, cam)
             assert (want > 0).any(axis=2).sum() > 300

@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 
 from iat.bake import seams
-from iat.bake.baker import BakePolicy, Baker, seam_error
+from iat.bake.baker import Baker
+from iat.bake.policy import BakePolicy
 from iat.geometry import quadtree as qt
+from iat.measure.seams import seam_error, seam_measure
 from iat.radiosity.solution import Solution
 from tests.test_flatten import wavy_field
 
@@ -126,7 +128,7 @@ def test_two_quads_of_different_depth_share_one_function(method, monkeypatch):
         assert before["edges"] == after["edges"] == 1
         assert before["max"] > 1e-3, scale
         assert after["max"] <= 1e-6, (scale, after)
-        m = seams.seam_measure(on, sol, samples=65)
+        m = seam_measure(on, sol, samples=65)
         assert m["max"] <= 1e-6 and m["segments"] == 1
         assert on.timings["seams"] >= 0.0
 
@@ -168,7 +170,7 @@ def test_t_junction_partial_overlaps(depths, monkeypatch):
     sol = uniform_solution(TEE, [True] * 3, depths)
     for scale in (1.0, 0.5, 0.25):
         on, off = bake_both(sol, BakePolicy(threshold=0, scale=scale, detail=False), monkeypatch)
-        m_on, m_off = seams.seam_measure(on, sol, samples=129), seams.seam_measure(off, sol, samples=129)
+        m_on, m_off = seam_measure(on, sol, samples=129), seam_measure(off, sol, samples=129)
         assert m_on["segments"] == 3
         assert m_off["max"] > 1e-3, (depths, scale)
         assert m_on["max"] <= 1e-6, (depths, scale, m_on)
@@ -191,8 +193,8 @@ def test_textured_patch_takes_the_coarser_mesh_neighbours_edge(monkeypatch):
     pol = BakePolicy(threshold=3, scale=1.0, detail=False)  # patch 0 textured, patch 1 mesh
     on, off = bake_both(sol, pol, monkeypatch)
     assert list(on.patch_textured) == [True, False]
-    assert seams.seam_measure(off, sol)["max"] > 1e-3
-    assert seams.seam_measure(on, sol)["max"] <= 1e-6
+    assert seam_measure(off, sol)["max"] > 1e-3
+    assert seam_measure(on, sol)["max"] <= 1e-6
     # the mesh part itself is untouched
     np.testing.assert_array_equal(on.mesh_radiance, off.mesh_radiance)
 
@@ -208,7 +210,7 @@ def test_linear_fields_stay_exact_and_caches_stay_clean():
         p: np.array(t) for p, t in zip(range(3), baker.tiles.get(np.arange(3), "bilinear", 0.5), strict=True)
     }
     b = baker.bake(BakePolicy(threshold=0, scale=0.5, detail=False))
-    assert seams.seam_measure(b, sol)["max"] <= 1e-5
+    assert seam_measure(b, sol)["max"] <= 1e-5
     for p, t in zip(range(3), baker.tiles.get(np.arange(3), "bilinear", 0.5), strict=True):
         np.testing.assert_array_equal(t, ref[p])
 
@@ -220,8 +222,8 @@ def test_threshold_steps_reuse_harmonised_boxes():
     baker = Baker(sol)
     for t in (0, 1, 0, 2, 1):
         b = baker.bake(BakePolicy(threshold=t, scale=0.5, detail=False))
-        assert seams.seam_measure(b, sol)["textured"]["max"] <= 1e-6
-    st = baker._seam_state
+        assert seam_measure(b, sol)["textured"]["max"] <= 1e-6
+    st = baker.seam_cache
     assert st.stats["boxes_reused"] > 0
     assert len(st.pairs) == 3  # paired once per Baker
 
@@ -234,7 +236,7 @@ def test_every_pixel_format_stores_both_sides_alike(pixel_format, monkeypatch):
     before, after = seam_error(off, sol)["max"], seam_error(on, sol)["max"]
     # shared knots hold one value, hence one code; the finer side's extra knots lie on the
     # coarse polyline up to the format's rounding: the seam is at most two roundings
-    from iat.bake.baker import quantise_rgb9e5, quantise_rgba8
+    from iat.bake.formats import quantise_rgb9e5, quantise_rgba8
 
     v = sol.vert_radiance.astype(np.float64)
     q = {
@@ -269,14 +271,14 @@ def _seam_step(img, world, x_seam=1.0):
 def test_gl_render_shows_no_step_across_the_seam(egl_ctx, monkeypatch):
     from iat.camera import Camera
     from iat.render.renderer import Renderer
-    from tests.test_iat_acceptance import _pixel_centres_on_plane_z0
+    from tests.support.geometry import pixel_centres_on_plane_z0
 
     sol = uniform_solution(TWO, [True, True], [5, 2], max_depth=5)
     pol = BakePolicy(threshold=0, scale=0.5, detail=False)
     on, off = bake_both(sol, pol, monkeypatch)
     cam = Camera(eye=[1.0, 0.5, 1.0], target=[1.0, 0.5, 0.0], yfov=60.0, znear=0.01, zfar=10.0)
     w, h = 200, 120
-    world = _pixel_centres_on_plane_z0(cam, w, h)
+    world = pixel_centres_on_plane_z0(cam, w, h)
     r = Renderer(egl_ctx)
     try:
         steps = {}
@@ -315,8 +317,8 @@ def _boxes_by_recipe(baker, baked, pol):
     materialised (``apply_ring``), padded with ``np.pad(mode="edge")``, divided by the albedo on
     detail patches, converted with ``to_gpu`` and blitted."""
     from iat.bake import atlas
-    from iat.bake.baker import from_gpu, to_gpu
     from iat.bake.flatten import scaled_side, tile_side
+    from iat.bake.formats import from_gpu, to_gpu
 
     idx = baker.index
     ps = np.flatnonzero(baked.patch_textured)
@@ -327,7 +329,7 @@ def _boxes_by_recipe(baker, baked, pol):
         textured = baked.patch_textured
         sides = tile_side(idx.depth).astype(np.int64)
         sides[ps] = scaled_side(tile_side(idx.depth[ps]), pol.scale)
-        pairs = baker._seam_state.pairs
+        pairs = baker.seam_cache.pairs
         inv = set(np.unique(pairs.patch[textured[pairs.patch].any(1)]).tolist())
         rings = {
             p: seams.tile_ring(t, not idx.is_quad[p])
@@ -338,8 +340,8 @@ def _boxes_by_recipe(baker, baked, pol):
         for p, t in zip(mesh.tolist(), baker.tiles.get(mesh, "bilinear", 1.0, "clamped"), strict=True):
             rings[p] = seams.tile_ring(t, not idx.is_quad[p])
         new, _ = seams.harmonise_rings(rings, sides, textured, idx.is_quad, pairs)
-    scale8 = baker._rgba8_scale(pol.detail) if pol.pixel_format == "rgba8" else 1.0
-    dm = baker._detail_mask(pol)
+    scale8 = baker.rgba8_scale(pol.detail) if pol.pixel_format == "rgba8" else 1.0
+    dm = baker.detail_mask(pol)
     gpus, floats = [], []
     for p, t in zip(ps.tolist(), tiles, strict=True):
         if p in new:
@@ -348,13 +350,13 @@ def _boxes_by_recipe(baker, baked, pol):
         after = int(atlas.align_up(n + 2 * g, align)) - n - g
         box = np.pad(t, ((g, after), (g, after), (0, 0)), mode="edge")
         if dm[p]:
-            box *= baker._inv_albedo[p].astype(np.float32)
+            box *= baker.inv_albedo[p].astype(np.float32)
         gpu = to_gpu(box, pol.pixel_format, scale8)
         if pol.pixel_format in ("rgba8", "rgb9e5"):
             box = from_gpu(gpu, pol.pixel_format, scale8)
         gpus.append(gpu)
         floats.append(box)
-    pk = baker._pack(ps, np.array([t.shape[0] for t in tiles]), pol, align)
+    pk = baker.pack(ps, np.array([t.shape[0] for t in tiles]), pol, align)
     G = np.zeros(baked.gpu_pages.shape, baked.gpu_pages.dtype)
     F = np.zeros(baked.gpu_pages.shape[:3] + (3,), np.float32)
     atlas.blit_boxes(G, gpus, pk.placements, g)

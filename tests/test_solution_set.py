@@ -12,7 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iat.bake.baker import BakedSet, BakePolicy, Baker
+from iat.bake.baked import BakedSet
+from iat.bake.baker import Baker
+from iat.bake.policy import BakePolicy
 from iat.color import srgb_encode
 from iat.errors import BakeError, OptionError
 from iat.io.scene import load_scene

@@ -35,12 +35,15 @@ import numpy as np
 import pytest
 
 from iat.bake.atlas import mip_levels
-from iat.bake.baker import BakePolicy, Baker, quantise_rgb9e5, quantise_rgba8, seam_error
+from iat.bake.baker import Baker
 from iat.bake.flatten import flatten, sample_tile
+from iat.bake.formats import quantise_rgb9e5, quantise_rgba8
+from iat.bake.policy import BakePolicy
 from iat.camera import Camera
 from iat.errors import BakeError, IATError, LoadError, OptionError, RenderError, SolutionFileError
 from iat.geometry import quadtree as qt
 from iat.io.scene import load_scene
+from iat.measure.seams import seam_error
 from iat.radiosity import Solution, SolveOptions, solve
 from iat.radiosity.options import RAY_EPS
 from tests import stability_scenes as ss
@@ -1019,7 +1022,8 @@ sys.path.insert(0, sys.argv[1])
 resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))  # 3 GiB: the bake below needs ~25
 import numpy as np
 from tests import stability_scenes as ss
-from iat.bake.baker import Baker, BakePolicy
+from iat.bake.baker import Baker
+from iat.bake.policy import BakePolicy
 from iat.errors import IATError
 sol = ss.synthetic_solution(ss.grid_corners(4, 3), lambda p, x: np.ones((len(p), 3)), max_depth=2)
 try:
@@ -1199,7 +1203,7 @@ def test_files_junk_npz_message_does_not_suggest_unpickling(bad_inputs):
 def test_files_viewer_open_job_reports_each_bad_input_on_one_line(bad_inputs, tmp_path, monkeypatch):
     """The viewer's open path (viewer.state.OpenJob, what `iat view FILE` runs after the window is up):
     every bad file ends in one line naming it, the job finishes, nothing is raised into the UI."""
-    from viewer.state import OpenJob
+    from viewer.jobs import OpenJob
 
     monkeypatch.setenv("IAT_CACHE_DIR", str(tmp_path / "cache"))
     errors = {}
@@ -1538,7 +1542,7 @@ def test_soak_a_thousand_rebakes(renderer, grid_solution):
 def test_soak_bake_worker_coalesces_a_burst(grid_solution):
     """The viewer's BakeWorker under a 500-request burst (a slider dragged fast): requests coalesce,
     the thread stays single, the last policy asked is the one baked."""
-    from viewer.state import BakeWorker
+    from viewer.bake_worker import BakeWorker
 
     scene, sol = grid_solution
     w = BakeWorker(Baker(sol, scene))

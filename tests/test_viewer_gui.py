@@ -56,81 +56,87 @@ def test_viewer_end_to_end(tmp_path, monkeypatch, gui_child):
     app = ViewerApp(default_model(), size=(1280, 800), solve_options=SolveOptions(max_depth=4), idle=False)
     s = app.state
     s.tuning.threshold = 0  # texture every patch: the IAT image is then all texture
-    s.diff_gain = 1.0
+    s.view.diff_gain = 1.0
     got: dict = {}
     images: dict[str, np.ndarray] = {}
 
     def settle(ctx, frames=3):
-        wait_until(ctx, lambda: not s.rebaking and not s.opening, 30, "the re-bake")
+        wait_until(ctx, lambda: not s.jobs.rebaking and not s.jobs.opening, 30, "the re-bake")
         ctx.yield_(frames)
 
     def shot(ctx, mode: str) -> None:
         """F12 in ``mode``: the app writes the 3D view; keep its pixels."""
-        s.last_screenshot = ""
+        s.messages.last_screenshot = ""
         ctx.key_press(imgui.Key.f12)
-        wait_until(ctx, lambda: s.last_screenshot, 10, f"the {mode} screenshot")
+        wait_until(ctx, lambda: s.messages.last_screenshot, 10, f"the {mode} screenshot")
         from PIL import Image
 
-        got.setdefault("shots", []).append(s.last_screenshot)
-        images[mode] = np.asarray(Image.open(s.last_screenshot).convert("RGB")).astype(np.int16)
+        got.setdefault("shots", []).append(s.messages.last_screenshot)
+        images[mode] = np.asarray(Image.open(s.messages.last_screenshot).convert("RGB")).astype(np.int16)
         testing.capture(ctx, str(tmp_path / f"window-{mode}.png"))
 
     def drive(ctx) -> None:
-        wait_until(ctx, lambda: s.baked is not None and s.solution is not None, 120, "the Cornell box")
+        wait_until(
+            ctx, lambda: s.model.baked is not None and s.model.solution is not None, 120, "the Cornell box"
+        )
         settle(ctx)
-        got["deepest"] = s.deepest
+        got["deepest"] = s.model.deepest
         got["t0"] = (
-            s.baked.policy.threshold,
-            s.iat_triangles,
-            s.memory["texture_bytes"],
-            s.memory["patches_textured"],
+            s.model.baked.policy.threshold,
+            s.model.iat_triangles,
+            s.model.memory["texture_bytes"],
+            s.model.memory["patches_textured"],
         )
 
         # the threshold slider, through the real widget: all mesh, then back to all texture
-        ctx.item_input_value("//**/Threshold", s.deepest + 1)
+        ctx.item_input_value("//**/Threshold", s.model.deepest + 1)
         settle(ctx)
         got["t_top"] = (
-            s.baked.policy.threshold,
-            s.iat_triangles,
-            s.memory["texture_bytes"],
-            s.memory["patches_textured"],
+            s.model.baked.policy.threshold,
+            s.model.iat_triangles,
+            s.model.memory["texture_bytes"],
+            s.model.memory["patches_textured"],
         )
         ctx.item_input_value("//**/Threshold", 0)
         settle(ctx)
-        got["t_back"] = (s.baked.policy.threshold, s.iat_triangles, s.memory["texture_bytes"])
+        got["t_back"] = (
+            s.model.baked.policy.threshold,
+            s.model.iat_triangles,
+            s.model.memory["texture_bytes"],
+        )
 
         # modes, by their radio buttons, each with an F12 screenshot
         for label, mode in (("Mesh", "mesh"), ("IAT", "iat"), ("Split", "split"), ("Difference", "diff")):
             ctx.item_click(f"//**/{label}")
             ctx.yield_(2)
-            got.setdefault("modes", []).append((s.mode, app.shown_mode()))
+            got.setdefault("modes", []).append((s.view.mode, app.shown_mode()))
             shot(ctx, mode)
-        got["split_at"] = s.split
+        got["split_at"] = s.view.split
 
         # drag the split divider in the view from the middle to 25 %
         ctx.item_click("//**/Split")
         ctx.yield_(2)
-        x, y, w, h = s.view_rect
+        x, y, w, h = s.view.rect
         ctx.mouse_move_to_pos(ImVec2(x + 0.5 * w, y + 0.5 * h))
         ctx.mouse_down(0)
         ctx.mouse_move_to_pos(ImVec2(x + 0.25 * w, y + 0.5 * h))
         ctx.yield_(2)
         ctx.mouse_up(0)
-        got["split_dragged"] = s.split
+        got["split_dragged"] = s.view.split
         # a drag elsewhere in the view looks around
-        before = s.camera.forward.copy()
+        before = s.view.camera.forward.copy()
         ctx.mouse_move_to_pos(ImVec2(x + 0.7 * w, y + 0.5 * h))
         ctx.mouse_down(0)
         ctx.mouse_move_to_pos(ImVec2(x + 0.8 * w, y + 0.55 * h))
         ctx.yield_(2)
         ctx.mouse_up(0)
-        got["look_turned"] = float(np.degrees(np.arccos(np.clip(before @ s.camera.forward, -1, 1))))
+        got["look_turned"] = float(np.degrees(np.arccos(np.clip(before @ s.view.camera.forward, -1, 1))))
         # W held walks forward (the click in the view took the keyboard focus from the panels)
-        eye = s.camera.eye.copy()
+        eye = s.view.camera.eye.copy()
         ctx.key_down(imgui.Key.w)
         ctx.yield_(4)
         ctx.key_up(imgui.Key.w)
-        got["walked"] = float((s.camera.eye - eye) @ s.camera.forward)
+        got["walked"] = float((s.view.camera.eye - eye) @ s.view.camera.forward)
         ctx.item_click("//**/Reset view")
         ctx.item_click("//**/IAT")
 
@@ -138,47 +144,47 @@ def test_viewer_end_to_end(tmp_path, monkeypatch, gui_child):
         ctx.item_click("//**/Budget")
         ctx.item_input_value("//**/Budget (MB)", 0.01)
         settle(ctx)
-        m = s.memory
+        m = s.model.memory
         got["budget"] = (
             s.tuning.budget_on,
             m["budget_mb"],
             m["texture_bytes"],
             m["budget_too_small"],
-            s.iat_triangles,
+            s.model.iat_triangles,
         )
         ctx.item_click("//**/Budget")
         settle(ctx)
-        got["budget_off"] = s.memory["texture_bytes"]
+        got["budget_off"] = s.model.memory["texture_bytes"]
 
         # export the bake on screen as GLB (written on a background thread)
         ctx.window_focus("//Model")
         ctx.item_input_value("//**/GLB file", str(tmp_path / "export.glb"))
         ctx.item_click("//**/Export GLB")
-        wait_until(ctx, lambda: "exported" in s.status or s.error, 60, "the export")
-        got["export_status"] = s.status
+        wait_until(ctx, lambda: "exported" in s.messages.status or s.messages.error, 60, "the export")
+        got["export_status"] = s.messages.status
         # a broken file: typed into the Model panel and opened
         ctx.item_input_value("//**/File to open", str(broken))
         ctx.item_click("//**/Open")
-        wait_until(ctx, lambda: bool(s.error), 30, "the error")
-        got["error"] = s.error
+        wait_until(ctx, lambda: bool(s.messages.error), 30, "the error")
+        got["error"] = s.messages.error
         drawn = app.frames_drawn
         ctx.yield_(5)
         got["drawn_after_error"] = app.frames_drawn - drawn
-        got["model_after_error"] = s.model_path
+        got["model_after_error"] = s.model.path
         got["error_window"] = ctx.item_exists("//Error/Dismiss")
         testing.capture(ctx, str(tmp_path / "window-error.png"))
         shot(ctx, "after-error")
         ctx.item_click("//Error/Dismiss")
         ctx.yield_(2)
-        got["error_cleared"] = s.error
+        got["error_cleared"] = s.messages.error
 
     got["seconds"] = run_gui(app, drive)
 
     deepest = got["deepest"]
-    mesh_tris = s.mesh_triangles
+    mesh_tris = s.model.mesh_triangles
     # threshold 0: every patch is one textured polygon, few triangles, texture memory used
     thr, tris, tex, textured = got["t0"]
-    assert thr == 0 and textured == s.solution.patch_is_quad.size
+    assert thr == 0 and textured == s.model.solution.patch_is_quad.size
     assert tris < 100 < mesh_tris and tex > 0
     # above the deepest tree: all mesh, no texture memory, the mesh's triangles
     thr, tris, tex, textured = got["t_top"]
@@ -259,8 +265,8 @@ class _GatedBaker:
 
 
 def test_bake_worker_bakes_the_newest_request_and_survives_errors():
-    from iat.bake.baker import BakePolicy
-    from viewer.state import BakeWorker
+    from iat.bake.policy import BakePolicy
+    from viewer.bake_worker import BakeWorker
 
     baker = _GatedBaker()
     w = BakeWorker(baker)
@@ -289,13 +295,13 @@ def test_bake_worker_bakes_the_newest_request_and_survives_errors():
     finally:
         baker.gate.set()
         w.close()
-    assert not w._thread.is_alive()
+    assert not w.alive
 
 
 def test_the_scale_slider_snaps_to_the_prewarmed_ladder():
     """Every value the Scale slider can set is on the 2**(k/4) ladder the worker pre-warms, inside
     the slider's range, and the seam-free dyadic scales are on it."""
-    from viewer.state import SCALE_MAX, SCALE_MIN, scale_neighbours, snap_scale
+    from viewer.bake_worker import SCALE_MAX, SCALE_MIN, scale_neighbours, snap_scale
 
     for v in np.geomspace(0.05, 4.0, 97):
         s = snap_scale(v)
@@ -309,8 +315,8 @@ def test_the_scale_slider_snaps_to_the_prewarmed_ladder():
 
 
 def test_neighbour_policies_are_the_sliders_next_steps():
-    from iat.bake.baker import BakePolicy
-    from viewer.state import neighbour_policies, scale_neighbours
+    from iat.bake.policy import BakePolicy
+    from viewer.bake_worker import neighbour_policies, scale_neighbours
 
     q, r = 2.0**0.25, 2.0 ** (-1 / 4)
     assert scale_neighbours(1.0) == [2.0 ** (-1 / 4), 2.0 ** (1 / 4)]
@@ -335,9 +341,10 @@ def test_bake_worker_prewarms_the_neighbours_so_the_next_step_is_a_cache_hit():
     """Idle, the worker bakes the last policy's neighbours (threshold +-1, the ladder scales on
     either side) into the Baker's caches, publishing nothing; a step to any of them then finds its
     pages cached: no resampling, no seam pass, no blit."""
-    from iat.bake.baker import BakePolicy, Baker
+    from iat.bake.baker import Baker
+    from iat.bake.policy import BakePolicy
     from tests.test_bake import grid_scene_solution
-    from viewer.state import BakeSource, BakeWorker, neighbour_policies
+    from viewer.bake_worker import BakeSource, BakeWorker, neighbour_policies
 
     sol = grid_scene_solution()
     deepest = int(sol.patch_depth().max())
@@ -417,8 +424,8 @@ def test_a_request_made_during_prewarm_is_served_first():
     """A request submitted while a neighbour is being pre-warmed: the neighbour's bake stops at its
     next stage, the request is baked next, the old policy's other neighbours are dropped, and the
     new policy's neighbours are pre-warmed after it."""
-    from iat.bake.baker import BakePolicy
-    from viewer.state import BakeWorker
+    from iat.bake.policy import BakePolicy
+    from viewer.bake_worker import BakeWorker
 
     baker = _SlowNeighbourBaker()
     w = BakeWorker(baker)
@@ -444,13 +451,15 @@ def test_a_request_made_during_prewarm_is_served_first():
     finally:
         baker.gate.set()
         w.close()
-    assert not w._thread.is_alive()
+    assert not w.alive
 
 
 def test_open_job_solves_caches_and_reports_errors(tmp_path, monkeypatch):
-    from iat.bake.baker import BakePolicy
+    from iat.bake.policy import BakePolicy
     from iat.radiosity import SolveOptions
-    from viewer.state import BakeWorker, OpenJob, default_model
+    from viewer.bake_worker import BakeWorker
+    from viewer.jobs import OpenJob
+    from viewer.state import default_model
 
     monkeypatch.setenv("IAT_CACHE_DIR", str(tmp_path / "cache"))
     opts = SolveOptions(max_depth=2)
@@ -486,9 +495,10 @@ def test_open_job_solves_caches_and_reports_errors(tmp_path, monkeypatch):
 
 
 def test_open_job_cancel_stops_the_solve(tmp_path, monkeypatch):
-    from iat.bake.baker import BakePolicy
+    from iat.bake.policy import BakePolicy
     from iat.radiosity import SolveOptions
-    from viewer.state import OpenJob, default_model
+    from viewer.jobs import OpenJob
+    from viewer.state import default_model
 
     monkeypatch.setenv("IAT_CACHE_DIR", str(tmp_path / "cache"))
     job = OpenJob(default_model(), SolveOptions(max_depth=8), BakePolicy())
@@ -505,13 +515,14 @@ def test_open_job_cancel_stops_the_solve(tmp_path, monkeypatch):
 
 def test_open_job_reports_the_load_and_cancels_it(tmp_path, monkeypatch):
     """G2: the open job shows the model load's progress (``loading: ...``) and a cancel stops the load."""
-    from iat.bake.baker import BakePolicy
+    from iat.bake.policy import BakePolicy
     from iat.radiosity import SolveOptions
-    from viewer.state import OpenJob, default_model
+    from viewer.jobs import OpenJob
+    from viewer.state import default_model
 
     monkeypatch.setenv("IAT_CACHE_DIR", str(tmp_path / "cache"))
     seen = []
-    original = OpenJob._load_progress
+    original = OpenJob.load_progress
 
     def spy(self, fraction, message):
         seen.append((fraction, message))
@@ -521,7 +532,7 @@ def test_open_job_reports_the_load_and_cancels_it(tmp_path, monkeypatch):
         seen.append((self.fraction, self.message, self.eta is None or self.eta >= 0))
         return keep_going
 
-    monkeypatch.setattr(OpenJob, "_load_progress", spy)
+    monkeypatch.setattr(OpenJob, "load_progress", spy)
     job = OpenJob(default_model(), SolveOptions(max_depth=2), BakePolicy())
     assert job.join(60)
     assert job.result is None and job.error == f"{default_model()}: cancelled"

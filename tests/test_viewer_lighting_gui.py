@@ -59,12 +59,12 @@ def test_viewer_lighting_end_to_end(tmp_path, monkeypatch, gui_child):
     from imgui_bundle.immapp import testing
     from PIL import Image
 
-    from iat.bake.baker import BakedSet
+    from iat.bake.baked import BakedSet
     from iat.io.scene import load_scene
     from iat.radiosity import SolveOptions
     from viewer import panels
     from viewer.app import ViewerApp
-    from viewer.state import project_points
+    from viewer.picking import project_points
 
     monkeypatch.setenv("IAT_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setenv("IAT_SCREENSHOT_DIR", str(tmp_path / "shots"))
@@ -80,7 +80,10 @@ def test_viewer_lighting_end_to_end(tmp_path, monkeypatch, gui_child):
         wait_until(
             ctx,
             lambda: (
-                not (s.rebaking or s.opening or s.relighting or s.solving_day_cycle) and app._relit is None
+                not (
+                    s.jobs.rebaking or s.jobs.opening or s.lighting.relighting or s.lighting.solving_day_cycle
+                )
+                and app.pending_relit is None
             ),
             120,
             "the background work",
@@ -88,58 +91,60 @@ def test_viewer_lighting_end_to_end(tmp_path, monkeypatch, gui_child):
         ctx.yield_(frames)
 
     def shot(ctx, name: str) -> np.ndarray:
-        s.last_screenshot = ""
+        s.messages.last_screenshot = ""
         ctx.key_press(imgui.Key.f12)
-        wait_until(ctx, lambda: s.last_screenshot, 10, f"the {name} screenshot")
-        images[name] = np.asarray(Image.open(s.last_screenshot).convert("RGB")).astype(np.float64)
+        wait_until(ctx, lambda: s.messages.last_screenshot, 10, f"the {name} screenshot")
+        images[name] = np.asarray(Image.open(s.messages.last_screenshot).convert("RGB")).astype(np.float64)
         testing.capture(ctx, str(tmp_path / f"window-{name}.png"))
         return images[name]
 
     def drive(ctx) -> None:
-        wait_until(ctx, lambda: s.baked is not None and s.editor is not None, 120, "the model")
+        wait_until(ctx, lambda: s.model.baked is not None and s.lighting.editor is not None, 120, "the model")
         settle(ctx)
         ctx.item_click("//**/IAT")
         ctx.yield_(2)
         shot(ctx, "before")
-        ed = s.editor
+        ed = s.lighting.editor
         k = [lt.name for lt in ed.lights].index("bulb")
         got["start"] = ed.lights[k].position.copy()
-        got["solution0"] = s.solution
+        got["solution0"] = s.model.solution
 
         # drag the bulb's marker to the right third of the view, at its height
-        px, ok = project_points(s.camera, [ed.lights[k].position], s.view_rect)
+        px, ok = project_points(s.view.camera, [ed.lights[k].position], s.view.rect)
         assert ok[0], "the bulb is not in view"
-        x, y, w, h = s.view_rect
+        x, y, w, h = s.view.rect
         ctx.mouse_move_to_pos(ImVec2(float(px[0, 0]), float(px[0, 1])))
         ctx.mouse_down(0)
         ctx.mouse_move_to_pos(ImVec2(float(px[0, 0]) + 0.25 * w, float(px[0, 1])))
         ctx.yield_(3)
         ctx.mouse_up(0)
-        got["selected"] = s.selected_light == k
-        got["dragging_after"] = s.dragging_light
-        got["looked"] = s.looking
+        got["selected"] = s.lighting.selected_light == k
+        got["dragging_after"] = s.lighting.dragging_light
+        got["looked"] = s.view.looking
         got["moved_to"] = ed.lights[k].position.copy()
         # the view improves step by step: wait for the final (converged) step and its bake
-        wait_until(ctx, lambda: s.relights > 0, 120, "the first re-solved solution")
-        got["first_step"] = s.relight_step
+        wait_until(ctx, lambda: s.lighting.relights > 0, 120, "the first re-solved solution")
+        got["first_step"] = s.lighting.relight_step
         wait_until(
             ctx,
-            lambda: s.relight_step[0] == s.relight_step[1] and s.relight_step[1] > 0,
+            lambda: (
+                s.lighting.relight_step[0] == s.lighting.relight_step[1] and s.lighting.relight_step[1] > 0
+            ),
             120,
             "the last step",
         )
         settle(ctx)
-        got["relights"] = s.relights
-        got["steps_published"] = s.relighter.steps_done
-        got["mode"] = s.solution.stats.get("mode")
-        got["bake_source"] = s.bake_source
+        got["relights"] = s.lighting.relights
+        got["steps_published"] = s.lighting.relighter.steps_done
+        got["mode"] = s.model.solution.stats.get("mode")
+        got["bake_source"] = s.model.bake_source
         shot(ctx, "moved")
 
         # add and delete a light with the panel's buttons
         n = len(ed.lights)
         ctx.item_click("//Lighting/Add point light")
         ctx.yield_(2)
-        got["added"] = (len(ed.lights), s.selected_light)
+        got["added"] = (len(ed.lights), s.lighting.selected_light)
         ctx.item_click("//Lighting/Delete light")
         ctx.yield_(2)
         got["deleted"] = len(ed.lights) == n
@@ -148,29 +153,29 @@ def test_viewer_lighting_end_to_end(tmp_path, monkeypatch, gui_child):
         # save the lights back to glTF
         ctx.item_input_value("//Lighting/glTF file##lights", str(tmp_path / "saved.glb"))
         ctx.item_click("//Lighting/Save lights")
-        wait_until(ctx, lambda: "saved the lights" in s.status or s.error, 60, "the save")
-        got["save_status"] = s.status
+        wait_until(ctx, lambda: "saved the lights" in s.messages.status or s.messages.error, 60, "the save")
+        got["save_status"] = s.messages.status
         got["saved_lights"] = [(lt.name, lt.position.copy()) for lt in ed.lights]
 
         # the day cycle: solve the states, then drag the time of day
         ctx.item_click("//Lighting/Solve day cycle")
-        wait_until(ctx, lambda: s.solution_set is not None, 300, "the day-cycle solve")
-        wait_until(ctx, lambda: isinstance(s.baked, BakedSet), 120, "the day-cycle bake")
+        wait_until(ctx, lambda: s.lighting.solution_set is not None, 300, "the day-cycle solve")
+        wait_until(ctx, lambda: isinstance(s.model.baked, BakedSet), 120, "the day-cycle bake")
         settle(ctx)
-        got["set"] = (list(s.solution_set.names), [float(t) for t in s.solution_set.times])
-        got["memory"] = dict(s.memory)
+        got["set"] = (list(s.lighting.solution_set.names), [float(t) for t in s.lighting.solution_set.times])
+        got["memory"] = dict(s.model.memory)
         got["hud"] = panels.hud_lines(s)
         for t, name in ((0.0, "t0"), (1.0, "t1"), (0.5, "t05"), (0.25, "t025")):
             ctx.item_input_value("//Lighting/Time of day", t)
             ctx.yield_(3)
-            got.setdefault("blend", {})[name] = (s.day_time, app.renderer.blend)
+            got.setdefault("blend", {})[name] = (s.lighting.day_time, app.renderer.blend)
             shot(ctx, name)
         ctx.item_click("//Lighting/Day cycle on")
         settle(ctx)
-        got["day_off_baked"] = type(s.baked).__name__
+        got["day_off_baked"] = type(s.model.baked).__name__
 
     got["seconds"] = run_gui(app, drive)
-    assert not s.error, s.error
+    assert not s.messages.error, s.messages.error
 
     # 1. the drag: the bulb was picked (not a look-around), moved at its height, and re-solved
     assert got["selected"] and not got["dragging_after"] and not got["looked"]

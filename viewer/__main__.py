@@ -34,13 +34,13 @@ def cli(argv: list[str] | None = None) -> int:
     opts = None if args.max_depth is None else SolveOptions(max_depth=args.max_depth)
     try:
         if args.bench:
-            from viewer.app import benchmark_rebake_frames
+            from viewer.bench import benchmark_rebake_frames
 
             res = benchmark_rebake_frames(args.path, size=args.size, max_depth=args.max_depth or 4)
             print(json.dumps(res, indent=1))
             return 0 if res["ok"] else 1
         if args.screenshots:
-            from viewer.app import capture_screenshots
+            from viewer.bench import capture_screenshots
 
             for f in capture_screenshots(args.screenshots, args.path, size=args.size, solve_options=opts):
                 print(f)

@@ -23,8 +23,10 @@ from pathlib import Path
 import numpy as np
 from imgui_bundle import ImVec2, ImVec4, hello_imgui, imgui, implot
 
+from iat.bake.flatten import METHODS
+from viewer.bake_worker import snap_scale
 from viewer.navigation import paths_file
-from viewer.state import METHODS, MODE_LABELS, MODES, AppState, snap_scale
+from viewer.state import MODE_LABELS, MODES, AppState
 
 RED = ImVec4(0.85, 0.2, 0.2, 1.0)
 GREEN = ImVec4(0.3, 0.75, 0.35, 1.0)
@@ -61,13 +63,13 @@ def _seconds(s: float | None) -> str:
 # -- Tuning -----------------------------------------------------------------------------------------
 def tuning_panel(state: AppState) -> None:
     t = state.tuning
-    if not state.loaded:
+    if not state.model.loaded:
         imgui.text_disabled("nothing open yet")
     auto = t.budget_on
-    resolved = state.baked.policy if state.baked is not None else None
+    resolved = state.model.baked.policy if state.model.baked is not None else None
 
-    imgui.begin_disabled(auto or not state.loaded)
-    top = state.deepest + 1
+    imgui.begin_disabled(auto or not state.model.loaded)
+    top = state.model.deepest + 1
     shown = resolved.threshold if (auto and resolved is not None) else t.threshold
     changed, v = imgui.slider_int("Threshold", int(shown), 0, max(top, 1))
     if changed and not auto:
@@ -113,13 +115,13 @@ def tuning_panel(state: AppState) -> None:
     )
     if changed:
         t.exposure = float(v)
-    changed, state.tonemap = imgui.checkbox("sRGB tone map", state.tonemap)
+    changed, state.view.tonemap = imgui.checkbox("sRGB tone map", state.view.tonemap)
 
     imgui.separator()
-    if state.rebaking:
+    if state.jobs.rebaking:
         imgui.text_colored(DIM, "re-baking... (showing the previous bake)")
     elif resolved is not None:
-        imgui.text_colored(DIM, f"on screen: {state.policy_summary()}")
+        imgui.text_colored(DIM, f"on screen: {state.model.policy_summary()}")
 
 
 # -- View -------------------------------------------------------------------------------------------
@@ -127,32 +129,32 @@ def view_panel(state: AppState) -> None:
     for i, m in enumerate(MODES):
         if i:
             imgui.same_line()
-        if imgui.radio_button(MODE_LABELS[m], state.mode == m):
-            state.mode = m
-    if state.mode == "split":
-        changed, v = imgui.slider_float("Divider", float(state.split), 0.0, 1.0, "%.2f")
+        if imgui.radio_button(MODE_LABELS[m], state.view.mode == m):
+            state.view.mode = m
+    if state.view.mode == "split":
+        changed, v = imgui.slider_float("Divider", float(state.view.split), 0.0, 1.0, "%.2f")
         if changed:
-            state.split = float(v)
+            state.view.split = float(v)
         imgui.text_colored(DIM, "mesh left, IAT right; drag the line in the view")
-    if state.mode == "diff":
+    if state.view.mode == "diff":
         changed, v = imgui.slider_float(
-            "Diff gain", float(state.diff_gain), 1.0, 256.0, "x%.0f", imgui.SliderFlags_.logarithmic
+            "Diff gain", float(state.view.diff_gain), 1.0, 256.0, "x%.0f", imgui.SliderFlags_.logarithmic
         )
         if changed:
-            state.diff_gain = float(v)
+            state.view.diff_gain = float(v)
         imgui.text_colored(DIM, "|mesh - IAT| x gain")
 
     imgui.separator()
-    cams = state.cameras
+    cams = state.model.cameras
     names = [c.name or f"camera {k}" for k, c in enumerate(cams)] or ["(none)"]
-    changed, k = imgui.combo("Camera", min(state.camera_index, len(names) - 1), names)
+    changed, k = imgui.combo("Camera", min(state.view.camera_index, len(names) - 1), names)
     if changed and cams:
-        state.camera_index = k
-        if state.nav is not None:
-            state.nav.reset(cams[k])
-    if imgui.button("Reset view") and state.nav is not None:
-        state.nav.reset()
-    nav = state.nav
+        state.view.camera_index = k
+        if state.view.nav is not None:
+            state.view.nav.reset(cams[k])
+    if imgui.button("Reset view") and state.view.nav is not None:
+        state.view.nav.reset()
+    nav = state.view.nav
     if nav is not None:
         imgui.same_line()
         imgui.text(f"speed {nav.speed * nav.effective_gear:.3g}/s")
@@ -164,44 +166,44 @@ def view_panel(state: AppState) -> None:
 
     imgui.separator()
     imgui.text("Camera paths")
-    names = list(state.paths)
+    names = list(state.paths.named)
     if names:
-        cur = names.index(state.path_name) if state.path_name in names else 0
+        cur = names.index(state.paths.selected) if state.paths.selected in names else 0
         changed, k = imgui.combo("Path", cur, names)
-        state.path_name = names[k]
+        state.paths.selected = names[k]
     else:
         imgui.text_disabled("no paths yet: record one")
-    if state.recorder is None:
+    if state.paths.recorder is None:
         if imgui.button("Record"):
             state.start_recording()
     else:
         if imgui.button("Stop recording"):
             state.stop_recording()
         imgui.same_line()
-        imgui.text_colored(RED, f"REC {len(state.recorder.cameras)}")
+        imgui.text_colored(RED, f"REC {len(state.paths.recorder.cameras)}")
     imgui.same_line()
-    if state.player is None:
+    if state.paths.player is None:
         imgui.begin_disabled(not names)
         if imgui.button("Play"):
-            state.start_playback(state.path_name or names[0])
+            state.start_playback(state.paths.selected or names[0])
         imgui.end_disabled()
     else:
         if imgui.button("Stop"):
             state.stop_playback()
         imgui.same_line()
-        p = state.player
-        imgui.text(f"{p.index}/{p.frames}" if state.playback_frames else f"{p.index} frames")
-    changed, v = imgui.input_int("Frames", int(state.playback_frames))
+        p = state.paths.player
+        imgui.text(f"{p.index}/{p.frames}" if state.paths.playback_frames else f"{p.index} frames")
+    changed, v = imgui.input_int("Frames", int(state.paths.playback_frames))
     if changed:
-        state.playback_frames = max(int(v), 0)
+        state.paths.playback_frames = max(int(v), 0)
     _help("0 plays the path in real time; N plays exactly N frames (benchmark).")
-    imgui.begin_disabled(not state.model_path or not state.paths)
+    imgui.begin_disabled(not state.model.path or not state.paths.named)
     if imgui.button("Save paths"):
-        state.request_save_paths = True
+        state.requests.save_paths = True
     imgui.end_disabled()
-    if state.model_path:
+    if state.model.path:
         imgui.same_line()
-        imgui.text_colored(DIM, paths_file(state.model_path).name)
+        imgui.text_colored(DIM, paths_file(state.model.path).name)
     imgui.text_colored(DIM, "F12: screenshot")
 
 
@@ -215,11 +217,11 @@ def _bar(fraction: float, text: str, color: ImVec4 | None = None) -> None:
 
 
 def stats_panel(state: AppState) -> None:
-    h = state.frame_history()
+    h = state.stats.frame_history()
     recent = h[-60:]
     mean = float(recent.mean()) if recent.size else 0.0
     worst = float(recent.max()) if recent.size else 0.0
-    imgui.text(f"{state.fps:5.1f} fps   {mean:5.1f} ms/frame   max {worst:5.1f} ms")
+    imgui.text(f"{state.stats.fps:5.1f} fps   {mean:5.1f} ms/frame   max {worst:5.1f} ms")
     if h.size and implot.begin_plot(
         "##frametimes",
         ImVec2(-1, hello_imgui.em_size(7.0)),
@@ -234,7 +236,7 @@ def stats_panel(state: AppState) -> None:
         implot.plot_inf_lines("50 ms", np.array([50.0], np.float32), limit)
         implot.end_plot()
 
-    mem = state.memory
+    mem = state.model.memory
     if imgui.begin_table(
         "counts", 3, imgui.TableFlags_.borders_inner_h | imgui.TableFlags_.sizing_stretch_prop
     ):
@@ -242,9 +244,9 @@ def stats_panel(state: AppState) -> None:
         imgui.table_setup_column("triangles")
         imgui.table_setup_column("draw calls")
         imgui.table_headers_row()
-        rows = [("Mesh", state.mesh_triangles, 1 if state.loaded else 0)]
+        rows = [("Mesh", state.model.mesh_triangles, 1 if state.model.loaded else 0)]
         if mem:
-            rows.append(("IAT", state.iat_triangles, mem.get("draw_calls", 0)))
+            rows.append(("IAT", state.model.iat_triangles, mem.get("draw_calls", 0)))
             rows.append(
                 ("  mesh part", mem.get("triangles_mesh_part", 0), int(mem.get("triangles_mesh_part", 0) > 0))
             )
@@ -264,10 +266,10 @@ def stats_panel(state: AppState) -> None:
             imgui.table_next_column()
             imgui.text(f"{calls}")
         imgui.end_table()
-    if state.mesh_triangles and mem:
-        fewer = state.mesh_triangles / max(state.iat_triangles, 1)
+    if state.model.mesh_triangles and mem:
+        fewer = state.model.mesh_triangles / max(state.model.iat_triangles, 1)
         imgui.text(f"IAT draws {fewer:,.0f}x fewer triangles than the mesh")
-    rs = state.render_stats
+    rs = state.stats.render
     if rs:
         imgui.text_colored(
             DIM, f"last frame drew {rs.get('triangles', 0):,} triangles in {rs.get('draw_calls', 0)} calls"
@@ -295,16 +297,17 @@ def stats_panel(state: AppState) -> None:
         )
 
     imgui.separator()
-    solve = _seconds(state.solve_seconds) if state.loaded else "-"
-    if state.solution_from_cache:
+    solve = _seconds(state.model.solve_seconds) if state.model.loaded else "-"
+    if state.model.from_cache:
         solve += " (cached)"
     imgui.text(f"Solve {solve}")
-    imgui.text(f"Re-bake {_seconds(state.bake_seconds) if state.rebakes else '-'}   ({state.rebakes} bakes)")
-    if state.rebaking:
+    jobs = state.jobs
+    imgui.text(f"Re-bake {_seconds(jobs.bake_seconds) if jobs.rebakes else '-'}   ({jobs.rebakes} bakes)")
+    if state.jobs.rebaking:
         imgui.same_line()
         imgui.text_colored(DIM, "baking...")
 
-    job = state.open_job
+    job = state.jobs.open_job
     if job is not None and not job.done:
         imgui.separator()
         eta = job.eta
@@ -312,9 +315,9 @@ def stats_panel(state: AppState) -> None:
         _bar(job.fraction, f"{100 * job.fraction:.0f} %  ETA {_seconds(eta) if eta is not None else '...'}")
         if imgui.button("Cancel"):
             job.cancel()
-    if state.status:
+    if state.messages.status:
         imgui.separator()
-        imgui.text_wrapped(state.status)
+        imgui.text_wrapped(state.messages.status)
 
 
 # -- Lighting ---------------------------------------------------------------------------------------
@@ -323,39 +326,39 @@ def _light_label(k: int, lt) -> str:
 
 
 def lighting_panel(state: AppState) -> None:
-    ed = state.editor
+    ed = state.lighting.editor
     if ed is None:
         imgui.text_disabled("nothing open yet")
         return
-    _, state.show_lights = imgui.checkbox("Show lights", state.show_lights)
+    _, state.lighting.show_lights = imgui.checkbox("Show lights", state.lighting.show_lights)
     _help("Light markers in the view: click one to select it, drag it to move it at its height.")
 
-    day = state.day_cycle
+    day = state.lighting.day_cycle
     imgui.begin_disabled(day)
     lights = ed.lights
-    if state.selected_light >= len(lights):
-        state.selected_light = len(lights) - 1
+    if state.lighting.selected_light >= len(lights):
+        state.lighting.selected_light = len(lights) - 1
     if imgui.begin_list_box("##lights", ImVec2(-1, hello_imgui.em_size(3.6))):
         for k, lt in enumerate(lights):
-            clicked, _ = imgui.selectable(_light_label(k, lt), k == state.selected_light)
+            clicked, _ = imgui.selectable(_light_label(k, lt), k == state.lighting.selected_light)
             if clicked:
-                state.selected_light = k
+                state.lighting.selected_light = k
         if not lights:
             imgui.text_disabled("no point or spot lights")
         imgui.end_list_box()
     if imgui.button("Add point light"):
-        state.selected_light = ed.add("point", _add_position(state))
+        state.lighting.selected_light = ed.add("point", _add_position(state))
     imgui.same_line()
     if imgui.button("Add spot light"):
-        state.selected_light = ed.add("spot", _add_position(state))
+        state.lighting.selected_light = ed.add("spot", _add_position(state))
     imgui.same_line()
-    imgui.begin_disabled(state.selected_light < 0)
-    if imgui.button("Delete light") and state.selected_light >= 0:
-        ed.delete(state.selected_light)
-        state.selected_light = min(state.selected_light, len(ed.lights) - 1)
+    imgui.begin_disabled(state.lighting.selected_light < 0)
+    if imgui.button("Delete light") and state.lighting.selected_light >= 0:
+        ed.delete(state.lighting.selected_light)
+        state.lighting.selected_light = min(state.lighting.selected_light, len(ed.lights) - 1)
     imgui.end_disabled()
 
-    k = state.selected_light
+    k = state.lighting.selected_light
     if 0 <= k < len(ed.lights):
         lt = ed.lights[k]
         lo, hi = ed.scene.bounds
@@ -398,28 +401,30 @@ def lighting_panel(state: AppState) -> None:
         imgui.text_colored(DIM, "turn the day cycle off to edit the lights")
 
     imgui.separator()
-    if state.relighting:
-        step, steps = state.relight_step
+    if state.lighting.relighting:
+        step, steps = state.lighting.relight_step
         imgui.text_colored(DIM, f"re-solving... (step {step + 1 if step < steps else 1} of {max(steps, 1)})")
-    elif state.relights:
-        step, steps = state.relight_step
-        imgui.text_colored(DIM, f"solved in {_seconds(state.relight_seconds)} (step {step}/{steps}, resolve)")
+    elif state.lighting.relights:
+        step, steps = state.lighting.relight_step
+        imgui.text_colored(
+            DIM, f"solved in {_seconds(state.lighting.relight_seconds)} (step {step}/{steps}, resolve)"
+        )
     imgui.begin_disabled(day)
     if imgui.button("Refine mesh"):
-        state.request_remesh = True
+        state.requests.remesh = True
     imgui.end_disabled()
     _help(
         "Moving lights keeps the mesh (the solve continues from the last solution, fast);\n"
         "this solves afresh so the mesh follows the new shadows."
     )
 
-    if not state.file_fields["lights"] and state.model_path:
-        p = Path(ed.base.path or state.model_path)
-        state.file_fields["lights"] = str(p.with_name(p.stem + "-lit" + (p.suffix or ".glb")))
+    if not state.requests.file_fields["lights"] and state.model.path:
+        p = Path(ed.base.path or state.model.path)
+        state.requests.file_fields["lights"] = str(p.with_name(p.stem + "-lit" + (p.suffix or ".glb")))
     _path_input(state, "glTF file##lights", "lights")
     imgui.begin_disabled(not ed.base.path)
-    if imgui.button("Save lights") and state.file_fields["lights"].strip():
-        state.request_save_lights = state.file_fields["lights"].strip()
+    if imgui.button("Save lights") and state.requests.file_fields["lights"].strip():
+        state.requests.save_lights = state.requests.file_fields["lights"].strip()
     imgui.end_disabled()
     _help(
         "Writes a copy of the model with these lights (KHR_lights_punctual) and emission;\n"
@@ -431,9 +436,9 @@ def lighting_panel(state: AppState) -> None:
 
 def _add_position(state: AppState):
     """A new light goes in front of the camera (one fifth of the model's size), inside the model."""
-    ed = state.editor
+    ed = state.lighting.editor
     lo, hi = ed.scene.bounds
-    cam = state.camera
+    cam = state.view.camera
     if cam is None:
         return None
     p = np.asarray(cam.eye) + np.asarray(cam.forward) * 0.2 * float(np.linalg.norm(hi - lo))
@@ -444,14 +449,14 @@ def _add_position(state: AppState):
 def day_cycle_panel(state: AppState) -> None:
     imgui.separator()
     imgui.text("Day cycle")
-    states = state.lighting_states
-    sset = state.solution_set
+    states = state.lighting.states
+    sset = state.lighting.solution_set
     if not states and sset is None:
         imgui.text_disabled("the model has no lighting states (extras iat_lighting_states)")
         return
     names = list(sset.names) if sset is not None else list(states)
     imgui.text_colored(DIM, ", ".join(names))
-    job = state.set_job
+    job = state.lighting.set_job
     if job is not None and not job.done:
         _bar(job.fraction, f"{100 * job.fraction:.0f} %  {job.message[:40]}")
         if imgui.button("Cancel##day"):
@@ -459,23 +464,23 @@ def day_cycle_panel(state: AppState) -> None:
         return
     if sset is None:
         if imgui.button("Solve day cycle"):
-            state.request_day_cycle = True
+            state.requests.day_cycle = True
         _help(
             "Solves every lighting state on one mesh (the union of their own adaptive meshes),\n"
             "then bakes them into texture layers that share one atlas layout."
         )
         return
-    changed, on = imgui.checkbox("Day cycle on", state.day_cycle)
+    changed, on = imgui.checkbox("Day cycle on", state.lighting.day_cycle)
     if changed:
-        state.day_cycle = bool(on)
-    imgui.begin_disabled(not state.day_cycle)
-    changed, v = imgui.slider_float("Time of day", float(state.day_time), 0.0, 1.0, "%.3f")
+        state.lighting.day_cycle = bool(on)
+    imgui.begin_disabled(not state.lighting.day_cycle)
+    changed, v = imgui.slider_float("Time of day", float(state.lighting.day_time), 0.0, 1.0, "%.3f")
     if changed:
-        state.day_time = float(min(max(v, 0.0), 1.0))
-    imgui.text(state.day_label() or " ")
+        state.lighting.day_time = float(min(max(v, 0.0), 1.0))
+    imgui.text(state.lighting.day_label() or " ")
     keys = "  ".join(f"{n} {t:.2f}" for n, t in zip(sset.names, sset.times, strict=True))
     imgui.text_colored(DIM, "keys: " + keys)
-    mem = state.memory
+    mem = state.model.memory
     if mem and int(mem.get("solutions", 1)) > 1:
         n = int(mem["solutions"])
         per = float(mem.get("texture_bytes", 0)) / n
@@ -486,23 +491,23 @@ def day_cycle_panel(state: AppState) -> None:
 # -- File -------------------------------------------------------------------------------------------
 def _path_input(state: AppState, label: str, key: str) -> None:
     imgui.set_next_item_width(-hello_imgui.em_size(6.0))
-    _, state.file_fields[key] = imgui.input_text(label, state.file_fields[key])
+    _, state.requests.file_fields[key] = imgui.input_text(label, state.requests.file_fields[key])
 
 
 def file_panel(state: AppState) -> None:
-    imgui.text_wrapped(f"Open: {state.model_path or '(nothing)'}")
-    if not state.file_fields["open"]:
-        state.file_fields["open"] = state.model_path
+    imgui.text_wrapped(f"Open: {state.model.path or '(nothing)'}")
+    if not state.requests.file_fields["open"]:
+        state.requests.file_fields["open"] = state.model.path
     _path_input(state, "File to open", "open")
-    imgui.begin_disabled(state.opening)
-    if imgui.button("Open") and state.file_fields["open"].strip():
-        state.request_open = state.file_fields["open"].strip()
+    imgui.begin_disabled(state.jobs.opening)
+    if imgui.button("Open") and state.requests.file_fields["open"].strip():
+        state.requests.open = state.requests.file_fields["open"].strip()
     imgui.end_disabled()
     if has_native_dialogs():
         imgui.same_line()
         if imgui.button("Browse..."):
             open_dialog(state)
-    o = state.solve_options
+    o = state.model.solve_options
     changed, v = imgui.slider_int("Solve depth", int(o.max_depth), 1, 10)
     if changed:
         o.max_depth = int(v)
@@ -512,55 +517,57 @@ def file_panel(state: AppState) -> None:
     )
     if changed:
         o.tolerance = float(v)
-    changed, state.use_cache = imgui.checkbox("Use solution cache", state.use_cache)
+    changed, state.model.use_cache = imgui.checkbox("Use solution cache", state.model.use_cache)
     _help("Solved models are kept (by file content and options) so they reopen at once.")
 
     imgui.separator()
-    if not state.file_fields["export"] and state.model_path:
-        state.file_fields["export"] = str(
-            Path(state.model_path).with_name(Path(state.model_path).stem + "-iat.glb")
+    if not state.requests.file_fields["export"] and state.model.path:
+        state.requests.file_fields["export"] = str(
+            Path(state.model.path).with_name(Path(state.model.path).stem + "-iat.glb")
         )
     _path_input(state, "GLB file", "export")
-    imgui.begin_disabled(state.baked is None)
-    if imgui.button("Export GLB") and state.file_fields["export"].strip():
-        state.request_export = state.file_fields["export"].strip()
+    imgui.begin_disabled(state.model.baked is None)
+    if imgui.button("Export GLB") and state.requests.file_fields["export"].strip():
+        state.requests.export = state.requests.file_fields["export"].strip()
     imgui.end_disabled()
-    if not state.file_fields["solution"] and state.model_path:
-        state.file_fields["solution"] = str(Path(state.model_path).with_suffix(".npz"))
+    if not state.requests.file_fields["solution"] and state.model.path:
+        state.requests.file_fields["solution"] = str(Path(state.model.path).with_suffix(".npz"))
     _path_input(state, "Solution file", "solution")
-    imgui.begin_disabled(state.solution is None)
-    if imgui.button("Save solution") and state.file_fields["solution"].strip():
-        state.request_save_solution = state.file_fields["solution"].strip()
+    imgui.begin_disabled(state.model.solution is None)
+    if imgui.button("Save solution") and state.requests.file_fields["solution"].strip():
+        state.requests.save_solution = state.requests.file_fields["solution"].strip()
     imgui.end_disabled()
 
 
 def open_dialog(state: AppState) -> None:
     from imgui_bundle import portable_file_dialogs as pfd
 
-    start = str(Path(state.model_path).parent) if state.model_path else str(Path.cwd())
-    state.dialogs["open"] = pfd.open_file("Open a model or solution", start, MODEL_FILTERS)
+    start = str(Path(state.model.path).parent) if state.model.path else str(Path.cwd())
+    state.requests.dialogs["open"] = pfd.open_file("Open a model or solution", start, MODEL_FILTERS)
 
 
 def export_dialog(state: AppState) -> None:
     from imgui_bundle import portable_file_dialogs as pfd
 
-    default = Path(state.model_path).stem + "-iat.glb" if state.model_path else "iat.glb"
-    state.dialogs["export"] = pfd.save_file("Export the bake as GLB", default, ["glTF binary", "*.glb"])
+    default = Path(state.model.path).stem + "-iat.glb" if state.model.path else "iat.glb"
+    state.requests.dialogs["export"] = pfd.save_file(
+        "Export the bake as GLB", default, ["glTF binary", "*.glb"]
+    )
 
 
 def poll_dialogs(state: AppState) -> None:
     """Pick up the answers of native file dialogs (they run in their own process)."""
-    for kind in list(state.dialogs):
-        d = state.dialogs[kind]
+    for kind in list(state.requests.dialogs):
+        d = state.requests.dialogs[kind]
         if not d.ready(0):
             continue
-        del state.dialogs[kind]
+        del state.requests.dialogs[kind]
         res = d.result()
         if kind == "open" and res:
-            state.request_open = res[0]
-            state.file_fields["open"] = res[0]
+            state.requests.open = res[0]
+            state.requests.file_fields["open"] = res[0]
         elif kind == "export" and res:
-            state.request_export = res if res.lower().endswith(".glb") else res + ".glb"
+            state.requests.export = res if res.lower().endswith(".glb") else res + ".glb"
 
 
 # -- menus, errors, overlay ---------------------------------------------------------------------------
@@ -572,37 +579,40 @@ def menus(state: AppState) -> None:
                 open_dialog(state)
             else:
                 _focus("Model")
-                state.set_status(
+                state.messages.set_status(
                     "no native file dialog here (install zenity): type the path in the Model panel"
                 )
         if imgui.menu_item_simple("Open the Cornell box"):
             from viewer.state import default_model
 
-            state.request_open = str(default_model())
-        if imgui.menu_item_simple("Export GLB...", enabled=state.baked is not None):
+            state.requests.open = str(default_model())
+        if imgui.menu_item_simple("Export GLB...", enabled=state.model.baked is not None):
             if native:
                 export_dialog(state)
             else:
                 _focus("Model")
-        if imgui.menu_item_simple("Save camera paths", enabled=bool(state.model_path and state.paths)):
-            state.request_save_paths = True
+        if imgui.menu_item_simple("Save camera paths", enabled=bool(state.model.path and state.paths.named)):
+            state.requests.save_paths = True
         if imgui.menu_item_simple("Screenshot", "F12"):
-            state.request_screenshot = ""
+            state.requests.screenshot = ""
         imgui.separator()
         if imgui.menu_item_simple("Quit"):
-            state.request_quit = True
+            state.requests.quit = True
         imgui.end_menu()
     if imgui.begin_menu("Mode"):
         for m in MODES:
-            if imgui.menu_item_simple(MODE_LABELS[m], None, state.mode == m):
-                state.mode = m
+            if imgui.menu_item_simple(MODE_LABELS[m], None, state.view.mode == m):
+                state.view.mode = m
         imgui.separator()
-        if imgui.menu_item_simple("Reset view", "R") and state.nav is not None:
-            state.nav.reset()
-        for k, c in enumerate(state.cameras):
-            if imgui.menu_item_simple(f"Camera: {c.name or k}", None, k == state.camera_index) and state.nav:
-                state.camera_index = k
-                state.nav.reset(c)
+        if imgui.menu_item_simple("Reset view", "R") and state.view.nav is not None:
+            state.view.nav.reset()
+        for k, c in enumerate(state.model.cameras):
+            if (
+                imgui.menu_item_simple(f"Camera: {c.name or k}", None, k == state.view.camera_index)
+                and state.view.nav
+            ):
+                state.view.camera_index = k
+                state.view.nav.reset(c)
         imgui.end_menu()
 
 
@@ -615,7 +625,7 @@ def _focus(window: str) -> None:
 
 def error_window(state: AppState) -> None:
     """The last error, in a small window over the view, until dismissed."""
-    if not state.error:
+    if not state.messages.error:
         return
     vp = imgui.get_main_viewport()
     imgui.set_next_window_pos(
@@ -628,19 +638,19 @@ def error_window(state: AppState) -> None:
     opened, keep = imgui.begin("Error", True, flags)
     if opened:
         imgui.push_style_color(imgui.Col_.text, ImVec4(1.0, 0.45, 0.4, 1.0))
-        imgui.text_wrapped(state.error)
+        imgui.text_wrapped(state.messages.error)
         imgui.pop_style_color()
         imgui.text_colored(DIM, "the viewer keeps showing the last good model")
         if imgui.button("Dismiss"):
             keep = False
     imgui.end()
     if not keep:
-        state.clear_error()
+        state.messages.clear_error()
 
 
 def view_overlay(state: AppState) -> None:
     """Labels and the split divider over the 3D view (imgui background draw list, no GL)."""
-    x, y, w, h = state.view_rect
+    x, y, w, h = state.view.rect
     if w <= 0 or h <= 0:
         return
     dl = imgui.get_background_draw_list()
@@ -651,29 +661,31 @@ def view_overlay(state: AppState) -> None:
         dl.add_text(ImVec2(px + 9, y + 9), shadow, text)
         dl.add_text(ImVec2(px + 8, y + 8), white, text)
 
-    if not state.loaded:
-        job = state.open_job
+    if not state.model.loaded:
+        job = state.jobs.open_job
         label(x, f"opening {Path(job.path).name}: {job.message}" if job and not job.done else "nothing open")
         return
-    shown = state.mode
-    if state.mode == "split":
-        sx = x + state.split * w
-        col = imgui.get_color_u32(ImVec4(1.0, 0.85, 0.2, 1.0 if state.dragging_split else 0.8))
-        dl.add_line(ImVec2(sx, y), ImVec2(sx, y + h), col, 3.0 if state.dragging_split else 2.0)
+    shown = state.view.mode
+    if state.view.mode == "split":
+        sx = x + state.view.split * w
+        col = imgui.get_color_u32(ImVec4(1.0, 0.85, 0.2, 1.0 if state.view.dragging_split else 0.8))
+        dl.add_line(ImVec2(sx, y), ImVec2(sx, y + h), col, 3.0 if state.view.dragging_split else 2.0)
         dl.add_circle_filled(ImVec2(sx, y + h * 0.5), 7.0, col)
         label(x, "Mesh")
         label(sx, "IAT")
     else:
-        label(x, MODE_LABELS.get(shown, shown) + (f"  x{state.diff_gain:.0f}" if shown == "diff" else ""))
+        label(
+            x, MODE_LABELS.get(shown, shown) + (f"  x{state.view.diff_gain:.0f}" if shown == "diff" else "")
+        )
     _light_markers(state, dl)
     hud = hud_lines(state)
     for k, line in enumerate(hud):
         yy = y + h - 10 - 16 * (len(hud) - k)
         dl.add_text(ImVec2(x + 9, yy + 1), shadow, line)
         dl.add_text(ImVec2(x + 8, yy), white, line)
-    if state.recorder is not None:
+    if state.paths.recorder is not None:
         dl.add_text(ImVec2(x + w - 60, y + 8), imgui.get_color_u32(RED), "REC")
-    if state.player is not None:
+    if state.paths.player is not None:
         dl.add_text(ImVec2(x + w - 60, y + 8), white, "PLAY")
 
 
@@ -681,42 +693,42 @@ def hud_lines(state: AppState) -> list[str]:
     """Text drawn at the bottom of the view: the day-cycle moment and its texture memory against
     the budget (N states cost N texture layers), the re-solve in progress."""
     lines = []
-    if state.day_cycle and state.solution_set is not None:
-        lines.append(f"day {state.day_time:.2f}: {state.day_label()}")
-        mem = state.memory
+    if state.lighting.day_cycle and state.lighting.solution_set is not None:
+        lines.append(f"day {state.lighting.day_time:.2f}: {state.lighting.day_label()}")
+        mem = state.model.memory
         if mem:
             n = int(mem.get("solutions", 1))
             used = float(mem.get("texture_bytes", 0))
             on = state.tuning.budget_on
             budget = f"{_mb(float(state.tuning.budget_mb) * MB)} budget" if on else "no budget"
             lines.append(f"texture {n} x {_mb(used / max(n, 1))} = {_mb(used)} / {budget}")
-    if state.relighting:
+    if state.lighting.relighting:
         lines.append("re-solving the lighting...")
     return lines
 
 
 def _light_markers(state: AppState, dl) -> None:
     """A circle per light (filled for the selected one), its name, and a spot light's direction."""
-    from viewer.state import project_points
+    from viewer.picking import project_points
 
-    ed, cam = state.editor, state.camera
-    if not state.show_lights or ed is None or cam is None or not ed.lights:
+    ed, cam = state.lighting.editor, state.view.camera
+    if not state.lighting.show_lights or ed is None or cam is None or not ed.lights:
         return
     lights = ed.lights
-    px, ok = project_points(cam, [lt.position for lt in lights], state.view_rect)
+    px, ok = project_points(cam, [lt.position for lt in lights], state.view.rect)
     lo, hi = ed.scene.bounds
     reach = 0.06 * float(np.linalg.norm(hi - lo))
-    tips, tok = project_points(cam, [lt.position + reach * lt.direction for lt in lights], state.view_rect)
+    tips, tok = project_points(cam, [lt.position + reach * lt.direction for lt in lights], state.view.rect)
     for k, lt in enumerate(lights):
         if not ok[k]:
             continue
         c = np.clip(np.asarray(lt.color, dtype=np.float64) / max(float(np.max(lt.color)), 1e-9), 0.0, 1.0)
         col = imgui.get_color_u32(ImVec4(float(c[0]), float(c[1]), float(c[2]), 1.0))
-        sel = k == state.selected_light
+        sel = k == state.lighting.selected_light
         edge = imgui.get_color_u32(ImVec4(1.0, 0.85, 0.2, 1.0) if sel else ImVec4(0, 0, 0, 0.9))
         p = ImVec2(float(px[k, 0]), float(px[k, 1]))
         if lt.kind == "spot" and tok[k]:
             dl.add_line(p, ImVec2(float(tips[k, 0]), float(tips[k, 1])), edge, 2.0)
         dl.add_circle_filled(p, 7.0, col)
-        dl.add_circle(p, 8.0, edge, 0, 3.0 if k == state.selected_light else 1.5)
-        dl.add_text(ImVec2(p.x + 10, p.y - 7), edge if k == state.selected_light else col, lt.name)
+        dl.add_circle(p, 8.0, edge, 0, 3.0 if k == state.lighting.selected_light else 1.5)
+        dl.add_text(ImVec2(p.x + 10, p.y - 7), edge if k == state.lighting.selected_light else col, lt.name)

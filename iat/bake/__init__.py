@@ -1,2 +1,4 @@
 """Solution -> textures: ``flatten`` (quad-tree -> tile), ``seams`` (harmonised shared edges), ``atlas``
-(packing), ``baker`` (policy, formats, memory report, budget, the cached Baker, Baked)."""
+(packing), ``policy``, ``formats`` (GPU pixel formats), ``memory`` (memory report, host memory),
+``budget``, ``boxes`` (tile boxes, pages), ``polygons`` (vertex arrays), ``baked`` (Baked, BakedSet),
+``baker`` (the cached Baker)."""

@@ -408,7 +408,7 @@ def flatten(solution, patches=None, method: str = "bilinear", *, index: Solution
 # sampling and scaling
 
 
-def _axis_weights(n: int, pos: np.ndarray, kernel: str) -> tuple[np.ndarray, np.ndarray]:
+def axis_weights(n: int, pos: np.ndarray, kernel: str) -> tuple[np.ndarray, np.ndarray]:
     """Taps and weights to interpolate a row of ``n`` samples at ``pos`` (texel units, [0, n-1]).
 
     Returns (idx (k, taps) int64 into the row, w (k, taps) float64). The cubic
@@ -450,12 +450,12 @@ def _axis_weights(n: int, pos: np.ndarray, kernel: str) -> tuple[np.ndarray, np.
 def _clamped_weights(n: int, m: int, kernel: str) -> np.ndarray:
     """(m, n) float64 weights of the clamped resample of a row of ``n`` samples to ``m``.
 
-    Row ``k`` interpolates at ``k (n - 1) / (m - 1)`` (:func:`_axis_weights`): rows 0 and
+    Row ``k`` interpolates at ``k (n - 1) / (m - 1)`` (:func:`axis_weights`): rows 0 and
     ``m - 1`` are unit vectors, so edge texels are copied exactly.
     """
     pos = np.arange(m) * ((n - 1) / (m - 1))
     pos[-1] = n - 1
-    idx, w = _axis_weights(n, pos, kernel)
+    idx, w = axis_weights(n, pos, kernel)
     W = np.zeros((m, n))
     np.add.at(W, (np.repeat(np.arange(m), idx.shape[1]), idx.ravel()), w.ravel())
     return W
@@ -643,8 +643,8 @@ def sample_tile(tile: np.ndarray, u, v, kernel: str = "bilinear") -> np.ndarray:
     n = tile.shape[0]
     u = np.atleast_1d(np.asarray(u, dtype=np.float64))
     v = np.atleast_1d(np.asarray(v, dtype=np.float64))
-    ia, wa = _axis_weights(n, u * (n - 1), kernel)
-    ib, wb = _axis_weights(n, v * (n - 1), kernel)
+    ia, wa = axis_weights(n, u * (n - 1), kernel)
+    ib, wb = axis_weights(n, v * (n - 1), kernel)
     out = np.zeros((len(u), tile.shape[2]))
     for p in range(ib.shape[1]):
         for q in range(ia.shape[1]):

@@ -1,4 +1,4 @@
-"""Seams between neighbouring patches: edge pairing, harmonisation of tile edges, a seam measure.
+"""Seams between neighbouring patches: edge pairing and harmonisation of tile edges.
 
 Neighbouring roots (patches) are subdivided independently, so two textured neighbours
 represent their shared edge by different piecewise-linear functions (different depths,
@@ -36,15 +36,15 @@ written back by :func:`apply_ring`), after flatten + (clamped) scaling and befor
 - triangle tiles get their outer half refilled (:func:`~iat.flatten.extend_triangle`) after
   their hypotenuse changed, so bilinear filtering stays exact at the diagonal.
 
-:func:`harmonised_boxes` is the Baker's hook: it returns what ``Baker._box_tiles`` returns,
-with the boxes of the changed patches built from their tile and harmonised ring (rings are
-harmonised first, so each box is built once, by ``Baker._build_boxes``). Harmonisation applies
-to ``clamped`` scaling of every method (``bilinear``, ``scan``, ``bicubic``: all are drawn
-with GL_LINEAR) and to scale 1 (which the tile cache shares between the two modes);
-``naive`` scaling at other scales is left as the report did it, to show its correspondence
-errors. On the Baker (``_seam_state``): the pairs, the original edge rings per tile key,
-and each harmonised box per (box key, patch) with the ring it was built from, reused while
-that ring is unchanged (a threshold step rebuilds only the boxes near the change).
+The Baker consumes these pure steps (it owns their caches: the pairs, the original rings per
+tile key, and each harmonised box per box key with the ring it was built from, reused while
+that ring is unchanged, so a threshold step rebuilds only the boxes near the change): the rings
+of :func:`involved_patches` at :func:`ring_sides`, harmonised by :func:`harmonise_rings`, are
+written into the boxes (:func:`iat.bake.boxes.build_boxes`). Harmonisation applies
+(:func:`applies`) to ``clamped`` scaling of every method (``bilinear``, ``scan``, ``bicubic``:
+all are drawn with GL_LINEAR) and to scale 1 (which the tile cache shares between the two
+modes); ``naive`` scaling at other scales is left as the report did it, to show its
+correspondence errors.
 
 Left over: scales whose sides are not ``2**k + 1`` (see above), a T-junction point that is
 not a knot of the long side, a vertex where two *mesh* patches disagree (the texture can
@@ -52,14 +52,10 @@ follow one), a mesh neighbour finer than the scaled texture (sampled at the text
 knots), and the rounding of quantised formats (rgba8, rgb9e5) at the finer side's extra
 knots. Figures: docs/baking.md, section 3.
 
-:func:`seam_measure` samples every shared segment densely from both sides in the baked
-atlas, partial overlaps and textured-vs-mesh edges included (``bake.seam_error`` only
-sees whole, coplanar edges between textured patches).
+The seam measures (``seam_measure``, ``seam_error``) are in :mod:`iat.measure.seams`.
 """
 
 from __future__ import annotations
-
-from collections import OrderedDict
 
 import numpy as np
 
@@ -68,12 +64,14 @@ from iat.bake.flatten import TileCache, extend_triangle, scaled_side, tile_side
 __all__ = [
     "MAX_ANGLE_DEG",
     "EdgePairs",
+    "applies",
     "apply_ring",
     "edge_pairs",
     "harmonise_rings",
-    "harmonised_boxes",
+    "involved_patches",
+    "patch_normals",
     "ring_index",
-    "seam_measure",
+    "ring_sides",
     "solution_pairs",
     "tile_ring",
 ]
@@ -152,7 +150,8 @@ def _corner_groups(pairs, is_quad):
     return nodes.astype(np.int64), label.astype(np.int64)
 
 
-def _normals(corners: np.ndarray, is_quad: np.ndarray) -> np.ndarray:
+def patch_normals(corners: np.ndarray, is_quad: np.ndarray) -> np.ndarray:
+    """(P, 3) unit normals of patches with corners (P, 4, 3) (triangles: slots 0-2), is_quad (P,)."""
     n = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
     tri = ~is_quad
     n[tri] = np.cross(corners[tri, 1] - corners[tri, 0], corners[tri, 2] - corners[tri, 0])
@@ -209,7 +208,7 @@ def edge_pairs(
     if material is not None:
         mat = np.asarray(material)
         keep &= mat[ep[i]] == mat[ep[j]]
-    nrm = _normals(corners, is_quad)
+    nrm = patch_normals(corners, is_quad)
     cos = (nrm[ep[i]] * nrm[ep[j]]).sum(1)
     if max_angle_deg is not None:
         keep &= cos >= np.cos(np.radians(max_angle_deg))
@@ -429,45 +428,7 @@ def harmonise_rings(
 
 
 # ---------------------------------------------------------------------------
-# the Baker's hook
-
-
-class _State:
-    """Per Baker: the pairs, original rings per tile key, harmonised boxes per box key."""
-
-    def __init__(self, solution):
-        self.solution = solution
-        self.pairs = solution_pairs(solution)
-        self.rings: OrderedDict = OrderedDict()  # tile key -> {patch: ring}
-        self.boxes: OrderedDict = OrderedDict()  # box key -> {patch: (ring, box item)}
-        self.stats = {"runs": 0, "boxes_built": 0, "boxes_reused": 0}
-        self.last_info: dict = {}
-
-
-def _state(baker) -> _State:
-    st = baker.__dict__.get("_seam_state")
-    if st is None or st.solution is not baker.solution:
-        st = baker.__dict__["_seam_state"] = _State(baker.solution)
-    return st
-
-
-def _lru(store: OrderedDict, key, size: int) -> dict:
-    d = store.pop(key, None)
-    store[key] = d = {} if d is None else d
-    while len(store) > size:
-        store.popitem(last=False)
-    return d
-
-
-def _rings(baker, st: _State, patches: np.ndarray, method: str, scale: float, mode: str) -> dict:
-    """Original rings of ``patches`` under a tile key (cached per key; 8 keys kept)."""
-    store = _lru(st.rings, TileCache.key(method, scale, mode), 8)
-    missing = np.array([p for p in patches.tolist() if p not in store], dtype=np.int64)
-    if len(missing):
-        tiles = baker.tiles.get(missing, method, scale, mode)
-        quad = baker.index.is_quad
-        store.update((p, tile_ring(t, not quad[p])) for p, t in zip(missing.tolist(), tiles, strict=True))
-    return {p: store[p] for p in patches.tolist()}
+# what the Baker harmonises
 
 
 def applies(policy) -> bool:
@@ -475,240 +436,19 @@ def applies(policy) -> bool:
     return TileCache.key(policy.method, policy.scale, policy.scale_mode)[2] == "clamped"
 
 
-def harmonised_boxes(baker, ps: np.ndarray, policy, align: int, timings: dict | None = None):
-    """``baker._box_tiles(ps, policy, align)`` with the boxes of patches whose edges were
-    harmonised (:func:`harmonise_rings`) built the same way from harmonised tiles.
+def ring_sides(depth: np.ndarray, ps: np.ndarray, scale: float) -> np.ndarray:
+    """(P,) int64 texels per side of each patch's ring: the scaled tile of the textured ``ps``,
+    the scale-1 tile (the mesh along its edges) of the others; ``depth`` (P,) tree depths."""
+    sides = tile_side(depth).astype(np.int64)
+    sides[ps] = scaled_side(tile_side(depth[ps]), scale)
+    return sides
 
-    The return value has ``_box_tiles``'s form (a tuple of lists in the order of ``ps``);
-    cached boxes are never modified. The rings are harmonised first, so every box is built
-    once: the harmonised ones by ``baker._build_boxes`` (tile + ring, no harmonised tile copy),
-    the others by ``_box_tiles`` (the Baker's cache). A harmonised box is kept per (box key,
-    patch) with its ring and reused while the ring is unchanged (a threshold step rebuilds only
-    the patches next to the changed ones). ``timings["seams"]``: seconds spent harmonising and
-    building the harmonised boxes.
-    """
-    import time
 
-    t0 = time.perf_counter()
-    baker.tiles.get(ps, policy.method, policy.scale, policy.scale_mode)  # flattened / scaled at once
-    if timings is not None:
-        timings["scale"] = time.perf_counter() - t0
-    if not applies(policy) or len(ps) == 0:
-        return baker._box_tiles(ps, policy, align)
-    t0 = time.perf_counter()
-    st = _state(baker)
-    st.stats["runs"] += 1
-    idx = baker.index
-    pairs = st.pairs
-    textured = np.zeros(idx.n_patches, dtype=bool)
-    textured[ps] = True
-    sides = tile_side(idx.depth).astype(np.int64)
-    sides[ps] = scaled_side(tile_side(idx.depth[ps]), policy.scale)
+def involved_patches(pairs: EdgePairs, textured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(textured, mesh)`` patches of the pairs with a textured side (sorted int64 arrays): whose
+    rings :func:`harmonise_rings` needs (``textured`` (P,) bool)."""
     if len(pairs):
         involved = np.unique(pairs.patch[textured[pairs.patch].any(axis=1)])
     else:
         involved = np.zeros(0, np.int64)
-    tex_inv, mesh_inv = involved[textured[involved]], involved[~textured[involved]]
-    rings = _rings(baker, st, tex_inv, policy.method, policy.scale, policy.scale_mode)
-    if len(mesh_inv):
-        rings.update(_rings(baker, st, mesh_inv, "bilinear", 1.0, "clamped"))
-    new, info = harmonise_rings(rings, sides, textured, idx.is_quad, pairs)
-    st.last_info = info
-    bkey = (
-        TileCache.key(policy.method, policy.scale, policy.scale_mode),
-        policy.pixel_format,
-        policy.gutter,
-        align,
-        policy.detail,
-        baker._rgba8_scale(policy.detail) if policy.pixel_format == "rgba8" else 1.0,  # sets share one
-    )
-    store = _lru(st.boxes, bkey, 4)
-    build = [p for p, ring in new.items() if p not in store or store[p][0].tobytes() != ring.tobytes()]
-    st.stats["boxes_built"] += len(build)
-    st.stats["boxes_reused"] += len(new) - len(build)
-    if build:
-        b = np.array(build, dtype=np.int64)
-        tiles = baker.tiles.get(b, policy.method, policy.scale, policy.scale_mode)
-        items = baker._build_boxes(b, tiles, {p: new[p] for p in build}, policy, align)
-        for p, item in zip(build, items, strict=True):
-            store[p] = (new[p], item)
-    t_seams = time.perf_counter() - t0
-    plain = np.array([p for p in ps.tolist() if p not in new], dtype=np.int64)
-    res = tuple(list(comp) for comp in baker._box_tiles(plain, policy, align))
-    if new:
-        order = {p: q for q, p in enumerate(plain.tolist())}
-        merged = tuple([None] * len(ps) for _ in res)
-        for q, p in enumerate(ps.tolist()):
-            item = store[p][1] if p in new else tuple(comp[order[p]] for comp in res)
-            for comp, x in zip(merged, item, strict=True):
-                comp[q] = x
-        res = merged
-    if timings is not None:
-        timings["seams"] = t_seams
-    return res
-
-
-# ---------------------------------------------------------------------------
-# measure
-
-
-def seam_measure(
-    baked, solution, samples: int = 33, include_mesh: bool = True, pairs: EdgePairs | None = None
-) -> dict:
-    """Largest and mean radiance difference along shared segments, sampled from both sides.
-
-    baked : a :class:`~iat.bake.Baked`; textured sides are read bilinearly in its atlas (as
-      GL_LINEAR does; detail patches times their albedo), mesh sides (``include_mesh``) from the
-      solution (the mesh along the edge)
-    samples : points per segment, ends included
-    pairs : :class:`EdgePairs` (default :func:`solution_pairs`: same material, coplanar within
-      :data:`MAX_ANGLE_DEG`), partial overlaps included
-    Returns dict(max=, mean=, segments=, samples=, textured=: the same over textured-textured
-    segments only); zeros when none.
-    """
-    from iat.bake.baker import _sample_pages
-    from iat.bake.flatten import flatten, sample_tile
-
-    pairs = solution_pairs(solution) if pairs is None else pairs
-    none = {"max": 0.0, "mean": 0.0, "segments": 0, "samples": 0}
-    textured = np.asarray(baked.patch_textured, dtype=bool)
-    if not len(pairs) or not len(baked.tex_patch):
-        return {**none, "textured": dict(none)}
-    tp = textured[pairs.patch]
-    use = tp.any(1) if include_mesh else tp.all(1)
-    if not use.any():
-        return {**none, "textured": dict(none)}
-    P_, E_, LO, HI = pairs.patch[use], pairs.edge[use], pairs.lo[use], pairs.hi[use]
-    tex = textured[P_]
-    w = np.linspace(0.0, 1.0, int(samples))[None, :]
-    # per textured patch: atlas uv of its corner slots, layer
-    ptex, first = np.unique(baked.tex_patch, return_index=True)
-    slot_of = np.full(len(textured), -1, dtype=np.int64)
-    slot_of[ptex] = first
-    nv = np.bincount(baked.tex_patch, minlength=len(textured))
-    is_quad = np.asarray(solution.patch_is_quad, dtype=bool)
-    albedo = np.asarray(solution.patch_albedo, dtype=np.float64)
-    pages = baked.pages
-    mesh_ps = np.unique(P_[~tex])
-    mesh_tiles = flatten(solution, mesh_ps, "bilinear") if len(mesh_ps) else {}
-    uv_corner = np.where(
-        is_quad[:, None, None],
-        np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64),
-        np.array([[0, 0], [1, 0], [0, 1], [0, 1]], dtype=np.float64),
-    )
-    vals = []
-    for s in (0, 1):
-        p, e = P_[:, s], E_[:, s]
-        t = LO[:, s, None] + (HI[:, s, None] - LO[:, s, None]) * w  # (n, S)
-        sa = e
-        sb = np.where(is_quad[p], (e + 1) % 4, (e + 1) % 3)
-        out = np.zeros(t.shape + (3,))
-        tx = tex[:, s]
-        if tx.any():
-            q = np.flatnonzero(tx)
-            f0 = slot_of[p[q]]
-            n_q = nv[p[q]]
-            ua = baked.tex_uv[f0 + np.minimum(sa[q], n_q - 1)].astype(np.float64)
-            ub = baked.tex_uv[f0 + np.minimum(sb[q], n_q - 1)].astype(np.float64)
-            uv = ua[:, None] * (1 - t[q, :, None]) + ub[:, None] * t[q, :, None]
-            layer = np.repeat(baked.tex_layer[f0].astype(np.int64), t.shape[1])
-            v = _sample_pages(pages, layer, uv.reshape(-1, 2)).reshape(len(q), -1, 3)
-            if len(baked.tex_detail):
-                det = baked.tex_detail[f0] > 0
-                v = np.where(det[:, None, None], v * albedo[p[q]][:, None, :], v)
-            out[q] = v
-        if (~tx).any():
-            q = np.flatnonzero(~tx)
-            ca = uv_corner[p[q], sa[q]]
-            cb = uv_corner[p[q], sb[q]]
-            uvp = ca[:, None] * (1 - t[q, :, None]) + cb[:, None] * t[q, :, None]
-            for pp in np.unique(p[q]).tolist():
-                rr = np.flatnonzero(p[q] == pp)
-                out[q[rr]] = sample_tile(
-                    mesh_tiles[pp], uvp[rr, :, 0].ravel(), uvp[rr, :, 1].ravel()
-                ).reshape(len(rr), -1, 3)
-        vals.append(out)
-    d = np.abs(vals[0] - vals[1]).max(axis=2)  # (n, S)
-
-    def summary(sel):
-        if not sel.any():
-            return dict(none)
-        x = d[sel]
-        return {
-            "max": float(x.max()),
-            "mean": float(x.mean()),
-            "segments": int(sel.sum()),
-            "samples": int(x.size),
-        }
-
-    res = summary(np.ones(len(d), dtype=bool))
-    res["textured"] = summary(tex.all(1))
-    return res
-
-
-# ---------------------------------------------------------------------------
-# figures for docs/baking.md: python -m iat.seams SOLUTION.npz [more.npz ...]
-
-
-def _main(argv=None) -> None:  # pragma: no cover - a measuring script
-    import argparse
-    import time
-
-    from iat.bake.baker import BakePolicy, Baker, seam_error
-    from iat.radiosity import Solution
-
-    ap = argparse.ArgumentParser(description="seams and harmonisation cost of solutions (docs/baking.md)")
-    ap.add_argument("solutions", nargs="+")
-    args = ap.parse_args(argv)
-    for path in args.solutions:
-        sol = Solution.load(path)
-        baker = Baker(sol)
-        t = time.perf_counter()
-        st_pairs = solution_pairs(sol)
-        print(
-            f"{path}: {len(sol.leaf_patch)} elements, {len(st_pairs)} pairs, pairing "
-            f"{(time.perf_counter() - t) * 1e3:.0f} ms"
-        )
-        for scale in (1.0, 0.5, 0.25):
-            c = seam_error(baker.bake(BakePolicy(threshold=0, scale=scale, detail=False)), sol)
-            n = seam_error(
-                baker.bake(BakePolicy(threshold=0, scale=scale, scale_mode="naive", detail=False)), sol
-            )
-            m = seam_measure(baker.bake(BakePolicy(threshold=0, scale=scale, detail=False)), sol)
-            print(
-                f"  scale {scale}: seam_error clamped {c['max']:.4g} / naive {n['max']:.4g} "
-                f"({c['edges']} edges); seam_measure clamped {m['max']:.4g} ({m['segments']} segments)"
-            )
-        st = _state(baker)
-
-        def timed(pol, cold, baker=baker, st=st):
-            if cold:
-                st.rings.clear()
-                st.boxes.clear()
-            baker._pages.clear()
-            return baker.bake(pol).timings
-
-        for scale in (1.0, 0.5, 0.25):
-            pol = BakePolicy(threshold=0, scale=scale, detail=False)
-            timed(pol, False)
-            tms = [timed(pol, True) for _ in range(3)]
-            print(
-                f"  cold harmonisation, scale {scale}: {np.median([x['seams'] for x in tms]) * 1e3:.1f} ms "
-                f"(bake {np.median([x['total'] for x in tms]) * 1e3:.1f} ms)"
-            )
-        ws, tot = [], []
-        for scale in (1.0, 0.5):
-            for thr in list(range(8)) + list(range(7, -1, -1)):
-                tm = timed(BakePolicy(threshold=thr, scale=scale, detail=False), False)
-                ws.append(tm.get("seams", 0.0))
-                tot.append(tm["total"])
-        p = np.percentile(np.array(ws) * 1e3, [50, 95])
-        q = np.percentile(np.array(tot) * 1e3, [50, 95])
-        print(
-            f"  threshold walk (32 steps): seams p50 {p[0]:.1f} p95 {p[1]:.1f} ms; "
-            f"bake p50 {q[0]:.1f} p95 {q[1]:.1f} ms"
-        )
-
-
-if __name__ == "__main__":  # pragma: no cover
-    _main()
+    return involved[textured[involved]], involved[~textured[involved]]

@@ -80,7 +80,7 @@ def _solve_options(args):
 
 
 def _bake_policy(args):
-    from iat.bake.baker import BakePolicy
+    from iat.bake.policy import BakePolicy
 
     kw = {}
     for name in ("threshold", "scale", "method", "budget_mb"):

@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from iat.color import srgb_encode
 from iat.errors import BakeError
 from iat.io.glb import GlbBuilder
 
@@ -97,8 +98,7 @@ class _IatGlb(GlbBuilder):
 
 def _png(rgb_linear01: np.ndarray) -> bytes:
     """sRGB 8-bit PNG of linear values in [0, 1], (h, w, 3)."""
-    x = np.clip(np.asarray(rgb_linear01, dtype=np.float64), 0.0, 1.0)
-    x = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(np.maximum(x, 0.0031308), 1 / 2.4) - 0.055)
+    x = srgb_encode(np.clip(np.asarray(rgb_linear01, dtype=np.float64), 0.0, 1.0))
     img = Image.fromarray(np.round(x * 255.0).astype(np.uint8))
     buf = io.BytesIO()
     img.save(buf, format="PNG")

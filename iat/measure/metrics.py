@@ -1,7 +1,7 @@
 """Image and seam metrics: PSNR, FLIP, relative error, lit-pixel masks, edge mismatch.
 
 Images are ``(h, w, 3)`` float arrays of linear RGB radiance (the renderer's
-float read-back, :func:`iat.reference.render_reference`), unless said otherwise.
+float read-back, :func:`iat.measure.reference.render_reference`), unless said otherwise.
 Every function is vectorised numpy and returns plain Python floats.
 """
 
@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from iat.color import LUMINANCE_WEIGHTS, srgb_encode
+
 __all__ = [
-    "REC709",
     "luminance",
     "psnr",
     "srgb_tonemap",
@@ -19,9 +20,6 @@ __all__ = [
     "lit_mask",
     "edge_mismatch",
 ]
-
-#: Rec. 709 / sRGB luminance weights of linear R, G, B
-REC709 = np.array([0.2126, 0.7152, 0.0722])
 
 
 def _image(x, name: str) -> np.ndarray:
@@ -44,7 +42,7 @@ def luminance(img) -> np.ndarray:
     a = np.asarray(img, dtype=np.float64)
     if a.shape[-1] != 3:
         raise ValueError(f"luminance: last axis must be RGB (3), got shape {a.shape}")
-    return a @ REC709
+    return a @ LUMINANCE_WEIGHTS
 
 
 def psnr(a, b, peak: float | None = None) -> float:
@@ -72,8 +70,7 @@ def srgb_tonemap(img, exposure: float = 1.0) -> np.ndarray:
     img : (..., 3) float linear radiance. Returns (...) float32 in [0, 1] (sRGB-encoded).
     """
     x = np.clip(np.asarray(img, dtype=np.float64) * float(exposure), 0.0, 1.0)
-    x = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-    return x.astype(np.float32)
+    return srgb_encode(x).astype(np.float32)
 
 
 def flip(test, reference, exposure: float = 1.0, return_map: bool = False):
@@ -90,7 +87,7 @@ def flip(test, reference, exposure: float = 1.0, return_map: bool = False):
         import flip_evaluator
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise ImportError(
-            "iat.metrics.flip needs the 'flip-evaluator' package (NVIDIA FLIP): "
+            "iat.measure.metrics.flip needs the 'flip-evaluator' package (NVIDIA FLIP): "
             f"pip install flip-evaluator ({e})"
         ) from e
     t, r = _image(test, "test"), _image(reference, "reference")

@@ -1,9 +1,9 @@
-"""Mitsuba 3 path-traced references of a :class:`~iat.scene.Scene`.
+"""Mitsuba 3 path-traced references of a :class:`~iat.io.scene.Scene`.
 
 The reference is what the radiosity solution should converge to: the same
 patches, the same diffuse albedos, the same emitters, rendered by an unbiased
 path tracer. It is compared with the renderer's float output (``mesh`` / ``iat``
-modes) through :mod:`iat.metrics`.
+modes) through :mod:`iat.measure.metrics`.
 
 Conventions (checked by ``tests/test_reference.py``)
 ----------------------------------------------------
@@ -82,7 +82,7 @@ def _import_mitsuba():
         import mitsuba as mi  # noqa: F401
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise ImportError(
-            "iat.reference needs the 'mitsuba' package (Mitsuba 3) for path-traced references: "
+            "iat.measure.reference needs the 'mitsuba' package (Mitsuba 3) for path-traced references: "
             f"pip install mitsuba ({e})"
         ) from e
     return mi

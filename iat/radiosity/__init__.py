@@ -4,8 +4,10 @@ import functools
 import hashlib
 from pathlib import Path
 
+from iat.radiosity.options import SolveOptions
+from iat.radiosity.resolving import resolve
 from iat.radiosity.solution import Solution
-from iat.radiosity.solver import SolveOptions, resolve, solve
+from iat.radiosity.solver import solve
 
 __all__ = ["SolveOptions", "Solution", "resolve", "solve", "solver_fingerprint"]
 

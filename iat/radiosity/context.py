@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from iat.color import LUMINANCE_WEIGHTS
 from iat.geometry import quadtree as qt
 from iat.radiosity.formfactor import point_polygon
 from iat.radiosity.options import (
@@ -20,7 +21,6 @@ from iat.radiosity.options import (
     FF_EPS,
     FF_FAR,
     GATHER_BLOCK,
-    LUMINANCE,
     MAX_ELEMENT_FRACTION,
     MIN_ELEMENT_FRACTION,
     RAY_EPS,
@@ -553,7 +553,7 @@ class Context:
 
     def emitted_power(self) -> float:
         """Luminance power emitted by emissive patches and lights (W, luminance-weighted)."""
-        p = float(np.pi * (self.emission @ LUMINANCE * self.area).sum())
+        p = float(np.pi * (self.emission @ LUMINANCE_WEIGHTS * self.area).sum())
         for lt in self.lights:
             p += light_power(lt)
         return p
@@ -562,7 +562,7 @@ class Context:
 def light_power(lt) -> float:
     """Luminance power of a light (by magnitude: a difference of two lights may be negative)."""
     solid = 4 * np.pi if lt.kind == "point" else 2 * np.pi * (1 - math.cos(lt.outer_cone))
-    return abs(float(lt.radiant_intensity @ LUMINANCE)) * solid
+    return abs(float(lt.radiant_intensity @ LUMINANCE_WEIGHTS)) * solid
 
 
 def solver_albedo(scene) -> np.ndarray:

@@ -1,4 +1,5 @@
-"""Options of the radiosity solver (:class:`SolveOptions`) and the constants that tune it."""
+"""Options of the radiosity solver (:class:`SolveOptions`) and the constants that tune it (how they were
+chosen: docs/benchmarks.md, "Solver constants: how they were chosen")."""
 
 from __future__ import annotations
 
@@ -9,86 +10,52 @@ import numpy as np
 
 from iat.errors import OptionError
 
-#: Rec. 709 luminance weights for "power" and variation tests
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
-#: relative floor of the split test, as a fraction of the mean reflected direct radiance
+#: split test's absolute floor, fraction of the mean reflected direct radiance (dark corners stop splitting)
 ABS_FLOOR = 0.02
-#: ray-origin offset (normal and towards the patch centre), fraction of the scene diagonal
+#: ray-origin offset along the normal and to the patch centre, fraction of the scene diagonal (no self-hits)
 RAY_EPS = 1e-4
-#: ... but at most this fraction of the radius of the patch the ray leaves (or aims at)
+#: ... at most this fraction of the radius of the patch the ray leaves or aims at (small patches stay hit)
 RAY_EPS_PATCH = 0.02
-#: in-plane nudge of form-factor points off shared edges, fraction of the scene diagonal
+#: in-plane nudge of form-factor points off shared edges, fraction of the scene diagonal (singular there)
 FF_EPS = 1e-6
-#: receivers per vectorised gather block (bounds the (n, samples) temporaries)
+#: receivers per vectorised gather block, a count (bounds the memory of the (n, samples) temporaries)
 GATHER_BLOCK = 8192
-#: ``min_element_size=None`` means this fraction of the square root of the scene's surface
-#: area (a length that measures a scene's size whatever its shape: 3.8 cm in the house,
-#: 4 cm in the 30 m cave tunnel, 2.3 mm in the Cornell box)
+#: ``min_element_size=None``: this fraction of sqrt(scene surface area) (ends subdivision along hard shadows)
 MIN_ELEMENT_FRACTION = 1.0 / 600.0
-#: elements longer than this fraction of the square root of the scene's surface area (5.7 cm in
-#: the Cornell box, 1.6 m in the house) split on a tighter tolerance (0: no such elements): the
-#: interpolation test alone left large elements whose light curves by up to ``tolerance``, all
-#: below the real light where it is concave, 3 % too dark on average in the Cornell box
+#: elements longer than this fraction of sqrt(scene surface area) split on BIG_TOLERANCE (0: none; else dark)
 MAX_ELEMENT_FRACTION = 1.0 / 24.0
-#: ... and they split on this fraction of ``tolerance`` (a large element's error covers much area;
-#: the light that is linear over it, which interpolation represents exactly, still never splits).
-#: Cornell box, tolerance 0.1: 1/4 gave 0.30 of uniform subdivision's elements at equal surface
-#: error, 1/8 0.25 (1/16 0.24; 1/2 0.38, no rule 0.77); the house gains 0.3 % elements
+#: ... as this fraction of ``tolerance`` (a large element's error covers much area)
 BIG_TOLERANCE = 0.125
-#: ... only on the levels above the last BIG_LEVELS (so a shallow solve keeps shallow patches)
+#: ... on all but the last BIG_LEVELS levels, a count (a shallow solve keeps shallow patches)
 BIG_LEVELS = 2
-#: receivers whose form factor to the shooter is below this use area samples only (the
-#: kernel is then nearly flat over the shooter); nearer ones add cosine-direction samples
+#: form factor below which a receiver uses area samples only (the kernel is flat); nearer ones add directions
 F_DIRECTION = 0.02
-#: a receiver patch to which a shooter's earlier gathers traced at least this many rays,
-#: none of them unoccluded, is skipped by that shooter's later shots
+#: rays of a shooter's gathers, none unoccluded, after which its later shots skip a receiver patch (culling)
 CULL_RAYS = 64
-#: receiver levels of a shot (hierarchical, after Hanrahan's BF refinement): a patch on which a
-#: shot adds less than COARSE_EPS[1] of its current radiance receives on its level-1 lattice grid
-#: (3 x 3 points, 6 on triangles), less than COARSE_EPS[0] at its corners only, the values
-#: interpolated to its vertices; otherwise at every vertex
+#: a shot adding under [1] / [0] of a patch's radiance is received on its 3 x 3 grid / corners (fewer gathers)
 COARSE_EPS = (0.002, 0.02)
-#: ... and only when the patch is far from the shooter: its radius below this fraction of the
-#: distance between them (the shot then varies smoothly over it, and the interpolation from the
-#: grid stays within a few percent of the shot's small contribution)
+#: ... only if the patch's radius is under this fraction of its distance to the shooter (the shot is smooth)
 COARSE_SIZE = (0.125, 0.25)
-#: receivers farther than this many shooter radii get their form factor from a Gauss rule
+#: distance in shooter radii beyond which a form factor comes from a Gauss rule (cheaper, accurate far off)
 FF_FAR = 4.0
-#: most (receiver, shooter) form factors kept for the shooters' later shots on the same mesh
-#: (8 bytes each)
+#: (receiver, shooter) form factors kept for the shooters' later shots on one mesh, a count (8 bytes each)
 FF_CACHE_ENTRIES = 12_000_000
-#: the direct pass (emitters) uses this many times the per-side samples of ``samples``
+#: per-side multiple of ``samples`` for the direct pass from emitters (the direct light shapes the mesh)
 DIRECT_SAMPLE_FACTOR = 2
-#: the strongest shots (the first bounces, which make most of the indirect light) use this many
-#: times the per-side samples of ``samples``; fainter ones fewer, down to 1 x 1
+#: per-side multiple of ``samples`` for the strongest shots (the first bounces make most indirect light)
 SHOT_SAMPLE_FACTOR = 2
-#: ... those that shoot at least this fraction of the emitted power; a shot of a smaller share
-#: s uses ``sqrt(s / SHOT_FULL_SHARE)`` of them per side (samples in proportion to power)
+#: emitted-power share from which a shot gets all of those; share s gets sqrt(s / this) (samples by power)
 SHOT_FULL_SHARE = 0.05
-#: the gathers that give stage C's new vertices the light shot so far (one sample pattern for all
-#: of them, so its error is one coherent offset of them all, not speckle) use this many times the
-#: per-side samples of ``samples`` for a source that shot at least ``SHOT_FULL_SHARE`` of the
-#: emitted power, fewer for a fainter one (by the square root of its share), as the strongest shots
-#: do. With 1 x (4 x 4 samples) the Cornell box floor's light reached the new vertices up to 9 %
-#: off (one offset per solve: -5 % on the new vertices of the seed-0 solve), and refinement chased
-#: that error: the adaptive mesh stayed ~1.5 % darker than uniform subdivision whatever the
-#: tolerance (13.5 k elements at tolerance 0.05 instead of 9.2 k); 4 x halves the rest of the
-#: offset but doubles the Cornell box's time and adds 30 % to the house's
+#: per-side multiple of ``samples`` for stage C's gathers at new vertices (one pattern: its error is common)
 REFINE_SAMPLE_FACTOR = 2
-#: a patch shoots its unshot field (linear in its leaves) times its *gain*: the power of its light
-#: integrated with the probes every split test evaluates (quadratic per leaf) over the power of the
-#: linear interpolant, kept within 1 / (1 + GAIN_LIMIT) .. 1 + GAIN_LIMIT. An element that stays
-#: coarse under concave light interpolates below it; shooting the interpolant lost that light from
-#: every surface's indirect light (the Cornell box's vertices 1.1 % dark, the closed lit box 2.8 %)
+#: a patch's shot gain (probe-integrated / interpolated power) kept in [1/(1+this), 1+this] (concave light)
 GAIN_LIMIT = 0.25
-#: :func:`resolve` solves afresh on the mesh when the changed sources' power exceeds this
-#: fraction of the new emitted power
+#: changed sources' power, fraction of the new emitted power, above which ``resolve`` solves afresh (noise)
 RESOLVE_MAX_CHANGE = 1.0
-#: rays per vertex that measure the closure of its hemisphere for the ambient term
+#: rays per vertex that measure the closure of its hemisphere for the ambient term, a count
 AMBIENT_RAYS = 16
-#: upper bound of the measured reflected fraction in the ambient term
+#: upper bound of the measured reflected fraction r in the ambient term (keeps r / (1 - r) finite)
 MAX_REFLECTANCE = 0.95
-
 
 
 @dataclass
@@ -144,7 +111,7 @@ class SolveOptions:
         shot so far (exact, never interpolated). Without it such surfaces keep their
         direct-light mesh.
     ambient : bool, default True. Add the ambient term for the light still unshot at
-        convergence (see the module docstring); False leaves it out (the result is
+        convergence (see :mod:`iat.radiosity.solver`, D); False leaves it out (the result is
         then darker by about ``convergence`` times the interreflection gain).
     """
 

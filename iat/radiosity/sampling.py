@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 
+from iat.color import LUMINANCE_WEIGHTS
 from iat.geometry import quadtree as qt
-from iat.radiosity.options import LUMINANCE
 
 
 def hash_uniform(keys: np.ndarray, salt: int, k: int = 2) -> np.ndarray:
@@ -328,4 +328,4 @@ def pattern_side(samples: int) -> int:
 
 
 def luminance_of(x: np.ndarray) -> np.ndarray:
-    return np.asarray(x) @ LUMINANCE
+    return np.asarray(x) @ LUMINANCE_WEIGHTS

@@ -72,7 +72,10 @@ class Visibility:
     def __exit__(self, *exc):
         self.close()
 
-    def _run(self, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> np.ndarray:
+    def occluded_chunk(self, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """embreex's raw answer for one chunk of rays, on the calling thread and not counted in
+        ``rays``: (n,) int, 0 where something lies before ``t``. o, d : (n, 3) float32 contiguous;
+        t : (n,) float32."""
         return self._scene.run(o, d, dists=t, query="OCCLUDED")
 
     def occluded(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray) -> np.ndarray:
@@ -96,11 +99,10 @@ class Visibility:
         bounds = list(range(0, n, c))
         if self._pool is None or len(bounds) == 1:
             for a in bounds:
-                out[a : a + c] = self._run(o[a : a + c], d[a : a + c], t[a : a + c]) == 0
+                out[a : a + c] = self.occluded_chunk(o[a : a + c], d[a : a + c], t[a : a + c]) == 0
         else:
-            futs = [
-                (a, self._pool.submit(self._run, o[a : a + c], d[a : a + c], t[a : a + c])) for a in bounds
-            ]
+            chunk = self.occluded_chunk
+            futs = [(a, self._pool.submit(chunk, o[a : a + c], d[a : a + c], t[a : a + c])) for a in bounds]
             for a, f in futs:
                 out[a : a + c] = f.result() == 0
         with self._lock:

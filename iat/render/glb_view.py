@@ -1,7 +1,7 @@
-"""Draw a GLB as :func:`iat.export.export_glb` writes it, with our own moderngl code.
+"""Draw a GLB as :func:`iat.export.gltf.export_glb` writes it, with our own moderngl code.
 
 This is the check that an exported file shows what the IAT renderer shows: it
-reads the glTF itself (no trimesh, no pygltflib) and draws every triangle
+reads the glTF with pygltflib (no trimesh) and draws every triangle
 primitive **unlit**, as a glTF viewer does with ``KHR_materials_unlit``:
 
     colour = baseColorFactor x baseColorTexture(TEXCOORD_t) x COLOR_0
@@ -23,7 +23,7 @@ primitive **unlit**, as a glTF viewer does with ``KHR_materials_unlit``:
   emission and alpha are ignored (the exporter writes none that matter).
 
 ``render_glb(path, camera, size, ctx=None)`` returns ``(h, w, 3) float32`` linear
-radiance (row 0 at the top), the same convention as :meth:`iat.render.Renderer.render`.
+radiance (row 0 at the top), the same convention as :meth:`iat.render.renderer.Renderer.render`.
 For several images of one file keep a :class:`GlbView`.
 """
 
@@ -32,13 +32,16 @@ from __future__ import annotations
 import io
 import json
 import struct
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pygltflib import GLTF2
 
 from iat.errors import LoadError, RenderError
+from iat.render import gl
 
 __all__ = ["GlbDocument", "GlbPrimitive", "GlbView", "is_iat_export", "load_glb", "render_glb"]
 
@@ -50,55 +53,6 @@ _TRIANGLES = 4
 _COMPONENT = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _GL_SRGB8_ALPHA8 = 0x8C43
-_GLB_MAGIC, _CHUNK_JSON, _CHUNK_BIN = 0x46546C67, 0x4E4F534A, 0x004E4942
-
-_SHADER = """
-#if defined VERTEX_SHADER
-uniform mat4 clip_from_world;
-in vec3 in_position;
-in vec4 in_color;
-in vec2 in_uv0;
-in vec2 in_uv1;
-out vec4 v_color;
-out vec2 v_uv0;
-out vec2 v_uv1;
-void main() {
-    v_color = in_color;
-    v_uv0 = in_uv0;
-    v_uv1 = in_uv1;
-    gl_Position = clip_from_world * vec4(in_position, 1.0);
-}
-#elif defined FRAGMENT_SHADER
-uniform sampler2D base_tex;   // unit 0
-uniform sampler2D ill_tex;    // unit 1
-uniform bool use_base;
-uniform bool use_ill;
-uniform int base_set;         // TEXCOORD_<n> of the base colour texture (0 or 1)
-uniform int ill_set;
-uniform bvec2 base_mirror;    // MIRRORED_REPEAT on s / t (the texture itself repeats)
-uniform bvec2 ill_mirror;
-uniform vec4 factor;          // baseColorFactor
-uniform float radiance_scale;
-in vec4 v_color;
-in vec2 v_uv0;
-in vec2 v_uv1;
-out vec4 frag_color;
-vec2 fold(vec2 uv, bvec2 m) {
-    vec2 f = 1.0 - abs(mod(uv, 2.0) - 1.0);
-    return vec2(m.x ? f.x : uv.x, m.y ? f.y : uv.y);
-}
-void main() {
-    vec4 c = factor * v_color;
-    if (use_base) {
-        c *= texture(base_tex, fold(base_set == 1 ? v_uv1 : v_uv0, base_mirror));
-    }
-    if (use_ill) {
-        c.rgb *= texture(ill_tex, fold(ill_set == 1 ? v_uv1 : v_uv0, ill_mirror)).rgb;
-    }
-    frag_color = vec4(c.rgb * radiance_scale, 1.0);
-}
-#endif
-"""
 
 
 # -- reading (pure numpy, no GL) ---------------------------------------------------------------------
@@ -170,26 +124,30 @@ class GlbDocument:
         return Camera(eye=c + np.array([0.0, 0.0, 2.2 * r]), target=c, yfov=50.0, znear=r * 0.01, zfar=r * 10)
 
 
-def _split_glb(data: bytes, path: Path) -> tuple[dict, bytes]:
+def _read_glb(data: bytes, path: Path) -> tuple[dict, bytes]:
+    """The JSON document (a dict, glTF defaults written out) and the BIN chunk (b"" when none) of a
+    GLB's bytes, read with pygltflib."""
     if len(data) < 20:
         raise LoadError("not a GLB file (too short)", path)
-    magic, version, length = struct.unpack_from("<III", data, 0)
-    if magic != _GLB_MAGIC:
-        raise LoadError("not a GLB file (bad magic)", path)
-    if version != 2:
+    version = int.from_bytes(data[4:8], "little")
+    if data[:4] == b"glTF" and version != 2:
         raise LoadError(f"GLB version {version}, only 2 is supported", path)
-    off, doc, binary = 12, None, b""
-    while off + 8 <= min(length, len(data)):
-        clen, ctype = struct.unpack_from("<II", data, off)
-        chunk = data[off + 8 : off + 8 + clen]
-        if ctype == _CHUNK_JSON:
-            doc = json.loads(chunk.decode("utf-8"))
-        elif ctype == _CHUNK_BIN and not binary:
-            binary = bytes(chunk)
-        off += 8 + clen
-    if doc is None:
+    # pygltflib reads chunks up to the header's length: a file cut short is read as far as it goes
+    if int.from_bytes(data[8:12], "little") > len(data):
+        data = data[:8] + len(data).to_bytes(4, "little") + data[12:]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # chunks of unknown type are skipped
+            gltf = GLTF2.load_from_bytes(data)
+    except OSError as e:  # pygltflib's "header does not appear to be valid glb format"
+        raise LoadError("not a GLB file (bad magic)", path) from e
+    except struct.error as e:
+        raise LoadError(f"truncated GLB file: {e}", path) from e
+    except AttributeError as e:  # a BIN chunk before the JSON chunk
+        raise LoadError("GLB without a JSON chunk before its BIN chunk", path) from e
+    if gltf is None:
         raise LoadError("GLB without a JSON chunk", path)
-    return doc, binary
+    return json.loads(gltf.to_json()), bytes(gltf.binary_blob() or b"")
 
 
 def _buffers(doc: dict, binary: bytes, path: Path) -> list[bytes]:
@@ -280,19 +238,11 @@ def _decode_image(doc: dict, bufs: list[bytes], image: int, path: Path) -> np.nd
 
 
 def is_iat_export(path: str | Path) -> bool:
-    """True when ``path`` is a GLB written by :func:`iat.export.export_glb` (root ``extras.iat``)."""
+    """True when ``path`` is a GLB written by :func:`iat.export.gltf.export_glb` (root ``extras.iat``)."""
     p = Path(path)
     try:
-        with open(p, "rb") as f:
-            head = f.read(20)
-            if len(head) < 20:
-                return False
-            magic, _, _ = struct.unpack_from("<III", head, 0)
-            clen, ctype = struct.unpack_from("<II", head, 12)
-            if magic != _GLB_MAGIC or ctype != _CHUNK_JSON:
-                return False
-            doc = json.loads(f.read(clen).decode("utf-8"))
-    except (OSError, ValueError):
+        doc, _ = _read_glb(p.read_bytes(), p)
+    except (OSError, LoadError, ValueError, TypeError, KeyError, AttributeError):
         return False
     return isinstance(doc.get("extras"), dict) and "iat" in doc["extras"]
 
@@ -311,7 +261,7 @@ def load_glb(path: str | Path) -> GlbDocument:
         if path.suffix.lower() == ".gltf":
             doc, binary = json.loads(data.decode("utf-8")), b""
         else:
-            doc, binary = _split_glb(data, path)
+            doc, binary = _read_glb(data, path)
         return _load(doc, binary, path)
     except LoadError:
         raise
@@ -439,12 +389,7 @@ class GlbView:
         self.ctx = ctx
         self._objects: list[Any] = []
         try:
-            self._prog = self._keep(
-                ctx.program(
-                    vertex_shader="#version 330 core\n#define VERTEX_SHADER\n" + _SHADER,
-                    fragment_shader="#version 330 core\n#define FRAGMENT_SHADER\n" + _SHADER,
-                )
-            )
+            self._prog = self._keep(gl.program(ctx, "glb"))
             self._white = self._keep(ctx.texture((1, 1), 4, bytes([255, 255, 255, 255])))
             self._textures = {t: self._texture(d) for t, d in self.document.textures.items()}
             self._draws = [self._primitive(p) for p in self.document.primitives if len(p.indices)]

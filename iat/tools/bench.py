@@ -37,9 +37,11 @@ from pathlib import Path
 import numpy as np
 
 from iat.camera import Camera
+from iat.color import LUMINANCE_WEIGHTS
 from iat.errors import LoadError
 from iat.progress import Progress
 from iat.radiosity.cache import cached_solve
+from iat.tools.common import jsonable, memory_report, policy_dict, psnr_from, texture_bytes
 
 log = logging.getLogger(__name__)
 
@@ -52,8 +54,6 @@ SAMPLE_DIR = Path(__file__).resolve().parents[2] / "sample_models"
 DEFAULT_CACHE = Path("out") / "bench"
 #: the triangle-bound case: few pixels, so per-vertex work dominates the frame
 TINY_SIZE = (64, 48)
-#: Rec. 709 luminance of linear RGB
-_LUM = np.array([0.2126, 0.7152, 0.0722])
 #: bump when the JSON layout changes
 SCHEMA_VERSION = 1
 #: the benchmark's solve: overrides of the solver's defaults, none now that the defaults are fast
@@ -267,7 +267,7 @@ def image_errors(renderer, cameras: list[Camera], size: tuple[int, int], with_fl
 
     Both are rendered as float32 linear radiance. PSNR's peak is the frame's
     display white: the radiance that the automatic exposure of the mesh frame
-    (:func:`iat.imageio.auto_exposure`) maps to 1, so a bright emitter in view
+    (:func:`iat.color.auto_exposure`) maps to 1, so a bright emitter in view
     does not inflate it. FLIP compares the two tone-mapped with that exposure.
     The relative error is over the lit pixels of the mesh frame.
     Returns ``{"frames", "psnr_db" (over all frames' pixels), "psnr_db_min" (worst frame),
@@ -287,7 +287,7 @@ def image_errors(renderer, cameras: list[Camera], size: tuple[int, int], with_fl
         mse = float(np.mean((img.astype(np.float64) - ref) ** 2))
         sq += mse / (peak * peak)
         n += 1
-        psnrs.append(_psnr_from(mse / (peak * peak)))
+        psnrs.append(psnr_from(mse / (peak * peak)))
         if with_flip:
             flips.append(flip(img, ref, exposure=e))
         m = lit_mask(ref)
@@ -295,7 +295,7 @@ def image_errors(renderer, cameras: list[Camera], size: tuple[int, int], with_fl
             rels.append(relative_error(img, ref, mask=m))
     return {
         "frames": n,
-        "psnr_db": _psnr_from(sq / max(n, 1)),
+        "psnr_db": psnr_from(sq / max(n, 1)),
         "psnr_db_min": min(psnrs) if psnrs else None,
         "flip_mean": float(np.mean(flips)) if flips else None,
         "flip_max": float(np.max(flips)) if flips else None,
@@ -303,59 +303,12 @@ def image_errors(renderer, cameras: list[Camera], size: tuple[int, int], with_fl
     }
 
 
-#: PSNR reported for identical images (JSON has no infinity)
-PSNR_IDENTICAL = 200.0
-
-
-def _psnr_from(normalised_mse: float) -> float:
-    if normalised_mse <= 0.0:
-        return PSNR_IDENTICAL
-    return min(PSNR_IDENTICAL, float(-10.0 * math.log10(normalised_mse)))
-
-
 def seam_errors(baked, solution) -> dict:
     """Seam error (:func:`iat.bake.seam_error`, absolute radiance along shared coplanar edges)
     of the IAT textures and of the solution's own mesh, for scale: ``{"iat": {...}, "mesh": {...}}``."""
-    from iat.bake.baker import seam_error
+    from iat.measure.seams import seam_error
 
-    return _jsonable({"iat": seam_error(baked, solution=solution), "mesh": seam_error(solution)})
-
-
-def _jsonable(o):
-    if isinstance(o, dict):
-        return {str(k): _jsonable(v) for k, v in o.items()}
-    if isinstance(o, list | tuple):
-        return [_jsonable(v) for v in o]
-    if isinstance(o, np.ndarray):
-        return _jsonable(o.tolist())
-    if isinstance(o, np.generic):
-        o = o.item()
-    if isinstance(o, float) and not math.isfinite(o):
-        return None
-    if isinstance(o, Path):
-        return str(o)
-    return o
-
-
-def _policy_dict(policy) -> dict:
-    try:
-        return asdict(policy)
-    except TypeError:
-        return dict(vars(policy))
-
-
-def _memory(baked) -> dict:
-    mem = baked.memory
-    return mem.to_dict() if hasattr(mem, "to_dict") else dict(vars(mem))
-
-
-def _texture_bytes(mem: dict) -> int:
-    for k in ("texture_bytes", "gpu_texture_bytes", "texture"):
-        if k in mem:
-            return int(mem[k])
-    if "texture_mb" in mem:
-        return int(round(float(mem["texture_mb"]) * 2**20))
-    raise KeyError(f"memory report has no texture bytes: {sorted(mem)}")
+    return jsonable({"iat": seam_error(baked, solution=solution), "mesh": seam_error(solution)})
 
 
 def _rebake_policy(policy):
@@ -378,7 +331,8 @@ def bench_model(
     progress: Progress | None = None,
 ) -> dict:
     """One model's row of the benchmark (see :func:`run_bench` for the fields)."""
-    from iat.bake.baker import BakePolicy, Baker
+    from iat.bake.baker import Baker
+    from iat.bake.policy import BakePolicy
     from iat.render.renderer import Renderer
 
     def step(frac: float, msg: str) -> None:
@@ -409,7 +363,7 @@ def bench_model(
     t0 = time.perf_counter()
     baked = baker.bake(policy)
     rebake_cached_s = time.perf_counter() - t0
-    mem = _memory(baked)
+    mem = memory_report(baked)
     seam = seam_errors(baked, sol)
     # IAT against mesh compares illumination: detail textures (report §3.7) exist in IAT mode only,
     # so the image error is measured on the same bake with radiance in every texel
@@ -468,7 +422,7 @@ def bench_model(
         "textured_patches": int(textured.sum()),
         "draw_calls_mesh": counts["mesh"][1],
         "draw_calls_iat": counts["iat"][1],
-        "texture_mb": _texture_bytes(mem) / 2**20,
+        "texture_mb": texture_bytes(mem) / 2**20,
         "memory": mem,
         "frame_rate": {
             k: {m: v[m]["fps"] for m in v} | {f"{m}_frame_ms": v[m]["frame_ms"] for m in v}
@@ -479,7 +433,7 @@ def bench_model(
         "flip": err["flip_mean"],
         "seam_error": seam["iat"],
         "seam_error_mesh": seam["mesh"],
-        "radiance_p99": float(np.percentile(sol.vert_radiance.astype(np.float64) @ _LUM, 99))
+        "radiance_p99": float(np.percentile(sol.vert_radiance.astype(np.float64) @ LUMINANCE_WEIGHTS, 99))
         if len(sol.vert_radiance)
         else 0.0,
         "detail_textures": n_detail,
@@ -490,12 +444,12 @@ def bench_model(
         "rebake_s": rebake_s,
         "rebake_cached_s": rebake_cached_s,
         "load_s": {"scene": sinfo["load_s"], "upload_mesh": up_mesh, "upload_iat": up_iat},
-        "policy": _policy_dict(baked.policy if getattr(baked, "policy", None) is not None else policy),
+        "policy": policy_dict(baked.policy if getattr(baked, "policy", None) is not None else policy),
         "bake_timings": dict(getattr(baked, "timings", {}) or {}),
         "gl_renderer": gl_renderer,
         "report": _report_row(model.stem),
     }
-    return _jsonable(row)
+    return jsonable(row)
 
 
 def _size_key(size) -> str:
@@ -581,7 +535,7 @@ def run_bench(
     rebake_s, load_s: {scene, upload_mesh, upload_iat}, policy, report`` (the report's
     Figure 3 numbers for the matching model, or None).
     """
-    from iat.bake.baker import BakePolicy
+    from iat.bake.policy import BakePolicy
 
     solve_options = bench_solve_options() if solve_options is None else solve_options
     policy = BakePolicy() if policy is None else policy
@@ -618,7 +572,7 @@ def run_bench(
             )
         )
     gl = rows[0]["gl_renderer"] if rows else ""
-    return _jsonable(
+    return jsonable(
         {
             "schema": SCHEMA_VERSION,
             "settings": {
@@ -629,7 +583,7 @@ def run_bench(
                 "error_size": list(size if error_size is None else error_size),
                 "repeats": int(repeats),
                 "solve_options": asdict(solve_options),
-                "policy": _policy_dict(policy),
+                "policy": policy_dict(policy),
                 "cache_dir": str(cache_dir),
             },
             "machine": {**machine_info(gl), "load_average_start": load_start},

@@ -37,10 +37,6 @@ from iat.radiosity.cache import cached_solve
 from iat.tools.bench import (
     DEFAULT_CACHE,
     FrameTimer,
-    _jsonable,
-    _memory,
-    _policy_dict,
-    _texture_bytes,
     bench_solve_options,
     default_models,
     interpolate_path,
@@ -50,6 +46,7 @@ from iat.tools.bench import (
     pick,
     resolve_model,
 )
+from iat.tools.common import jsonable, memory_report, policy_dict, psnr_from, texture_bytes
 
 log = logging.getLogger(__name__)
 
@@ -115,13 +112,11 @@ def _mean_flip(images, refs, exposures) -> float:
 
 def _psnr(images, refs, exposures) -> float:
     """PSNR over all frames, peak = each frame's display white (1 / exposure); capped at 200 dB."""
-    from iat.tools.bench import _psnr_from
-
     v = [
         float(np.mean((a.astype(np.float64) - b) ** 2)) * e * e
         for a, b, e in zip(images, refs, exposures, strict=True)
     ]
-    return _psnr_from(float(np.mean(v)))
+    return psnr_from(float(np.mean(v)))
 
 
 def chart_model(
@@ -145,7 +140,8 @@ def chart_model(
     ``thresholds x scales x tolerance_methods``; every solution also gives a mesh point.
     reference_spp : samples per pixel of the Mitsuba reference (None: no reference).
     """
-    from iat.bake.baker import BakePolicy, Baker
+    from iat.bake.baker import Baker
+    from iat.bake.policy import BakePolicy
     from iat.color import auto_exposure
     from iat.render.renderer import Renderer
 
@@ -249,8 +245,8 @@ def chart_model(
                     r.set_baked(baked)
                     imgs = [r.render(c, size=(w, h), mode="iat") for c in ecams]
                     st = r.stats()
-                    mem = _memory(baked)
-                    tex = _texture_bytes(mem)
+                    mem = memory_report(baked)
+                    tex = texture_bytes(mem)
                     points.append(
                         {
                             "kind": "iat",
@@ -282,12 +278,12 @@ def chart_model(
             mask = pareto_mask(c, e)
             pareto[f"{err}/{cost}"] = [int(i) for i in np.flatnonzero(mask)]
     step(1.0, "done")
-    return _jsonable(
+    return jsonable(
         {
             "model": model.stem,
             "file": str(model),
             "patches": int(scene.n_patches),
-            "finest": {"tolerance": tols[0], "policy": _policy_dict(finest_policy)},
+            "finest": {"tolerance": tols[0], "policy": policy_dict(finest_policy)},
             "reference": ref_info,
             "gl_renderer": gl_renderer,
             "points": points,
@@ -377,7 +373,7 @@ def run_chart(
                 progress=sub,
             )
         )
-    result = _jsonable(
+    result = jsonable(
         {
             "settings": {
                 "size": [int(size[0]), int(size[1])],

@@ -48,10 +48,7 @@ in vec2 v_detail_uv;
 flat in float v_detail;
 out vec4 frag_color;
 
-vec3 srgb_encode(vec3 c) {
-    c = clamp(c, 0.0, 1.0);
-    return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(vec3(0.0031308), c));
-}
+#include "color.glsl"
 
 vec3 page(float layer) {
     return texture(pages, vec3(v_uv, v_layer + layer)).rgb;

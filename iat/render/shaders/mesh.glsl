@@ -29,10 +29,7 @@ uniform bool tonemap;    // true: clamp + sRGB encode (window); false: linear ra
 in vec3 v_color;
 out vec4 frag_color;
 
-vec3 srgb_encode(vec3 c) {
-    c = clamp(c, 0.0, 1.0);
-    return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(vec3(0.0031308), c));
-}
+#include "color.glsl"
 
 void main() {
     vec3 c = v_color * exposure;

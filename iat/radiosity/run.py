@@ -1,0 +1,537 @@
+"""One solve's state and stages (:class:`SolveRun`): meshing by direct light (A), progressive
+shooting (B), refinement on the total radiance (C) and the ambient term (D), as
+:mod:`iat.radiosity.solver` describes them; :func:`iat.radiosity.solver.solve` and
+:func:`iat.radiosity.resolving.resolve` drive it."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from iat.geometry import quadtree as qt
+from iat.radiosity.context import Context, SolveCancelled
+from iat.radiosity.meshing import (
+    VertexCache,
+    averaging_matrix,
+    coarse_keys,
+    coarse_weights,
+    measure_interpolation_bias,
+    probe_shot_gain,
+    split_test,
+)
+from iat.radiosity.options import (
+    ABS_FLOOR,
+    AMBIENT_RAYS,
+    COARSE_EPS,
+    COARSE_SIZE,
+    GATHER_BLOCK,
+    MAX_REFLECTANCE,
+    REFINE_SAMPLE_FACTOR,
+    SHOT_FULL_SHARE,
+    SHOT_SAMPLE_FACTOR,
+    SolveOptions,
+)
+from iat.radiosity.sampling import Lattice, concentric_disk, luminance_of, pattern_side
+from iat.radiosity.solution import Solution
+from iat.radiosity.sources import sources_record
+from iat.radiosity.visibility import Visibility
+
+
+class SolveRun:
+    """The state of one solve: the mesh, per-vertex reflected and unshot radiance, stats."""
+
+    def __init__(self, scene, opts: SolveOptions, progress, vis: Visibility, t_start: float):
+        self.scene, self.opts, self.vis, self.t_start = scene, opts, vis, t_start
+        self.progress = progress
+        self.ctx = ctx = Context(scene, opts, vis)
+        self.P = len(ctx.area)
+        self.m_side = pattern_side(opts.samples)
+        self.state = {"cancelled": False, "last": 0.0, "fraction": 0.0, "message": ""}
+        self.stats: dict = {
+            "interpolation_bias": 0.0,
+            "interpolation_bias_vertices": 0,
+            "interpolation_bias_total": 0.0,
+            "interpolation_bias_total_vertices": 0,
+            "mesh_passes": 0,
+            "refine_passes": 0,
+        }
+        self.timings = {"meshing_s": 0.0, "shooting_s": 0.0, "refining_s": 0.0}
+        self.shots = 0
+        self.shot_index = np.ones(self.P, dtype=np.int64)  # jitter index per patch; 0 was the direct pass
+        self.shot_power = np.zeros(self.P)  # luminance power each patch has shot so far
+        self.shot_log: list[tuple[np.ndarray, np.ndarray]] = []  # (shot, received-and-reflected) power
+        self.power0 = ctx.emitted_power()
+        self.mesh: dict = {}
+        self.coarse: list[dict] | None = None  # coarse receiver grids, with what they received
+        self.levels: dict[int, np.ndarray] = {}  # per shooter: receiver level of each patch (-1: vertices)
+        self.reflected = np.zeros((0, 3))
+        self.unshot = np.zeros((0, 3))
+        # what a vertex's patch shoots is reflected + offset (the element-integrated light of the
+        # point lights instead of its exact vertex value, see :meth:`light_correction`); what it
+        # has shot so far is reflected + offset - unshot
+        self.offset = np.zeros((0, 3))
+        # per patch: what it shoots is its unshot field times this (:meth:`shot_gain`)
+        self.gain = np.ones(self.P)
+
+    # -- progress -----------------------------------------------------------------
+    def report(self, fraction: float, message: str) -> None:
+        st = self.state
+        st["fraction"], st["message"] = fraction, message
+        if self.progress is not None and self.progress(float(min(max(fraction, 0.0), 1.0)), message) is False:
+            st["cancelled"] = True
+            raise SolveCancelled
+
+    def _step(self, message: str) -> None:
+        """Report a new stage at the current fraction (so a big model is never silent for long);
+        nothing once the solve was cancelled (it is finishing with what it has)."""
+        if not self.state["cancelled"]:
+            try:
+                self.report(self.state["fraction"], message)
+            except SolveCancelled:
+                pass  # the stages below see state["cancelled"] and keep what was evaluated
+
+    def check(self) -> None:  # cheap poll inside long loops, at most 20 times a second
+        now = time.perf_counter()
+        if self.progress is not None and now - self.state["last"] > 0.05:
+            self.state["last"] = now
+            self.report(self.state["fraction"], self.state["message"])
+
+    # -- the mesh -----------------------------------------------------------------
+    def set_mesh(self, forest: qt.Forest, keys: np.ndarray) -> None:
+        ctx, mesh = self.ctx, self.mesh
+        mesh["forest"], mesh["keys"] = forest, keys
+        mesh["M"] = averaging_matrix(forest, keys, ctx.corners, ctx.area)
+        mesh["lattice"] = Lattice(forest, keys)
+        mesh["start"] = np.searchsorted(keys, qt.make_key(np.arange(self.P + 1), 0, 0, ctx.n))
+        mesh["geo"] = ctx.geometry(keys)
+        mesh["geo"].cache = {}
+        mesh["rho"] = ctx.albedo[qt.decode_key(keys, ctx.n)[0]]
+        mesh["nverts"] = np.diff(mesh["start"])
+        if self.coarse is None:  # the coarse receiver grids do not depend on the mesh
+            self.coarse = []
+            for level in range(min(len(COARSE_EPS), ctx.opts.max_depth)):
+                ck = coarse_keys(ctx.is_quad, level, ctx.n)
+                cgeo = ctx.geometry(ck)
+                cgeo.cache = {}
+                self.coarse.append(
+                    {
+                        "keys": ck,
+                        "geo": cgeo,
+                        "npts": np.diff(cgeo.start),
+                        "rho": ctx.albedo[cgeo.patch],
+                        "acc": np.zeros((len(ck), 3)),
+                    }
+                )
+        mesh["coarse_w"] = [
+            coarse_weights(keys, c["keys"], ctx.is_quad, lv, ctx.n) for lv, c in enumerate(self.coarse)
+        ]
+
+    @property
+    def forest(self) -> qt.Forest:
+        return self.mesh["forest"]
+
+    @property
+    def keys(self) -> np.ndarray:
+        return self.mesh["keys"]
+
+    def mesh_by_direct_light(self) -> None:
+        """Stage A."""
+        ctx = self.ctx
+        t0 = time.perf_counter()
+        roots = qt.roots(ctx.is_quad, self.opts.max_depth)
+        self.direct_cache = VertexCache()
+        forest, passes, _ = split_test(
+            ctx,
+            roots,
+            self.direct_cache,
+            lambda k: ctx.direct(k, self.check),
+            self.report,
+            "meshing",
+            (0.0, 0.2),
+        )
+        keys = qt.vertex_keys(forest)
+        bias, bias_n = measure_interpolation_bias(keys, qt.vertex_keys(roots), self.direct_cache, ctx)
+        self.stats.update(
+            mesh_passes=int(passes), interpolation_bias=bias, interpolation_bias_vertices=bias_n
+        )
+        self._step(f"meshing: {forest.n_leaves} elements, vertex table")
+        self.set_mesh(forest, keys)
+        self.reflected = self.direct_cache.get(keys)  # 0 where a cancel left a vertex unevaluated
+        self._step("meshing: light the elements receive")
+        self.offset = self.light_correction()
+        self.unshot = self.reflected + self.offset
+        self._step("meshing: power each patch shoots")
+        self.gain = self.shot_gain(self.direct_cache)
+        self.timings["meshing_s"] = time.perf_counter() - t0
+
+    def take_mesh(self, sol: Solution) -> None:
+        """The leaves and vertices of ``sol``, unchanged."""
+        forest = qt.Forest(
+            sol.max_depth,
+            np.asarray(sol.patch_is_quad, dtype=bool),
+            np.asarray(sol.leaf_patch, dtype=np.int32),
+            np.asarray(sol.leaf_level, dtype=np.int8),
+            np.asarray(sol.leaf_i, dtype=np.int32),
+            np.asarray(sol.leaf_j, dtype=np.int32),
+            np.asarray(sol.leaf_flip, dtype=bool),
+        )
+        self.set_mesh(forest, np.asarray(sol.vert_key, dtype=np.int64))
+        self.reflected = np.zeros((len(self.keys), 3))
+        self.unshot = np.zeros((len(self.keys), 3))
+        self.offset = np.zeros((len(self.keys), 3))
+
+    def direct_on_mesh(self) -> None:
+        """Direct light at every vertex of the given mesh (no subdivision)."""
+        t0 = time.perf_counter()
+        self.report(0.0, f"direct light on the given mesh: {len(self.keys)} vertices")
+        try:
+            self.reflected = self.ctx.direct(self.keys, self.check, self.mesh["geo"])
+        except SolveCancelled:
+            self.reflected = np.zeros((len(self.keys), 3))
+        self.offset = self.light_correction()
+        self.unshot = self.reflected + self.offset
+        self.timings["meshing_s"] = time.perf_counter() - t0
+
+    def light_correction(self, forest=None, keys=None, geo=None, lights=None, signs=None) -> np.ndarray:
+        """(V, 3) :meth:`Context.light_correction` on the current mesh (or the given one): added to
+        the exact reflected direct radiance, it gives the unshot radiance whose power is what the
+        elements received from the point / spot lights. Zero when cancelled."""
+        forest = self.forest if forest is None else forest
+        keys = self.keys if keys is None else keys
+        geo = self.mesh["geo"] if geo is None else geo
+        if self.state["cancelled"]:
+            return np.zeros((len(keys), 3))
+        try:
+            return self.ctx.light_correction(forest, keys, geo, lights, signs)
+        except SolveCancelled:
+            return np.zeros((len(keys), 3))
+
+    def shot_gain(self, cache: VertexCache) -> np.ndarray:
+        """(P,) :func:`probe_shot_gain` of the current mesh from the values in ``cache``: the power of each
+        patch's light integrated with its probes over that of its linear interpolant, which its
+        shots multiply (an element that stays coarse under concave light interpolates below it).
+        1 on patches lit by point or spot lights (their ``offset`` already shoots the light the
+        elements hold) and when the solve was cancelled."""
+        if self.state["cancelled"]:
+            return np.ones(self.P)
+        gain = probe_shot_gain(self.forest, cache, self.ctx)
+        if len(self.offset) and np.any(self.offset):
+            lit = np.zeros(self.P, dtype=bool)
+            lit[qt.decode_key(self.keys, self.ctx.n)[0][np.any(self.offset != 0, axis=1)]] = True
+            gain[lit] = 1.0
+        return gain
+
+    # -- shooting -----------------------------------------------------------------
+    def patch_power(self, unshot: np.ndarray) -> np.ndarray:
+        """(P,) luminance power of each patch's unshot field (by magnitude: it may be signed)."""
+        return np.pi * luminance_of(self.mesh["M"] @ np.abs(unshot)) * self.ctx.area
+
+    def shoot(self, span, target: float) -> None:
+        """Shoot until the unshot power is below ``target`` or max_shots."""
+        ctx, mesh, opts = self.ctx, self.mesh, self.opts
+        if self.power0 <= 0 or len(self.keys) == 0:
+            return
+        t0 = time.perf_counter()
+        u_start = self.u_start
+        span_log = math.log(u_start / target) if u_start > target > 0 else 1.0  # progress on a log scale
+        try:
+            while self.shots < opts.max_shots:
+                power = self.patch_power(self.unshot)
+                total = float(power.sum())
+                if total <= target:
+                    break
+                done = min(1.0, max(0.0, math.log(u_start / max(total, 1e-300)) / span_log))
+                self.state["fraction"] = span[0] + (span[1] - span[0]) * done
+                self.state["message"] = (
+                    f"shooting: {self.shots} shots, unshot {total / self.power0:.3g} of emitted"
+                )
+                self.check()
+                s = int(np.argmax(power))
+                a, b = mesh["start"][s], mesh["start"][s + 1]
+                field = mesh["lattice"].grid(s, self.unshot) * self.gain[s]
+                field_mean = np.ravel(mesh["M"][s] @ self.unshot) * self.gain[s]
+                # fewer samples for faint shots: their noise matters less (sqrt keeps power / m flat-ish)
+                m_hi = SHOT_SAMPLE_FACTOR * self.m_side
+                share = float(power[s]) / (SHOT_FULL_SHARE * self.power0)
+                m = max(1, min(m_hi, round(m_hi * math.sqrt(share))))
+                dv = self.shot_gather(s, m, field, field_mean)
+                self.shot_index[s] += 1
+                self.shot_power[s] += float(power[s])
+                self.shots += 1
+                self.unshot[a:b] = 0.0
+                self.reflected += dv
+                self.unshot += dv
+                received = np.pi * (ctx.area[:, None] * (mesh["M"] @ dv)).sum(axis=0)
+                self.shot_log.append((np.pi * ctx.area[s] * field_mean, received))
+        finally:
+            self.timings["shooting_s"] += time.perf_counter() - t0
+
+    def receiver_levels(self, s: int, field_mean: np.ndarray) -> np.ndarray:
+        """(P,) int8 receiver level of each patch for the shots of s: -1 at every vertex, k on
+        the coarse grid of level k (``COARSE_EPS``). Decided at the first shot of s, from the
+        largest form factor of a patch's corners to s, the shot's radiance and the patch's
+        radiance then, and kept for its later (fainter) shots, so that every shot of s reaches a
+        patch at the same level (what :meth:`refine_total` relies on)."""
+        if s in self.levels:
+            return self.levels[s]
+        ctx, mesh = self.ctx, self.mesh
+        lvl = np.full(self.P, -1, dtype=np.int8)
+        if self.coarse:
+            cgeo = self.coarse[0]["geo"]  # the patches' corners
+            idx, f = ctx.form_factors(s, cgeo)
+            fmax = np.zeros(self.P)
+            np.maximum.at(fmax, cgeo.patch[idx], f)
+            y = mesh["M"] @ luminance_of(self.reflected) + luminance_of(ctx.emission)
+            floor = ABS_FLOOR * float((y * ctx.area).sum() / max(ctx.area.sum(), 1e-300))
+            lum_mean = float(luminance_of(np.abs(field_mean)))
+            rel = fmax * lum_mean * luminance_of(ctx.albedo) / (y + max(floor, 1e-30))
+            dist = np.linalg.norm(ctx.centre - ctx.centre[s], axis=1) - ctx.radius[s]
+            size = ctx.radius / np.maximum(dist, 1e-300)
+            size[dist <= 0] = np.inf
+            for level in range(len(self.coarse) - 1, -1, -1):  # the coarsest that is fine enough
+                sel = (rel < COARSE_EPS[level]) & (size < COARSE_SIZE[level])
+                sel &= mesh["nverts"] > self.coarse[level]["npts"]
+                lvl[sel] = level
+        self.levels[s] = lvl
+        return lvl
+
+    def shot_gather(self, s: int, m: int, field: np.ndarray, field_mean: np.ndarray) -> np.ndarray:
+        """(V, 3) reflected radiance one shot from s adds at every vertex: gathered at the
+        vertices of the patches it lights noticeably, interpolated from coarse grids on the
+        others (whose gathered values are kept, per grid point, in the grids' ``acc``)."""
+        ctx, mesh = self.ctx, self.mesh
+        shot = int(self.shot_index[s])
+        lvl = self.receiver_levels(s, field_mean)
+        g = ctx.gather(
+            s, mesh["geo"], m, shot, field, field_mean, correlated=False, cull=True, patches=lvl < 0
+        )
+        dv = mesh["rho"] * g
+        for level, (c, w) in enumerate(zip(self.coarse or [], mesh["coarse_w"], strict=True)):
+            sel = lvl == level
+            if sel.any():
+                gc = c["rho"] * ctx.gather(
+                    s, c["geo"], m, shot, field, field_mean, correlated=False, cull=True, patches=sel
+                )
+                c["acc"] += gc
+                dv += w @ gc
+        return dv
+
+    def refine_total(self, label: str, span) -> None:
+        """Stage C: refine on the total radiance. New vertices get their direct light and a
+        gather of everything each patch has shot so far (exact: shots are linear, so one
+        gather of their sum equals replaying them all), never an interpolated value. Their
+        unshot radiance is what they received minus what their patch already shot from
+        there, so energy the coarser mesh could not hold is shot again, not lost."""
+        ctx, mesh = self.ctx, self.mesh
+        t0 = time.perf_counter()
+        keys = self.keys
+        shot_field = self.reflected + self.offset - self.unshot
+        lattice_b = mesh["lattice"]
+        sources = np.flatnonzero(self.shot_index > 1)
+        # what each source shot: its shot field times the gain its shots had
+        grids = {int(p): lattice_b.grid(int(p), shot_field) * self.gain[p] for p in sources}
+        means = (mesh["M"] @ shot_field) * self.gain[:, None]
+        total_cache = VertexCache(keys, self.reflected.copy())
+        # samples per source by the share of the power it has shot (as the shots themselves), but
+        # REFINE_SAMPLE_FACTOR x more per side: one pattern serves all new vertices, so its error
+        # is a coherent offset of them all, which the shots' per-vertex patterns average out
+        ref = max(SHOT_FULL_SHARE * self.power0, 1e-300)
+        m_ref = REFINE_SAMPLE_FACTOR * self.m_side
+        m_src = {
+            int(p): max(1, min(m_ref, round(m_ref * math.sqrt(self.shot_power[p] / ref)))) for p in sources
+        }
+        n_pass = self.stats["refine_passes"]
+
+        def evaluate_total(new: np.ndarray) -> np.ndarray:
+            out = self.direct_cache.get(new)
+            missing = self.direct_cache.find(new) < 0
+            if missing.any():
+                out[missing] = ctx.direct(new[missing], self.check)
+            if len(new):
+                geo = ctx.geometry(new)
+                rho = ctx.albedo[geo.patch]
+                on = np.zeros(self.P, dtype=bool)
+                on[geo.patch] = True
+                # what the coarse grids received, interpolated as at the old vertices
+                for level, c in enumerate(self.coarse or []):
+                    out += coarse_weights(new, c["keys"], ctx.is_quad, level, ctx.n) @ c["acc"]
+                # and a gather of what each source shot at the vertices of these patches
+                for p in sources:
+                    p = int(p)
+                    fine = self.levels[p] < 0 if p in self.levels else None
+                    if fine is not None and not (fine & on).any():
+                        continue
+                    jitter = int(self.shot_index[p]) + 1_000_000 * (1 + n_pass)
+                    out += rho * ctx.gather(
+                        p, geo, m_src[p], jitter, grids[p], means[p], correlated=True, cull=True, patches=fine
+                    )
+                    self.check()
+            return out
+
+        old_keys = keys
+        forest, passes, _ = split_test(
+            ctx, self.forest, total_cache, evaluate_total, self.report, label, span
+        )
+        self.stats["refine_passes"] += passes
+        keys = qt.vertex_keys(forest)
+        self.timings["refining_s"] += time.perf_counter() - t0
+        if len(keys) == len(old_keys):
+            self.gain = self.shot_gain(total_cache)
+            return
+        b, bn = measure_interpolation_bias(keys, old_keys, total_cache, ctx)
+        n_old = self.stats["interpolation_bias_total_vertices"]
+        if bn:  # vertex-weighted mean over the refinement stages
+            self.stats["interpolation_bias_total"] = (
+                self.stats["interpolation_bias_total"] * n_old + b * bn
+            ) / (n_old + bn)
+        self.stats["interpolation_bias_total_vertices"] = n_old + bn
+        old_idx = qt.lookup(old_keys, keys)
+        new_unshot = np.zeros((len(keys), 3))
+        new_unshot[old_idx >= 0] = self.unshot[old_idx[old_idx >= 0]]
+        self.reflected = total_cache.get(keys)
+        p_new, i_new, j_new = qt.decode_key(keys, ctx.n)
+        # new vertices shoot the element-integrated light of the point lights, not its vertex peak
+        light_corr = (
+            self.light_correction(forest, keys, ctx.geometry(keys))
+            if ctx.lights
+            else np.zeros((len(keys), 3))
+        )
+        for p in np.unique(p_new[old_idx < 0]):
+            sel = np.flatnonzero((old_idx < 0) & (p_new == p))
+            shot_here = grids[int(p)][i_new[sel], j_new[sel]] if int(p) in grids else 0.0
+            new_unshot[sel] = np.maximum(self.reflected[sel] + light_corr[sel] - shot_here, 0.0)
+        self.unshot = new_unshot
+        new_offset = np.zeros((len(keys), 3))
+        new_offset[old_idx >= 0] = self.offset[old_idx[old_idx >= 0]]
+        new_offset[old_idx < 0] = light_corr[old_idx < 0]
+        self.offset = new_offset
+        self.set_mesh(forest, keys)
+        self.gain = self.shot_gain(total_cache)
+
+    def run_plan(self, plan) -> None:
+        self.u_start = max(float(self.patch_power(self.unshot).sum()), 1e-300)
+        try:
+            for kind, arg, span in plan:
+                if self.state["cancelled"]:
+                    break
+                if kind == "shoot":
+                    self.shoot(span, arg)
+                elif self.opts.refine_indirect and self.shots:
+                    self.refine_total(arg, span)
+        except SolveCancelled:
+            pass
+
+    # -- the result ---------------------------------------------------------------
+    def closure(self) -> np.ndarray:
+        """(V,) fraction of each vertex's cosine-weighted hemisphere that meets the scene (1 in
+        a closed room, less near an opening), from ``AMBIENT_RAYS`` directions in one pattern for
+        all vertices (so it varies smoothly)."""
+        ctx, geo = self.ctx, self.mesh["geo"]
+        m = pattern_side(AMBIENT_RAYS)
+        pat = ctx.pattern(self.P, m, 0)  # (a patch index no shooter has)
+        dx, dy = concentric_disk(pat[:, 0], pat[:, 1])
+        dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
+        out = np.zeros(len(geo.key))
+        for a in range(0, len(geo.key), GATHER_BLOCK):
+            sl = slice(a, a + GATHER_BLOCK)
+            t1, t2 = ctx.tangent[geo.patch[sl], 0], ctx.tangent[geo.patch[sl], 1]
+            w = (
+                dx[None, :, None] * t1[:, None]
+                + dy[None, :, None] * t2[:, None]
+                + dz[None, :, None] * geo.normal[sl][:, None]
+            )
+            o = np.repeat(geo.origin[sl], len(pat), axis=0)
+            hit = self.vis.occluded(o, w.reshape(-1, 3), np.full(len(o), 4.0 * ctx.scale))
+            out[sl] = hit.reshape(-1, len(pat)).mean(axis=1)
+            self.check()
+        return out
+
+    def ambient(self, fallback_reflectance=None) -> tuple[np.ndarray, np.ndarray]:
+        """(V, 3) reflected radiance standing for the unshot light's later bounces: a uniform
+        incoming radiance ``E`` times each vertex's albedo and :meth:`closure`; and the (3,)
+        reflected fraction r it was derived from (:mod:`iat.radiosity.solver`, stage D)."""
+        ctx, mesh = self.ctx, self.mesh
+        log = self.shot_log[len(self.shot_log) // 2 :]
+        if log:
+            sp = np.sum([np.abs(a) for a, _ in log], axis=0)
+            rp = np.sum([np.abs(b) for _, b in log], axis=0)
+            r = np.where(sp > 0, rp / np.where(sp > 0, sp, 1.0), 0.0)
+        elif fallback_reflectance is not None and len(fallback_reflectance) == 3:
+            r = np.asarray(fallback_reflectance, dtype=np.float64)
+        else:
+            return np.zeros((len(self.keys), 3)), np.zeros(3)
+        r = np.clip(r, 0.0, MAX_REFLECTANCE)
+        phi_u = np.pi * (ctx.area[:, None] * (mesh["M"] @ self.unshot)).sum(axis=0)
+        if not np.any(phi_u):
+            return np.zeros((len(self.keys), 3)), r
+        weight = mesh["rho"] * self.closure()[:, None]  # reflected per unit of incoming E
+        denom = np.pi * (ctx.area[:, None] * (mesh["M"] @ weight)).sum(axis=0)
+        e = np.where(denom > 0, phi_u * r / (1.0 - r) / np.where(denom > 0, denom, 1.0), 0.0)
+        return weight * e, r
+
+    def finish(self, mode="solve", fallback_reflectance=None, extra=None) -> Solution:
+        ctx, opts = self.ctx, self.opts
+        forest, keys = self.forest, self.keys
+        unshot_power = self.patch_power(self.unshot)
+        vpatch = qt.decode_key(keys, ctx.n)[0]
+        reflected = self.reflected
+        amb, refl_frac = np.zeros((len(keys), 3)), np.zeros(3)
+        if opts.ambient and opts.max_shots > 0 and len(keys) and not self.state["cancelled"]:
+            try:
+                amb, refl_frac = self.ambient(fallback_reflectance)
+            except SolveCancelled:
+                amb = np.zeros((len(keys), 3))
+            reflected = reflected + amb
+        radiance = ctx.emission[vpatch] + reflected
+        if not np.isfinite(radiance).all():
+            raise FloatingPointError("radiosity produced non-finite radiance (a solver bug)")
+        radiance = np.maximum(radiance, 0.0)
+        unshot_fraction = float(unshot_power.sum() / self.power0) if self.power0 > 0 else 0.0
+        if not self.state["cancelled"]:
+            try:
+                self.report(1.0, f"done: {self.shots} shots, {len(keys)} vertices")
+            except SolveCancelled:
+                pass
+        elapsed = time.perf_counter() - self.t_start
+        vis = self.vis
+        sol = Solution.from_forest(
+            forest,
+            ctx.corners,
+            self.scene.patch_material,
+            ctx.albedo,
+            keys,
+            radiance,
+            options=opts.to_dict(),
+            model_path=str(getattr(self.scene, "path", "") or ""),
+        )
+        area_tot = float(ctx.area.sum())
+        sol.stats = {
+            "elements": int(forest.n_leaves),
+            "vertices": int(len(keys)),
+            "triangles": int(len(sol.tri_vertices)),
+            "shots": int(self.shots),
+            "rays": int(vis.rays),
+            "rays_per_s": float(vis.rays / vis.seconds) if vis.seconds > 0 else 0.0,
+            "time_s": float(elapsed),
+            **{k: float(v) for k, v in self.timings.items()},
+            "unshot_fraction": unshot_fraction,
+            **self.stats,
+            "max_depth_reached": int(forest.leaf_level.max()) if forest.n_leaves else 0,
+            "min_element_size": float(ctx.min_size),
+            "emitted_power": float(self.power0),
+            "ambient_luminance_fraction": float(
+                np.pi * (ctx.area * luminance_of(self.mesh["M"] @ amb)).sum() / self.power0
+            )
+            if self.power0 > 0 and area_tot > 0
+            else 0.0,
+            "reflectance": [float(x) for x in refl_frac],
+            "culled_pairs": float(ctx.culled_fraction()),
+            "mode": mode,
+            "sources": sources_record(ctx),
+            "cancelled": bool(self.state["cancelled"]),
+            "options": opts.to_dict(),
+            **(extra or {}),
+        }
+        return sol

@@ -1,0 +1,54 @@
+"""The record of a solve's light sources (``stats['sources']``), which :func:`iat.radiosity.resolving.resolve`
+compares with a scene's to find what changed."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+
+def sources_record(ctx) -> dict:
+    """JSON-able description of the light sources of a solve on ``ctx`` (a
+    :class:`iat.radiosity.context.Context`): its point / spot lights and its emitting patches
+    (``[patch, r, g, b]``, emitted radiance)."""
+    return {
+        "lights": [light_record(lt) for lt in ctx.lights],
+        "emitters": [[int(p), *(float(x) for x in ctx.emission[p])] for p in ctx.emitters],
+    }
+
+
+def light_record(lt) -> dict:
+    """JSON-able description of one point / spot light (positions in scene units, cones in radians)."""
+    return {
+        "kind": lt.kind,
+        "position": [float(x) for x in lt.position],
+        "direction": [float(x) for x in lt.direction],
+        "radiant_intensity": [float(x) for x in lt.radiant_intensity],
+        "inner_cone": float(lt.inner_cone),
+        "outer_cone": float(lt.outer_cone),
+    }
+
+
+def light_from_record(d: dict):
+    """A light-like object (what :meth:`Context.light_irradiance` reads) from :func:`light_record`."""
+    return SimpleNamespace(
+        kind=d["kind"],
+        position=np.asarray(d["position"], dtype=np.float64),
+        direction=np.asarray(d["direction"], dtype=np.float64),
+        radiant_intensity=np.asarray(d["radiant_intensity"], dtype=np.float64),
+        inner_cone=float(d["inner_cone"]),
+        outer_cone=float(d["outer_cone"]),
+    )
+
+
+def light_signature(lt) -> tuple:
+    """Kind, position, direction, cones, and last the intensity of a light (for matching)."""
+    return (
+        lt.kind,
+        tuple(np.round(np.asarray(lt.position, dtype=np.float64), 12)),
+        tuple(np.round(np.asarray(lt.direction, dtype=np.float64), 12)),
+        round(float(lt.inner_cone), 12),
+        round(float(lt.outer_cone), 12),
+        tuple(np.round(np.asarray(lt.radiant_intensity, dtype=np.float64), 12)),
+    )
