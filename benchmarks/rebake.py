@@ -32,7 +32,7 @@ upload separately. Not a test: timings depend on the machine (llvmpipe here).
 
 ``--prewarm`` bakes, after each change, the slider's not yet visited neighbours (timed
 apart as "prewarm (idle)"): what a viewer's bake worker could do while the slider rests.
-``--worker`` drives the viewer's own :class:`viewer.state.BakeWorker` instead: each change is
+``--worker`` drives the viewer's own :class:`viewer.bake_worker.BakeWorker` instead: each change is
 ``submit`` on the UI side, the bake on the worker thread, then ``set_baked`` + ``finish`` once
 the result is there (timed from ``submit``, without waiting for a frame), and ``--gap`` seconds
 of idle time (the slider resting) before the next change, in which the worker pre-warms the
@@ -108,7 +108,7 @@ def synthetic(scene, leaves: int, max_depth: int = 7, seed: int = 0):
 
 
 def load(args):
-    from iat.io.scene import load_scene
+    from iat.io.load import load_scene
     from iat.radiosity.cache import cached_solve
     from iat.radiosity.inputs import is_solution_path, open_solution
 

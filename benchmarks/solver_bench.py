@@ -48,7 +48,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from iat.io.scene import load_scene  # noqa: E402
+from iat.io.load import load_scene  # noqa: E402
 from iat.measure.metrics import reference_errors, smooth_lit_mask  # noqa: E402
 from iat.radiosity import SolveOptions, solve  # noqa: E402
 from iat.radiosity.visibility import CHUNK, Visibility  # noqa: E402

@@ -5,7 +5,7 @@ while another is waiting replaces it (only the newest runs next), the worker
 publishes results as they come, and the UI thread takes the newest one with
 :meth:`~LatestWorker.poll` without ever blocking. Subclasses say how a request is
 taken (:meth:`~LatestWorker._take`) and what it does (:meth:`~LatestWorker._work`);
-:class:`iat.lighting.Relighter` and ``viewer.state.BakeWorker`` are the two.
+:class:`iat.lighting.relight.Relighter` and ``viewer.bake_worker.BakeWorker`` are the two.
 
 Between requests the thread may do optional work of its own (:meth:`~LatestWorker._idle`,
 one small piece per call: the bake worker pre-warms the slider's neighbours there); a

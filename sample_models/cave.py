@@ -3,7 +3,7 @@
 A winding tunnel about 30 m long, closed at both ends, that widens into two
 chambers. Its wall is a displaced tube: rings of :data:`RING` vertices around a
 curved centre line, every ring point pushed in or out by deterministic fractal
-value noise (:func:`_common.fbm3`, no random generator) and the bottom squashed
+value noise (:func:`common.fbm3`, no random generator) and the bottom squashed
 into a bumpy floor. Each cell of the tube is split into two triangles along its
 shorter diagonal, so the surface is made of (non-coplanar) TRIANGLE roots with
 normals pointing into the cave. The ends are domed caps (triangle fans), and a
@@ -29,7 +29,7 @@ _HERE = Path(__file__).resolve().parent
 if __package__ in (None, ""):  # run as a script: make `sample_models` and `iat` importable
     sys.path.insert(0, str(_HERE.parent))
 
-from sample_models._common import Camera, ModelBuilder, assemble, fbm3, script_main, walk_path  # noqa: E402
+from sample_models.common import Camera, ModelBuilder, assemble, fbm3, script_main, walk_path  # noqa: E402
 
 DEFAULT_PATH = _HERE / "cave.glb"
 

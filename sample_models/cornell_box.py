@@ -87,7 +87,7 @@ def _box(footprint_mm, height_mm) -> list[np.ndarray]:
 
 
 def _normal(c: np.ndarray) -> np.ndarray:
-    """(3,) unit normal of a quad with counter-clockwise corners (as ``iat.scene.Scene.patch_normal``)."""
+    """(3,) unit normal of a quad with counter-clockwise corners (as ``iat.io.scene.Scene.patch_normal``)."""
     n = np.cross(c[2] - c[0], c[3] - c[1])
     return n / np.linalg.norm(n)
 
@@ -184,6 +184,6 @@ def build(path: str | Path = DEFAULT_PATH) -> Path:
 
 
 if __name__ == "__main__":
-    from sample_models._common import script_main
+    from sample_models.common import script_main
 
     sys.exit(script_main(build, DEFAULT_PATH, "Write the Cornell box sample scene as a GLB."))

@@ -23,7 +23,7 @@ A day cycle (root ``extras["iat_lighting_states"]``, read by :mod:`iat.lighting`
 ``morning`` (low warm sun through the south window, cool sky in the north one,
 the kitchen panel at half strength, lamps off), ``noon`` (both windows bright and
 neutral, everything else off) and ``evening`` (a dim orange dusk, every lamp on),
-at key times 0, 0.5 and 1. The file's own lighting (what :func:`iat.scene.load_scene`
+at key times 0, 0.5 and 1. The file's own lighting (what :func:`iat.io.load.load_scene`
 gives) is everything on at once.
 
 Output is deterministic: the same script gives the same bytes.
@@ -40,7 +40,7 @@ _HERE = Path(__file__).resolve().parent
 if __package__ in (None, ""):  # run as a script: make `sample_models` and `iat` importable
     sys.path.insert(0, str(_HERE.parent))
 
-from sample_models._common import Camera, ModelBuilder, assemble, script_main, walk_path  # noqa: E402
+from sample_models.common import Camera, ModelBuilder, assemble, script_main, walk_path  # noqa: E402
 
 DEFAULT_PATH = _HERE / "house.glb"
 

@@ -28,7 +28,7 @@ _HERE = Path(__file__).resolve().parent
 if __package__ in (None, ""):  # run as a script: make `sample_models` and `iat` importable
     sys.path.insert(0, str(_HERE.parent))
 
-from sample_models._common import Camera, ModelBuilder, assemble, loop_waypoints, script_main, walk_path  # noqa: E402
+from sample_models.common import Camera, ModelBuilder, assemble, loop_waypoints, script_main, walk_path  # noqa: E402
 
 DEFAULT_PATH = _HERE / "lavapit.glb"
 

@@ -34,8 +34,8 @@ _HERE = Path(__file__).resolve().parent
 if __package__ in (None, ""):  # run as a script: make `sample_models` and `iat` importable
     sys.path.insert(0, str(_HERE.parent))
 
-from sample_models import _common  # noqa: E402
-from sample_models._common import Camera, ModelBuilder, assemble, loop_waypoints, script_main, walk_path  # noqa: E402
+from sample_models import common  # noqa: E402
+from sample_models.common import Camera, ModelBuilder, assemble, loop_waypoints, script_main, walk_path  # noqa: E402
 
 DEFAULT_PATH = _HERE / "pool.glb"
 
@@ -68,8 +68,8 @@ LAMP_COLOR = (1.0, 0.93, 0.82)
 def textures() -> dict[str, bytes]:
     """The three detail textures as PNG bytes (deterministic)."""
     return {
-        "floor_tiles": _common.png_bytes(
-            _common.tile_texture(
+        "floor_tiles": common.png_bytes(
+            common.tile_texture(
                 TEX,
                 FLOOR_TILES,
                 (0.62, 0.55, 0.44),
@@ -79,8 +79,8 @@ def textures() -> dict[str, bytes]:
                 seed=11,
             )
         ),
-        "wall_tiles": _common.png_bytes(
-            _common.tile_texture(
+        "wall_tiles": common.png_bytes(
+            common.tile_texture(
                 TEX,
                 WALL_TILES,
                 (0.80, 0.81, 0.80),
@@ -90,8 +90,8 @@ def textures() -> dict[str, bytes]:
                 seed=12,
             )
         ),
-        "pool_tiles": _common.png_bytes(
-            _common.tile_texture(
+        "pool_tiles": common.png_bytes(
+            common.tile_texture(
                 TEX,
                 POOL_TILES,
                 (0.10, 0.38, 0.62),

@@ -37,7 +37,7 @@ def pytest_addoption(parser):
 
 
 def pytest_configure(config):
-    # iat.reference.render_reference_cached reads this to re-render Mitsuba references
+    # iat.measure.reference.render_reference_cached reads this to re-render Mitsuba references
     if config.getoption("--regen-refs"):
         import os
 

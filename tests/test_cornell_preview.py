@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from iat.io.scene import load_scene
+from iat.io.load import load_scene
 from iat.render.renderer import PREVIEW_AMBIENT, Renderer
 
 ROOT = Path(__file__).resolve().parents[1]

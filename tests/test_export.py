@@ -1,4 +1,4 @@
-"""iat.export: Baked -> GLB, read back with pygltflib (and the Khronos validator when present)."""
+"""iat.export.gltf: Baked -> GLB, read back with pygltflib (and the Khronos validator when present)."""
 
 from __future__ import annotations
 

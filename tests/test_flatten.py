@@ -1,4 +1,4 @@
-"""iat.flatten: quad-tree -> texture tile, exact where the maths is exact.
+"""iat.bake.flatten: quad-tree -> texture tile, exact where the maths is exact.
 
 Solutions are built synthetically (quadtree + Solution.from_forest) with radiance a
 known function of world position. Fields linear in world position are linear in

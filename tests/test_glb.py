@@ -1,4 +1,4 @@
-"""iat.glb (GlbBuilder) and the Cornell box sample script."""
+"""iat.io.glb (GlbBuilder) and the Cornell box sample script."""
 
 from __future__ import annotations
 
@@ -323,7 +323,7 @@ def test_write_replaces_and_is_deterministic(tmp_path):
 
 
 def test_write_removes_stale_temporaries_of_killed_writers(tmp_path, monkeypatch):
-    """The temporary is `.scene.glb.<random>.tmp` (the one scheme of iat.imageio.atomic_write); one a
+    """The temporary is `.scene.glb.<random>.tmp` (the one scheme of iat.fsutil.atomic_write); one a
     killed writer left more than an hour ago goes with the next successful write, a young one (a write
     in progress elsewhere) and other names stay (docs/stability.md, G4)."""
     import time

@@ -11,8 +11,8 @@
 5. Exported GLB: Khronos validator, trimesh, and our own GLB drawer (iat.glb_view) agree
    with IAT mode.
 
-Solutions are cached in ``out/acceptance`` (``iat.bench.cached_solve``; keyed by the
-options and the model's mtime), so only the first run pays for the solves. The figures
+Solutions are cached in ``out/acceptance`` (``iat.radiosity.cache.cached_solve``; keyed by the
+model's bytes, the options and the solver's source), so only the first run pays for the solves. The figures
 each test measures are merged into ``out/acceptance/results.json``; docs/baking.md
 quotes them.
 """

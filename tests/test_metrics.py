@@ -1,4 +1,4 @@
-"""Tests of iat.metrics on synthetic images."""
+"""Tests of iat.measure.metrics on synthetic images."""
 
 import math
 

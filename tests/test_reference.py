@@ -1,4 +1,4 @@
-"""Tests of iat.reference (Mitsuba 3 path-traced references): units and image orientation."""
+"""Tests of iat.measure.reference (Mitsuba 3 path-traced references): units and image orientation."""
 
 import numpy as np
 import pytest

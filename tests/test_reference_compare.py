@@ -22,7 +22,7 @@ SIZE = (96, 96)
 
 def test_cornell_box_against_mitsuba(egl_ctx):
     pytest.importorskip("mitsuba")
-    from iat.io.scene import load_scene
+    from iat.io.load import load_scene
     from iat.measure.reference import render_reference_cached
     from iat.render.renderer import Renderer
 

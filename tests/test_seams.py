@@ -1,4 +1,4 @@
-"""iat.seams: shared-edge pairing, harmonised tile edges, the seam measure.
+"""iat.bake.seams: shared-edge pairing, harmonised tile edges, the seam measure.
 
 Synthetic solutions: root patches refined uniformly to a chosen depth each, radiance a
 smooth non-linear function of world position, so neighbours of different depths describe

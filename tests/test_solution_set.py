@@ -1,4 +1,4 @@
-"""iat.solution_set and the set parts of iat.bake / iat.render / the CLI: lighting states solved on
+"""iat.lighting.solution_set and the set parts of iat.bake / iat.render / the CLI: lighting states solved on
 one mesh, baked into texture layers that share one atlas layout, and blended per texel (IAT) or
 per vertex (mesh) on the GPU: exact at the key times, linear in between."""
 
@@ -17,9 +17,11 @@ from iat.bake.baker import Baker
 from iat.bake.policy import BakePolicy
 from iat.color import srgb_encode
 from iat.errors import BakeError, OptionError
-from iat.io.scene import load_scene
-from iat.lighting import edits as L
+from iat.io.load import load_scene
+from iat.lighting.edits import add_light
+from iat.lighting.save import save_gltf
 from iat.lighting.solution_set import SolutionSet, blend_weights, even_times, load_set, same_mesh, solve_set
+from iat.lighting.states import apply_lighting_state
 from iat.radiosity import SolveOptions, solve
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -36,7 +38,7 @@ STATES = {
 
 @pytest.fixture(scope="module")
 def scene():
-    return L.add_light(load_scene(CORNELL), "point", [0.12, 0.40, 0.30], intensity=0.2, name="bulb")
+    return add_light(load_scene(CORNELL), "point", [0.12, 0.40, 0.30], intensity=0.2, name="bulb")
 
 
 @pytest.fixture(scope="module")
@@ -92,7 +94,7 @@ def test_the_merged_mesh_resolves_every_state(scene, sset):
     every vertex of each state's own mesh is a vertex of the set's mesh."""
     opts = SolveOptions(max_depth=3)
     for name, st in STATES.items():
-        own = solve(L.apply_lighting_state(scene, st), opts)
+        own = solve(apply_lighting_state(scene, st), opts)
         assert np.isin(own.vert_key, sset.first.vert_key).all(), name
         assert len(sset.first.leaf_patch) > len(own.leaf_patch)
     for how in ("union", "first"):
@@ -101,8 +103,8 @@ def test_the_merged_mesh_resolves_every_state(scene, sset):
 
 
 def test_a_set_refuses_solutions_of_other_meshes(scene):
-    a = solve(L.apply_lighting_state(scene, STATES["day"]), SolveOptions(max_depth=3))
-    b = solve(L.apply_lighting_state(scene, STATES["night"]), SolveOptions(max_depth=3))  # its own mesh
+    a = solve(apply_lighting_state(scene, STATES["day"]), SolveOptions(max_depth=3))
+    b = solve(apply_lighting_state(scene, STATES["night"]), SolveOptions(max_depth=3))  # its own mesh
     assert not same_mesh(a, b)
     with pytest.raises(OptionError, match="not on the mesh of solution 0"):
         SolutionSet([a, b])
@@ -266,7 +268,7 @@ def iat(*args):
 
 
 def test_cli_solve_states_bake_and_render_a_moment(tmp_path, scene):
-    model = L.save_gltf(scene, CORNELL, tmp_path / "cb.glb", lighting_states=STATES)
+    model = save_gltf(scene, CORNELL, tmp_path / "cb.glb", lighting_states=STATES)
     r = iat("solve", model, "--states", "-o", tmp_path / "cb.npz", "--max-depth", "3", "--json")
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)

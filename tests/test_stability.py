@@ -42,7 +42,7 @@ from iat.bake.policy import BakePolicy
 from iat.camera import Camera
 from iat.errors import BakeError, IATError, LoadError, OptionError, RenderError, SolutionFileError
 from iat.geometry import quadtree as qt
-from iat.io.scene import load_scene
+from iat.io.load import load_scene
 from iat.measure.seams import seam_error
 from iat.radiosity import Solution, SolveOptions, solve
 from iat.radiosity.options import RAY_EPS
@@ -443,7 +443,7 @@ _MILLION = r"""
 import json, resource, sys, time, tracemalloc
 import numpy as np
 from tests.stability_scenes import grid_mesh, write_binary_stl, point_light
-from iat.io.scene import load_scene
+from iat.io.load import load_scene
 from iat.radiosity import solve, SolveOptions
 V, F = grid_mesh(708)  # 1 002 528 triangles
 path = write_binary_stl(sys.argv[1], V, F)
@@ -1201,7 +1201,7 @@ def test_files_junk_npz_message_does_not_suggest_unpickling(bad_inputs):
 
 
 def test_files_viewer_open_job_reports_each_bad_input_on_one_line(bad_inputs, tmp_path, monkeypatch):
-    """The viewer's open path (viewer.state.OpenJob, what `iat view FILE` runs after the window is up):
+    """The viewer's open path (viewer.jobs.OpenJob, what `iat view FILE` runs after the window is up):
     every bad file ends in one line naming it, the job finishes, nothing is raised into the UI."""
     from viewer.jobs import OpenJob
 

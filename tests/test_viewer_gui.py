@@ -244,7 +244,7 @@ def test_no_display_returns_2():
 
 # -- the viewer's background work, without a window ------------------------------------------------------
 class _GatedBaker:
-    """Stands in for iat.bake.Baker: records the thresholds baked, waits on a gate, fails on 99."""
+    """Stands in for iat.bake.baker.Baker: records the thresholds baked, waits on a gate, fails on 99."""
 
     def __init__(self):
         import threading

@@ -43,12 +43,12 @@ STATES = {
 
 
 def make_model(path: Path) -> Path:
-    from iat.io.scene import load_scene
-    from iat.lighting import edits as lighting
+    from iat.io.load import load_scene
+    from iat.lighting import edits, save
 
     src = ROOT / "sample_models" / "cornell_box.glb"
-    scene = lighting.add_light(load_scene(src), "point", [0.12, 0.40, 0.30], intensity=0.12, name="bulb")
-    return lighting.save_gltf(scene, src, path, lighting_states=STATES)
+    scene = edits.add_light(load_scene(src), "point", [0.12, 0.40, 0.30], intensity=0.12, name="bulb")
+    return save.save_gltf(scene, src, path, lighting_states=STATES)
 
 
 @pytest.mark.gui
@@ -60,7 +60,7 @@ def test_viewer_lighting_end_to_end(tmp_path, monkeypatch, gui_child):
     from PIL import Image
 
     from iat.bake.baked import BakedSet
-    from iat.io.scene import load_scene
+    from iat.io.load import load_scene
     from iat.radiosity import SolveOptions
     from viewer import panels
     from viewer.app import ViewerApp

@@ -9,14 +9,14 @@ every frame); the panels (:mod:`viewer.panels`) dock around it and change the
 
 1. picks up finished background work: an opened model (:class:`~viewer.jobs.OpenJob`)
    or a re-bake (:class:`~viewer.bake_worker.BakeWorker`), and uploads it to the
-   :class:`~iat.render.Renderer` (GL happens on this thread only); a failure
+   :class:`~iat.render.renderer.Renderer` (GL happens on this thread only); a failure
    shows an error and keeps the last good model and bake;
 2. submits a re-bake when the tuning panel changed the policy (the previous
    bake stays on screen until the new one arrives);
 3. moves the camera (:mod:`viewer.controls`: keyboard, mouse, gamepad, or a
    camera path being played) and records it when a path is being recorded;
 4. serves the panels' requests: open, export GLB, save solution / paths, screenshot.
-5. lighting: hands light edits to the background re-solve (:class:`~iat.lighting.Relighter`:
+5. lighting: hands light edits to the background re-solve (:class:`~iat.lighting.relight.Relighter`:
    resolve from the last converged solution, coarse step first) and shows every
    improvement as it arrives (mesh at once, the re-bake follows); solves the model's
    lighting states for the day cycle (:class:`~viewer.jobs.SetJob`) and blends them
@@ -290,7 +290,9 @@ class ViewerApp:
 
     def _reset_lighting(self, opened: Opened) -> None:
         """A new model: a fresh light editor, background re-solve and day-cycle state."""
-        from iat.lighting.edits import LightEditor, Relighter, lighting_states
+        from iat.lighting.editor import LightEditor
+        from iat.lighting.relight import Relighter
+        from iat.lighting.states import lighting_states
 
         s = self.state
         if s.lighting.relighter is not None:
@@ -553,7 +555,7 @@ class ViewerApp:
             if ed is None or not ed.base.path:
                 s.messages.set_error("nothing open to save lights of")
             else:
-                from iat.lighting.edits import save_gltf
+                from iat.lighting.save import save_gltf
 
                 scene, sources, src = ed.scene, list(ed.sources), ed.base.path  # a snapshot: edits go on
                 self._in_background(

@@ -1,6 +1,6 @@
 """The viewer's re-bakes: one worker thread that bakes the newest requested policy.
 
-:class:`BakeWorker` re-bakes the latest requested :class:`~iat.bake.BakePolicy` on one
+:class:`BakeWorker` re-bakes the latest requested :class:`~iat.bake.policy.BakePolicy` on one
 worker thread (pure numpy); the UI thread picks the result (a :class:`BakeResult`) up with
 :meth:`BakeWorker.poll` and uploads it. Requests made while a bake runs are coalesced: only
 the newest is baked next. A request may also bring a new source (:class:`BakeSource`: a
@@ -110,7 +110,7 @@ def neighbour_policies(policy: BakePolicy, deepest: int, previous: BakePolicy | 
 class BakeWorker(LatestWorker):
     """Bakes on one worker thread; :meth:`submit` never blocks, :meth:`poll` returns the newest result.
 
-    baker : the :class:`~iat.bake.Baker` (used by this thread only: a Baker is not thread-safe)
+    baker : the :class:`~iat.bake.baker.Baker` (used by this thread only: a Baker is not thread-safe)
     prewarm : while idle, bake the neighbours of the last policy baked (:func:`neighbour_policies`),
       one per idle turn, to warm the Baker's caches (their results are dropped, nothing is
       published or uploaded). A request made meanwhile is taken as soon as the neighbour's bake

@@ -6,11 +6,11 @@ holds ``result`` or ``error`` (one line for the user, :func:`error_text`).
 
 - :class:`OpenJob` loads a model or solution, solves a model that has none (progress, ETA,
   cancel; solutions are cached under :func:`iat.radiosity.cache.cache_dir`), builds the
-  :class:`~iat.bake.Baker` and makes the first bake: an :class:`Opened`;
+  :class:`~iat.bake.baker.Baker` and makes the first bake: an :class:`Opened`;
 - :class:`SetJob` solves the model's lighting states on one mesh for the day-cycle slider.
 
 The re-bakes run on :class:`viewer.bake_worker.BakeWorker`, the re-solves after light edits on
-:class:`iat.lighting.Relighter`.
+:class:`iat.lighting.relight.Relighter`.
 """
 
 from __future__ import annotations
@@ -160,7 +160,7 @@ class OpenJob(_Job):
         return text if isinstance(e, IATError) or self.path in text else f"{self.path}: {text}"
 
     def _work(self) -> Opened:
-        from iat.io.scene import load_scene
+        from iat.io.load import load_scene
         from iat.radiosity import solve
         from iat.radiosity.inputs import is_solution_path, open_solution
 
@@ -224,9 +224,9 @@ class OpenJob(_Job):
 
 # -- the day cycle's solve ---------------------------------------------------------------------------
 class SetJob(_Job):
-    """Solve a model's lighting states on one mesh (:func:`iat.solution_set.solve_set`) on a worker
+    """Solve a model's lighting states on one mesh (:func:`iat.lighting.solution_set.solve_set`) on a worker
     thread, with progress (``fraction``, ``message``) and :meth:`cancel`; ``result`` (a
-    :class:`~iat.solution_set.SolutionSet`) or ``error`` (one line) when done."""
+    :class:`~iat.lighting.solution_set.SolutionSet`) or ``error`` (one line) when done."""
 
     def __init__(self, scene, states: dict, options: SolveOptions, mesh: str = "merge"):
         self.scene, self.states, self.options, self.mesh = scene, states, options, mesh

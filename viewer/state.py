@@ -16,7 +16,7 @@
 - ``state.requests`` (:class:`Requests`): what panels ask the app to do next frame.
 
 Panels change the fields; the app (``viewer/app.py``) notices the changes (a new bake policy,
-a request to open a file, ...) and acts, touching GL only through :class:`iat.render.Renderer`.
+a request to open a file, ...) and acts, touching GL only through :class:`iat.render.renderer.Renderer`.
 The long work runs off the UI thread (:mod:`viewer.jobs`, :mod:`viewer.bake_worker`).
 """
 
@@ -52,7 +52,7 @@ def default_model() -> Path:
 
 @dataclass
 class Tuning:
-    """What the tuning panel sets; :meth:`policy` turns it into a :class:`~iat.bake.BakePolicy`.
+    """What the tuning panel sets; :meth:`policy` turns it into a :class:`~iat.bake.policy.BakePolicy`.
 
     threshold : patches with tree depth >= threshold are textured (0 .. deepest + 1)
     scale : texture side factor (0.125 .. 2)
@@ -122,7 +122,7 @@ class ModelState:
 
     @property
     def memory(self) -> dict:
-        """The shown bake's :class:`~iat.bake.MemoryReport` as a dict ({} when none); a day-cycle
+        """The shown bake's :class:`~iat.bake.memory.MemoryReport` as a dict ({} when none); a day-cycle
         set's counts every state's texture layers (``solutions``)."""
         return self.baked.memory.to_dict() if self.baked is not None else {}
 
@@ -219,8 +219,8 @@ class JobsState:
 class LightingState:
     """Light edits, the background re-solve and the day cycle.
 
-    editor : the open model's :class:`iat.lighting.LightEditor`
-    relighter : the :class:`iat.lighting.Relighter` that re-solves after edits
+    editor : the open model's :class:`iat.lighting.editor.LightEditor`
+    relighter : the :class:`iat.lighting.relight.Relighter` that re-solves after edits
     relight_version : the editor version last submitted; relight_submitted : when (throttles drags)
     relight_step : (step, steps) of the last result shown; relight_seconds : edit to that result
     relights : results shown

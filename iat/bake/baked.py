@@ -191,7 +191,7 @@ class BakedSet:
 
     def at(self, t: float, times=None) -> Baked:
         """The blend at time ``t`` between the neighbouring key times (default: evenly spaced
-        in [0, 1]); see :func:`iat.solution_set.blend_weights`."""
+        in [0, 1]); see :func:`iat.lighting.solution_set.blend_weights`."""
         from iat.lighting.solution_set import blend_weights, even_times
 
         times = even_times(self.n_states) if times is None else times

@@ -128,7 +128,7 @@ class Baker:
     """Bakes one solution under changing policies, caching what does not change.
 
     solution : :class:`~iat.radiosity.solution.Solution`
-    scene : the :class:`~iat.scene.Scene` it was solved from (detail textures and their UVs), or None
+    scene : the :class:`~iat.io.scene.Scene` it was solved from (detail textures and their UVs), or None
 
     Attributes: ``tiles`` (:class:`~iat.bake.flatten.TileCache`, counters included), ``stats``
     (cache hits: ``pack_hits``, ``pages_hits``, ``mesh_hits``, ``bakes``), ``inv_albedo``
@@ -534,7 +534,7 @@ class Baker:
         """Bake several solutions of this model (lighting states) with one shared atlas layout.
 
         solutions : solutions on the same mesh as this Baker's (same leaves and vertex keys:
-          ``solve(..., mesh=first)`` / ``resolve``), e.g. a :class:`~iat.solution_set.SolutionSet`
+          ``solve(..., mesh=first)`` / ``resolve``), e.g. a :class:`~iat.lighting.solution_set.SolutionSet`
         policy : as for :meth:`bake`; a budget covers the whole set: N states cost N texture
           layers per page, so the budget search runs on ``budget_mb / N`` per state and picks a
           coarser scale (or a higher threshold) for a larger set.

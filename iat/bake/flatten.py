@@ -57,7 +57,7 @@ tile of that size at once as ``W @ tile @ W.T`` (two float32 products per chunk 
 block-diagonal sparse ones for the usual 2-6 taps; the per-tap float64 gathers they
 replace took 6-10x longer). Neighbours of *different* sizes describe a shared edge by
 different polylines (and sample it at different points once scaled); the baker matches
-them after scaling (:mod:`iat.seams`: the coarser side's edge polyline is copied onto the
+them after scaling (:mod:`iat.bake.seams`: the coarser side's edge polyline is copied onto the
 finer side's edge texels, exact when sides are ``2**k + 1``), for clamped scaling and
 scale 1 only.
 

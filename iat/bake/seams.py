@@ -4,7 +4,7 @@ Neighbouring roots (patches) are subdivided independently, so two textured neigh
 represent their shared edge by different piecewise-linear functions (different depths,
 hence different texel counts, and after scaling different texel positions). GL_LINEAR
 along a tile's edge is the linear interpolation of the tile's *edge texels* only (for a
-triangle's hypotenuse too, thanks to :func:`iat.flatten.extend_triangle`), so two sides
+triangle's hypotenuse too, thanks to :func:`iat.bake.flatten.extend_triangle`), so two sides
 render the same function along a shared segment exactly when their edge texel rows
 describe the same polyline there.
 
@@ -33,7 +33,7 @@ written back by :func:`apply_ring`), after flatten + (clamped) scaling and befor
   of its top member (a mesh patch, else the fewest texels, else the lowest index), which no
   whole-edge partner overwrites. Edge copies and corner groups are repeated (Jacobi) until
   nothing changes: 2-3 passes here, at most :data:`MAX_PASSES`.
-- triangle tiles get their outer half refilled (:func:`~iat.flatten.extend_triangle`) after
+- triangle tiles get their outer half refilled (:func:`~iat.bake.flatten.extend_triangle`) after
   their hypotenuse changed, so bilinear filtering stays exact at the diagonal.
 
 The Baker consumes these pure steps (it owns their caches: the pairs, the original rings per
@@ -285,7 +285,7 @@ def tile_ring(tile: np.ndarray, is_tri: bool) -> np.ndarray:
 
 def apply_ring(tile: np.ndarray, ring: np.ndarray, is_tri: bool) -> np.ndarray:
     """A float32 copy of ``tile`` with its boundary texels set to ``ring`` (triangles: outer
-    half refilled by :func:`~iat.flatten.extend_triangle`, so the hypotenuse filters exactly)."""
+    half refilled by :func:`~iat.bake.flatten.extend_triangle`, so the hypotenuse filters exactly)."""
     out = np.array(tile, dtype=np.float32, copy=True)
     rows, cols = ring_index(out.shape[0], is_tri)
     out[rows, cols] = ring

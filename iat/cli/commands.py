@@ -20,6 +20,7 @@ import numpy as np
 from iat.cli.args import parse_size, parse_vec
 from iat.errors import IATError, IATWarning, OptionError
 from iat.progress import ProgressBar
+from iat.tools.common import policy_dict
 
 EXIT_USER_ERROR = 2
 
@@ -38,7 +39,7 @@ def _solution_not_a_model(args, path) -> None:
     """``iat info SOL.npz`` / ``iat solve SOL.npz``: say what the file is and what would help (one line),
     instead of "unsupported file type '.npz'". A missing file is left to load_scene ("file not found")."""
     from iat.errors import LoadError
-    from iat.io.scene import SUPPORTED_EXTENSIONS
+    from iat.io.load import SUPPORTED_EXTENSIONS
     from iat.radiosity.inputs import is_solution_path
 
     path = Path(path)
@@ -60,8 +61,8 @@ def _solution_not_a_model(args, path) -> None:
 
 
 def _load(args, path, max_edge=None):
-    """:func:`iat.scene.load_scene` with a progress bar."""
-    from iat.io.scene import load_scene
+    """:func:`iat.io.load.load_scene` with a progress bar."""
+    from iat.io.load import load_scene
 
     _solution_not_a_model(args, path)
     with _progress_bar(args, f"load {Path(path).name}") as bar:
@@ -201,7 +202,7 @@ def cmd_bake(args) -> int:
         a, b, w = sset.weights(args.at)
         baked = bset.blend(a, b, w)
         export_glb(baked, args.output, scene=scene, layered=args.layered)
-        report = {"output": str(args.output), "policy": _policy_dict(bset.policy), **bset.memory.to_dict()}
+        report = {"output": str(args.output), "policy": policy_dict(bset.policy), **bset.memory.to_dict()}
         report["set"] = {
             "states": sset.names,
             "times": [float(x) for x in sset.times],
@@ -215,16 +216,10 @@ def cmd_bake(args) -> int:
     scene, sol = _open(args, "bake")
     baked = Baker(sol, scene).bake(_bake_policy(args))
     export_glb(baked, args.output, scene=scene, layered=args.layered)
-    report = {"output": str(args.output), "policy": _policy_dict(baked.policy), **baked.memory.to_dict()}
+    report = {"output": str(args.output), "policy": policy_dict(baked.policy), **baked.memory.to_dict()}
     report["timings"] = getattr(baked, "timings", {})
     _emit(args, report)
     return 0
-
-
-def _policy_dict(p) -> dict:
-    from dataclasses import asdict
-
-    return asdict(p)
 
 
 def cmd_render(args) -> int:

@@ -163,7 +163,7 @@ def _mesh_vertex_areas(baked) -> np.ndarray:
     """(M,) a third of the area of the mesh-part triangles around each vertex."""
     pos = np.asarray(baked.mesh_positions, dtype=np.float64).reshape(-1, 3)
     tri = np.asarray(baked.mesh_indices, dtype=np.int64).reshape(-1, 3)
-    from iat.io.scene import triangle_areas
+    from iat.geometry.mesh import triangle_areas
 
     third = np.repeat(triangle_areas(pos, tri) / 3.0, 3)
     return np.bincount(tri.ravel(), third, minlength=len(pos)).astype(np.float64)

@@ -4,7 +4,9 @@
 colour textures), cameras and ``KHR_lights_punctual`` lights, and writes one
 self-contained ``.glb``. The JSON and the binary chunk are built by hand so the
 output is byte-for-byte deterministic: the same calls give the same bytes (no
-timestamps, no dictionary-order surprises).
+timestamps, no dictionary-order surprises). pygltflib's writer is not used: it orders
+the JSON keys by its own dataclass fields and always writes a BIN chunk, so the
+committed sample models would change.
 
 Conventions
 -----------
@@ -34,7 +36,7 @@ import numpy as np
 
 from iat.camera import Camera
 
-__all__ = ["GlbBuilder", "quat_from_matrix", "look_rotation"]
+__all__ = ["GlbBuilder", "quat_from_matrix", "quat_to_matrix", "look_rotation"]
 
 # glTF enums
 _FLOAT = 5126
@@ -82,6 +84,21 @@ def quat_from_matrix(r: np.ndarray) -> np.ndarray:
     q = np.array(q, dtype=np.float64)
     q /= np.linalg.norm(q)
     return -q if q[3] < 0 else q
+
+
+def quat_to_matrix(q) -> np.ndarray:
+    """``(3, 3) float64`` rotation matrix of a quaternion ``(x, y, z, w)`` (normalised here)."""
+    x, y, z, w = (float(t) for t in q)
+    n = np.sqrt(x * x + y * y + z * z + w * w)
+    if n > 0:
+        x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def look_rotation(forward, up=(0.0, 1.0, 0.0)) -> np.ndarray:
@@ -548,7 +565,7 @@ class GlbBuilder:
 
         The bytes go to a temporary file ``.<name>.<random>.tmp`` in the same directory, which
         is flushed, fsynced and then renamed over ``path`` (``os.replace``), by
-        :func:`iat.imageio.atomic_write`. On any error the previous file at ``path`` is left
+        :func:`iat.fsutil.atomic_write`. On any error the previous file at ``path`` is left
         untouched and the temporary file removed; stale temporaries of killed writers (older
         than an hour) are removed after a successful write.
         """

@@ -1,2 +1,3 @@
-"""Lighting of a solved model: ``edits`` (light edits, lighting states, the background relighter,
-saving lights back to glTF) and ``solution_set`` (several lightings on one mesh, blend weights)."""
+"""Lighting of a solved model: ``edits`` (light and emission edits), ``states`` (named lighting states,
+their key times), ``save`` (writing lights back to glTF), ``editor`` (LightEditor), ``relight`` (the
+background re-solve) and ``solution_set`` (several lightings on one mesh, blend weights)."""

@@ -3,7 +3,7 @@
 A :class:`SolutionSet` holds solutions of the same patches solved on one settled
 mesh (``solve(scene, mesh=first)`` or :func:`iat.radiosity.resolve`), so their
 quad-trees, vertex keys and triangles are identical and every vertex (and, once
-baked with :meth:`iat.bake.Baker.bake_set`, every texel) of one has its partner
+baked with :meth:`iat.bake.baker.Baker.bake_set`, every texel) of one has its partner
 in the others. Each solution has a key time in [0, 1] (a time of day, or any
 other parameter); the light at time ``t`` is the linear blend of the two
 neighbouring key solutions (report §6.2.1: radiosity is linear in the sources,
@@ -11,7 +11,7 @@ so blending two solutions is the solution of the blended sources),
 :func:`blend_weights`: exact at the key times, clamped outside them.
 
 :func:`solve_set` solves a model's lighting states (``extras["iat_lighting_states"]``,
-see :mod:`iat.lighting`) on one mesh: by default the *merged* mesh (every state
+see :mod:`iat.lighting.states`) on one mesh: by default the *merged* mesh (every state
 solved adaptively, then the union of their quad-trees, :func:`merge_meshes`: each
 state's shadows resolved as finely as its own solve would), then every state on it.
 Cheaper choices: the mesh of all sources at once (``"union"``), or the first state's.
@@ -280,7 +280,7 @@ def load_set(paths, times=None, names=None) -> SolutionSet:
 
 
 def _times_from_model(sols) -> np.ndarray | None:
-    from iat.lighting.edits import lighting_states, state_times
+    from iat.lighting.states import lighting_states, state_times
 
     model = sols[0].model_path
     wanted = [s.stats.get("lighting_state") for s in sols]
@@ -308,7 +308,7 @@ def solve_set(
 ) -> SolutionSet:
     """Solve lighting states of ``scene`` on one mesh.
 
-    states : {name: state dict (see :mod:`iat.lighting`) or Scene}; None: the model's own
+    states : {name: state dict (see :mod:`iat.lighting.states`) or Scene}; None: the model's own
       ``extras["iat_lighting_states"]``. Key times from the states (``time``) or even.
     mesh : "merge" (default) solves every state adaptively and merges their trees
       (:func:`merge_meshes`: each state's features as fine as its own solve; 2 N solves),
@@ -322,7 +322,7 @@ def solve_set(
     """
     from iat.errors import Cancelled
     from iat.io.scene import Scene
-    from iat.lighting.edits import apply_lighting_state, lighting_states, state_times, union_lighting
+    from iat.lighting.states import apply_lighting_state, lighting_states, state_times, union_lighting
     from iat.radiosity import SolveOptions, resolve, solve
 
     states = lighting_states(scene) if states is None else dict(states)

@@ -73,7 +73,7 @@ def cached_solve(model, options=None, directory=None, progress: Progress | None 
     when it ran (read from the solution's stats when cached). A cache that cannot be written is
     no error (logged).
     """
-    from iat.io.scene import load_scene
+    from iat.io.load import load_scene
     from iat.radiosity import SolveOptions, solve
 
     options = SolveOptions() if options is None else options

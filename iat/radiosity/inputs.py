@@ -9,7 +9,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from iat.errors import LoadError, SolutionFileError
-from iat.io.scene import Scene, load_scene
+from iat.io.load import load_scene
+from iat.io.scene import Scene
 
 SOLUTION_SUFFIXES = (".npz",)
 
@@ -26,7 +27,7 @@ def open_solution(path: str | Path, options=None, progress=None, load_progress=N
     solution's own patches, without detail textures.
 
     progress : the solve's ``progress(fraction, message) -> bool`` (a model only).
-    load_progress : the model load's (:func:`iat.scene.load_scene`); False cancels.
+    load_progress : the model load's (:func:`iat.io.load.load_scene`); False cancels.
     """
     from iat.radiosity import Solution, SolveOptions, solve
 

@@ -45,7 +45,7 @@ class Solution:
     patch_is_quad : (P,) bool
     patch_material : (P,) int64 material index in the scene
     patch_albedo : (P, 3) float64 albedo used by the solve
-    leaf_patch, leaf_level, leaf_i, leaf_j, leaf_flip : (L,) leaves (see ``iat.quadtree``)
+    leaf_patch, leaf_level, leaf_i, leaf_j, leaf_flip : (L,) leaves (see ``iat.geometry.quadtree``)
     vert_key : (V,) int64 sorted vertex keys
     vert_radiance : (V, 3) float32 outgoing radiance, linear RGB
     tri_vertices : (T, 3) int32 anchored mesh triangles (indices into the vertex table)
@@ -77,7 +77,7 @@ class Solution:
 
     @property
     def forest(self) -> qt.Forest:
-        """The leaves as a :class:`iat.quadtree.Forest` (arrays shared, not copied)."""
+        """The leaves as a :class:`iat.geometry.quadtree.Forest` (arrays shared, not copied)."""
         return qt.Forest(
             self.max_depth,
             self.patch_is_quad,
@@ -130,7 +130,7 @@ class Solution:
     def save(self, path: str | Path) -> None:
         """Write atomically as ``.npz`` (no pickles); the previous file survives a failure.
 
-        Through :func:`iat.imageio.atomic_write`: a temporary ``.<name>.<random>.tmp`` in the same
+        Through :func:`iat.fsutil.atomic_write`: a temporary ``.<name>.<random>.tmp`` in the same
         directory, flushed and fsynced before ``os.replace``; stale temporaries of killed writers
         (older than an hour) are removed after a successful write.
         """

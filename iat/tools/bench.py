@@ -6,7 +6,7 @@ IAT-against-mesh image error (PSNR and FLIP over path frames), the seam error,
 solve, bake, re-bake and load times.
 
 Frame rate: the path's poses are interpolated to a fixed number of frames, each
-drawn offscreen with :meth:`iat.render.Renderer.draw` (tone-mapped into an RGBA8
+drawn offscreen with :meth:`iat.render.renderer.Renderer.draw` (tone-mapped into an RGBA8
 framebuffer, as a window would be) and finished with ``ctx.finish()``; the rate
 is ``frames / wall time``, best of ``repeats`` rounds, mesh and IAT rounds
 interleaved so that background load hits both alike. It is measured at the
@@ -16,7 +16,7 @@ triangle-bound case that the report's Onyx was in.
 
 The solve uses the solver's defaults (:data:`BENCH_SOLVE` holds no overrides;
 26 k-41 k elements on the samples, minutes on 2 cores), the bake the default
-:class:`~iat.bake.BakePolicy`.
+:class:`~iat.bake.policy.BakePolicy`.
 Solutions are cached (:func:`iat.radiosity.cache.cached_solve`, content-keyed) and solved
 again when the model file is newer or the options differ.
 
@@ -165,7 +165,7 @@ def pick(items: list, n: int) -> list:
 
 # -- measurements ------------------------------------------------------------------------------
 class FrameTimer:
-    """Times whole frames of a :class:`~iat.render.Renderer` into its own offscreen RGBA8 target."""
+    """Times whole frames of a :class:`~iat.render.renderer.Renderer` into its own offscreen RGBA8 target."""
 
     def __init__(self, renderer, size: tuple[int, int]):
         self.r = renderer
@@ -304,7 +304,7 @@ def image_errors(renderer, cameras: list[Camera], size: tuple[int, int], with_fl
 
 
 def seam_errors(baked, solution) -> dict:
-    """Seam error (:func:`iat.bake.seam_error`, absolute radiance along shared coplanar edges)
+    """Seam error (:func:`iat.measure.seams.seam_error`, absolute radiance along shared coplanar edges)
     of the IAT textures and of the solution's own mesh, for scale: ``{"iat": {...}, "mesh": {...}}``."""
     from iat.measure.seams import seam_error
 

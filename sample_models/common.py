@@ -17,7 +17,7 @@
 - :func:`assemble` puts a model together (geometry, lights, meshes, cameras, extras);
   :func:`script_main` is every script's ``python sample_models/NAME.py [-o PATH]``.
 
-Orientation conventions (as ``iat.scene``): a quad's corners run counter-clockwise
+Orientation conventions (as ``iat.io.scene``): a quad's corners run counter-clockwise
 seen from its front, its normal is ``cross(c2 - c0, c3 - c1)``; radiosity uses
 the front side only, so room faces look into the room and furniture faces out.
 Everything is deterministic: the same calls give the same bytes.
@@ -39,6 +39,7 @@ if str(_ROOT) not in sys.path:  # run as a script: make `iat` importable from th
     sys.path.insert(0, str(_ROOT))
 
 from iat.camera import Camera  # noqa: E402
+from iat.color import srgb_encode  # noqa: E402
 from iat.io.glb import GlbBuilder  # noqa: E402
 
 __all__ = [
@@ -493,10 +494,10 @@ def fbm3(p, octaves: int = 4, seed: int = 0, lacunarity: float = 2.0, gain: floa
 # -- textures -----------------------------------------------------------------------------------------
 
 
-def _srgb_encode(linear: np.ndarray) -> np.ndarray:
+def _srgb8(linear: np.ndarray) -> np.ndarray:
+    """(h, w, 3) linear RGB -> uint8 sRGB codes (clamped to [0, 1] first)."""
     x = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-    return np.round(s * 255.0).astype(np.uint8)
+    return np.round(srgb_encode(x) * 255.0).astype(np.uint8)
 
 
 def png_bytes(linear_rgb) -> bytes:
@@ -505,7 +506,7 @@ def png_bytes(linear_rgb) -> bytes:
     The zlib stream uses stored (uncompressed) deflate blocks, so the bytes do not
     depend on the zlib build; keep the images small.
     """
-    img = _srgb_encode(linear_rgb)
+    img = _srgb8(linear_rgb)
     h, w, _ = img.shape
     raw = b"".join(b"\x00" + img[y].tobytes() for y in range(h))  # filter type 0 per row
     blocks = bytearray(b"\x78\x01")
