@@ -69,6 +69,11 @@ class LatestWorker:
                 self._cv.wait(left)
         return True
 
+    @property
+    def alive(self) -> bool:
+        """The worker thread still runs (False once :meth:`close` has joined it)."""
+        return self._thread.is_alive()
+
     def close(self, timeout: float = 30.0) -> None:
         """Stop the thread (after the request in progress, if any)."""
         with self._cv:

@@ -9,6 +9,10 @@
   ``gui_child`` fixture re-runs such a test alone in a child process (Mesa aborts
   when a GLX window context is made in a process that holds ``egl_ctx``), and
   :func:`run_gui`, :func:`wait_until` drive the app under imgui-bundle's test engine.
+- ``renderer``: a module's :class:`iat.render.renderer.Renderer` on ``egl_ctx`` (modules
+  that check the GL state after it define their own).
+- ``stability_figures``: writes the stability catalogue's recorded figures to JSON after
+  each ``tests/test_stability_*.py`` module (see ``tests/support/stability.py``).
 """
 
 from __future__ import annotations
@@ -119,6 +123,26 @@ def egl_ctx():
         pytest.skip(f"no EGL OpenGL context: {e}")
     yield ctx
     ctx.release()
+
+
+@pytest.fixture(scope="module")
+def renderer(egl_ctx):
+    from iat.render.renderer import Renderer
+
+    r = Renderer(egl_ctx)
+    yield r
+    r.release()
+
+
+@pytest.fixture(scope="module")
+def stability_figures(tmp_path_factory):
+    """After the module: write the figures recorded so far to ``$IAT_STABILITY_JSON``
+    (default ``<pytest basetemp>/stability.json``)."""
+    from tests.support.stability import write_figures
+
+    yield
+    out = os.environ.get("IAT_STABILITY_JSON") or str(tmp_path_factory.getbasetemp() / "stability.json")
+    write_figures(Path(out))
 
 
 @pytest.fixture

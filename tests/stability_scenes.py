@@ -1,7 +1,7 @@
 """Small scenes and inputs that provoke the failure modes of ``docs/stability.md``.
 
 Every builder is deterministic and cheap (a few patches, or a synthetic
-solution made without solving), so that ``tests/test_stability.py`` runs in a
+solution made without solving), so that ``tests/test_stability_*.py`` run in a
 few minutes on two cores. Geometry is in metres, +Y up; faces are single-sided,
 their front (counter-clockwise corners) towards the space they light.
 """

@@ -367,7 +367,7 @@ def test_relighter_publishes_each_step_and_ends_on_the_resolve(bulb_scene):
         assert ok
     finally:
         rl.close()
-    assert not rl._thread.is_alive()
+    assert not rl.alive
 
 
 def test_relighter_reports_errors_and_keeps_going(bulb_scene, monkeypatch):

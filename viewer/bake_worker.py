@@ -153,11 +153,6 @@ class BakeWorker(LatestWorker):
         """Bakes finished so far (failed ones included)."""
         return self.published
 
-    @property
-    def alive(self) -> bool:
-        """The worker thread still runs (False once :meth:`close` has joined it)."""
-        return self._thread.is_alive()
-
     def submit(
         self, policy: BakePolicy, source: BakeSource | None = None, generation: int | None = None
     ) -> None:

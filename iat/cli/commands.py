@@ -291,14 +291,20 @@ def cmd_render(args) -> int:
     return 0
 
 
+def _size_and_frames(args, size: str, frames: int) -> tuple[tuple[int, int], int]:
+    """``(--size, --frames)`` of the benchmark commands, with their defaults; frames >= 1."""
+    wh = parse_size(getattr(args, "size", size) or size)
+    frames = int(getattr(args, "frames", frames) or frames)
+    if frames < 1:
+        raise OptionError(f"--frames must be >= 1, got {frames}")
+    return wh, frames
+
+
 def cmd_bench(args) -> int:
     """``iat bench [MODEL…] [--json] [--frames N] [--size WxH]``: Markdown on stdout, or JSON."""
     from iat.tools.bench import format_table, run_bench
 
-    size = parse_size(getattr(args, "size", "640x480") or "640x480")
-    frames = int(getattr(args, "frames", 60) or 60)
-    if frames < 1:
-        raise OptionError(f"--frames must be >= 1, got {frames}")
+    size, frames = _size_and_frames(args, "640x480", 60)
     bar = ProgressBar("bench")
     try:
         result = run_bench(list(getattr(args, "models", []) or []), frames=frames, size=size, progress=bar)
@@ -315,10 +321,7 @@ def cmd_chart(args) -> int:
     """``iat chart [MODEL…] -o CHART.png [--size WxH] [--frames N]``: writes CHART.png and CHART.json."""
     from iat.tools.chart import run_chart
 
-    size = parse_size(getattr(args, "size", "160x120") or "160x120")
-    frames = int(getattr(args, "frames", 10) or 10)
-    if frames < 1:
-        raise OptionError(f"--frames must be >= 1, got {frames}")
+    size, frames = _size_and_frames(args, "160x120", 10)
     bar = ProgressBar("chart")
     try:
         result = run_chart(
