@@ -124,6 +124,13 @@ class SeamCache:
         self.boxes.clear()
 
 
+def _box_key(policy: BakePolicy, align: int) -> tuple:
+    """What a tile box depends on besides its patch: the scaled tile, the GPU format, the gutter,
+    the alignment and whether detail textures divide it (the key of the box and page caches)."""
+    tkey = TileCache.key(policy.method, policy.scale, policy.scale_mode)
+    return (tkey, policy.pixel_format, policy.gutter, align, policy.detail)
+
+
 class Baker:
     """Bakes one solution under changing policies, caching what does not change.
 
@@ -296,8 +303,7 @@ class Baker:
 
     def _plain_boxes(self, ps: np.ndarray, policy: BakePolicy, align: int) -> tuple[list, list]:
         """Boxes of patches ``ps`` without harmonised rings, cached: ``(sources, GPU-form boxes)``."""
-        tkey = TileCache.key(policy.method, policy.scale, policy.scale_mode)
-        store = self._boxes.entry((tkey, policy.pixel_format, policy.gutter, align, policy.detail))
+        store = self._boxes.entry(_box_key(policy, align))
         missing = np.array([p for p in ps.tolist() if p not in store], dtype=np.int64)
         if len(missing):
             tiles = self.tiles.get(missing, policy.method, policy.scale, policy.scale_mode)
@@ -345,15 +351,7 @@ class Baker:
         t0 = time.perf_counter()
         new = self._harmonised_rings(textured, ps, policy)
         sc = self.seam_cache
-        bkey = (
-            TileCache.key(policy.method, policy.scale, policy.scale_mode),
-            policy.pixel_format,
-            policy.gutter,
-            align,
-            policy.detail,
-            self.page_scale(policy),  # sets share one
-        )
-        store = sc.boxes.entry(bkey)
+        store = sc.boxes.entry((*_box_key(policy, align), self.page_scale(policy)))  # sets share one scale
         build = [p for p, ring in new.items() if p not in store or store[p][0].tobytes() != ring.tobytes()]
         sc.stats["boxes_built"] += len(build)
         sc.stats["boxes_reused"] += len(new) - len(build)
@@ -381,15 +379,7 @@ class Baker:
         """The :class:`~iat.bake.boxes.PageEntry` of this textured set, cached: boxes
         (:meth:`_boxes_of`) blitted into GPU-form pages. ``tm``: tiles, blit (and scale, seams)."""
         t0 = time.perf_counter()
-        pkey = (
-            TileCache.key(policy.method, policy.scale, policy.scale_mode),
-            policy.pixel_format,
-            policy.gutter,
-            align,
-            policy.detail,
-            policy.page_size,
-            textured.tobytes(),
-        )
+        pkey = (*_box_key(policy, align), policy.page_size, textured.tobytes())
         entry = self._pages.hit(pkey)
         if entry is not None:
             self.stats["pages_hits"] += 1

@@ -59,7 +59,7 @@ def load_cached(path: Path, n_patches: int):
         return None
     try:
         sol = Solution.load(path)
-    except (IATError, OSError, ValueError) as e:  # damaged or of an older format: solve again
+    except (IATError, OSError) as e:  # damaged, of an older format or unreadable: solve again
         log.info("cache %s not used: %s", path, e)
         return None
     return sol if len(sol.patch_is_quad) == n_patches else None
