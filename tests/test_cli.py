@@ -136,6 +136,39 @@ def test_clamped_albedo_is_one_warning_line_on_stderr(tmp_path):
     assert json.loads(r.stdout)["patches"] == 1
 
 
+def test_loader_log_warnings_have_the_command_prefix(tmp_path):
+    """What the loader logs as a warning (a missing material library) is one ``iat CMD: warning:`` line."""
+    obj = tmp_path / "nolib.obj"
+    obj.write_text("mtllib gone.mtl\nv 0 0 0\nv 1 0 0\nv 1 0 -1\nf 1 2 3\n")
+    r = iat("info", obj, "--json")
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.splitlines() == [
+        f"iat info: warning: {obj}: material library gone.mtl not found; default materials used"
+    ]
+
+
+def test_no_light_source_warns_and_still_writes_the_solution(tmp_path):
+    obj = tmp_path / "dark.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 1 0 -1\nv 0 0 -1\nf 1 2 3 4\n")
+    r = iat("info", obj, "--json")
+    assert r.returncode == 0 and json.loads(r.stdout)["light_sources"] == "no light sources"
+    out = tmp_path / "dark.npz"
+    r = iat("solve", obj, "-o", out)
+    assert r.returncode == 0 and out.is_file()
+    assert r.stderr.splitlines() == [
+        f"iat solve: warning: {obj}: no light sources (no lights, no emissive materials): the solution is black"
+    ]
+
+
+def test_negative_coordinates_in_eye_and_target(tmp_path):
+    """``--eye -1,0.5,-3``: argparse alone takes a value starting with '-' for an option."""
+    out = tmp_path / "neg.png"
+    r = iat("render", CORNELL, "--mode", "preview", "--eye", "-1,0.5,-3", "--target", "-0.1,0.5,0",
+            "--size", "32x24", "-o", out)
+    assert r.returncode == 0, r.stderr
+    assert out.is_file()
+
+
 def test_load_draws_a_progress_bar_on_a_terminal(tmp_path, monkeypatch, capsys):
     """G2: ``iat info`` (and solve, bake, render through the same helper) draws the load's bar."""
     import io

@@ -47,6 +47,23 @@ def test_obj_unit_quad_is_one_quad_patch(tmp_path):
     assert len(s.materials) == 1 and np.allclose(s.materials[0].albedo, 0.5)
 
 
+def test_only_near_parallelograms_become_quad_roots():
+    """A quad root's lattice is bilinear, its texture affine per triangle: the two agree only on
+    parallelograms, so a skewed pair (the issue's ceiling: twist 0.77 of the mean diagonal) stays
+    two triangle roots, while a sheared parallelogram and a quad inside the tolerance merge."""
+    V = np.array([[0.1, -0.1, 0], [0.1, -9.9, 0], [7.44, -4.01, 0], [7.44, -0.3, 0]], dtype=float)
+    F = np.array([[0, 1, 2], [2, 3, 0]])
+    corners, _, _ = merge_quads(V, F, np.zeros(2, dtype=np.int64))
+    assert len(corners) == 2 and (corners[:, 3] < 0).all()
+    sheared = np.array([[0, 0, 0], [4, 0, 0], [5, 2, 0], [1, 2, 0]], dtype=float)
+    assert len(merge_quads(sheared, F, np.zeros(2, dtype=np.int64))[0]) == 1
+    near = sheared.copy()
+    near[2, 0] += 0.01 * 0.5 * (np.linalg.norm(near[2] - near[0]) + np.linalg.norm(near[3] - near[1]))
+    assert len(merge_quads(near, F, np.zeros(2, dtype=np.int64))[0]) == 1
+    near[2, 0] += 0.02 * 0.5 * (np.linalg.norm(near[2] - near[0]) + np.linalg.norm(near[3] - near[1]))
+    assert len(merge_quads(near, F, np.zeros(2, dtype=np.int64))[0]) == 2
+
+
 def test_gltf_quad_keeps_corner_order(tmp_path):
     s = load_scene(quad_gltf(tmp_path / "q.glb"))
     assert s.n_patches == 1 and s.patch_is_quad[0]

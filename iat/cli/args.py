@@ -3,6 +3,8 @@ with a one-line message."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from iat.errors import OptionError
@@ -26,3 +28,23 @@ def parse_size(text: str) -> tuple[int, int]:
     if not (1 <= w <= 16384 and 1 <= h <= 16384):
         raise OptionError(f"--size out of range: {text}")
     return w, h
+
+
+_NEGATIVE_VALUE = re.compile(r"^-\.?\d[\d.,eE+-]*$")  # -12,5,-22 or -0.5
+
+
+def join_negative_values(argv: list[str]) -> list[str]:
+    """``["--eye", "-12,5,-22"]`` -> ``["--eye=-12,5,-22"]``: argparse would take a value that
+    starts with ``-`` (and is not one plain number) for an option."""
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        tok = argv[i]
+        nxt = argv[i + 1] if i + 1 < len(argv) else None
+        if tok.startswith("--") and "=" not in tok and nxt is not None and _NEGATIVE_VALUE.match(nxt):
+            out.append(f"{tok}={nxt}")
+            i += 2
+        else:
+            out.append(tok)
+            i += 1
+    return out

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 import warnings
 from contextlib import contextmanager
@@ -17,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from iat.cli.args import parse_size, parse_vec
+from iat.cli.args import join_negative_values, parse_size, parse_vec
 from iat.errors import IATError, IATWarning, OptionError
 from iat.progress import ProgressBar
 from iat.tools.common import policy_dict
@@ -115,6 +116,7 @@ def cmd_info(args) -> int:
         "materials": len(scene.materials),
         "emissive_materials": int(sum(m.emission.max() > 0 for m in scene.materials)),
         "lights": len(scene.lights),
+        "light_sources": "yes" if scene.has_light_sources else "no light sources",
         "cameras": len(scene.cameras),
         "camera_paths": {k: len(v) for k, v in scene.camera_paths.items()},
         "bounds": scene.bounds.tolist(),
@@ -491,6 +493,13 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _print_warning(command: str, text: str) -> None:
+    from tqdm import tqdm
+
+    line = " ".join(str(text).split())
+    tqdm.write(f"iat {command}: warning: {line}", file=sys.stderr)  # above a progress bar, if any
+
+
 def _warning_printer(command: str):
     """A :func:`warnings.showwarning` that prints an IATWarning as one line on stderr."""
     default = warnings.showwarning
@@ -498,17 +507,37 @@ def _warning_printer(command: str):
     def show(message, category, filename, lineno, file=None, line=None):
         if not issubclass(category, IATWarning):
             return default(message, category, filename, lineno, file, line)
-        text = " ".join(str(message).split())
-        from tqdm import tqdm
-
-        tqdm.write(f"iat {command}: warning: {text}", file=sys.stderr)  # above a progress bar, if any
+        _print_warning(command, message)
 
     return show
 
 
+class _WarningLines(logging.Handler):
+    """Prints the ``iat`` loggers' warnings as ``iat CMD: warning: ...`` lines on stderr."""
+
+    def __init__(self, command: str):
+        super().__init__(logging.WARNING)
+        self.command = command
+
+    def emit(self, record: logging.LogRecord) -> None:
+        _print_warning(self.command, record.getMessage())
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(join_negative_values(sys.argv[1:] if argv is None else list(argv)))
+    logger = logging.getLogger("iat")
+    handler = _WarningLines(args.command)
+    logger.addHandler(handler)
+    propagate, logger.propagate = logger.propagate, False
+    try:
+        return _run(args)
+    finally:
+        logger.removeHandler(handler)
+        logger.propagate = propagate
+
+
+def _run(args) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("always", IATWarning)
         warnings.showwarning = _warning_printer(args.command)

@@ -16,6 +16,10 @@ from iat.errors import OptionError
 
 #: Coplanarity tolerance for merging triangle pairs into quads (radians between normals).
 QUAD_ANGLE_TOL = 1e-4
+#: a pair becomes a quad root only when its corners are within this of a parallelogram:
+#: |c0 - c1 + c2 - c3| (the bilinear twist, 4x the centre's offset from the affine split)
+#: over the mean diagonal; a skewed quad's bilinear lattice would be textured affinely per triangle
+QUAD_SKEW_TOL = 0.02
 #: Positions closer than this times the bounding-box diagonal are welded.
 WELD_REL_TOL = 1e-9
 
@@ -147,6 +151,7 @@ def merge_quads(
     face_uv: np.ndarray | None = None,
     angle_tol: float = QUAD_ANGLE_TOL,
     uv_tol: float = 1e-6,
+    skew_tol: float = QUAD_SKEW_TOL,
 ):
     """Merge coplanar triangle pairs back into convex quads.
 
@@ -222,7 +227,8 @@ def merge_quads(
     s2 = (_cross(e12, e23) * n).sum(1) / np.maximum(l12 * l23, 1e-300)
     s3 = (_cross(e23, e30) * n).sum(1) / np.maximum(l23 * l30, 1e-300)
     score = np.minimum(np.minimum(s0, s1), np.minimum(s2, s3))
-    ok = (s0 > 1e-6) & (s2 > 1e-6)
+    twist = _norm(p0 - p1 + p2 - p3) / np.maximum(0.5 * (_norm(p2 - p0) + _norm(p3 - p1)), 1e-300)
+    ok = (s0 > 1e-6) & (s2 > 1e-6) & (twist <= skew_tol)
     ha, hb, fa, fb, ha1, ha2, hb2, score = (x[ok] for x in (ha, hb, fa, fb, ha1, ha2, hb2, score))
 
     # greedy matching: a candidate wins when it ranks best at both of its faces

@@ -152,6 +152,14 @@ class Scene:
         return np.array([m.emission for m in self.materials])[self.patch_material]
 
     @property
+    def has_light_sources(self) -> bool:
+        """True when a light or a used material emits (a scene without is black whatever the solve)."""
+        if any(float(np.max(lt.radiant_intensity)) > 0 for lt in self.lights):
+            return True
+        used = np.unique(self.patch_material)
+        return any(float(self.materials[k].emission.max()) > 0 for k in used if 0 <= k < len(self.materials))
+
+    @property
     def bounds(self) -> np.ndarray:
         """(2, 3) float64 min and max corner of the used vertices."""
         used = np.zeros(len(self.vertices), dtype=bool)

@@ -50,6 +50,18 @@ def check_scene(scene) -> None:
             raise OptionError(f"scene: light {getattr(lt, 'name', '')!r} has non-finite values")
 
 
+def warn_if_unlit(scene) -> None:
+    """An :class:`iat.errors.IATWarning` when nothing in ``scene`` emits: the solve goes on (its
+    solution is black) but says so."""
+    if not scene.has_light_sources:
+        where = f"{scene.path}: " if getattr(scene, "path", "") else ""
+        warnings.warn(
+            f"{where}no light sources (no lights, no emissive materials): the solution is black",
+            IATWarning,
+            stacklevel=3,
+        )
+
+
 def check_mesh(sol: Solution, scene, what: str) -> None:
     """Raise OptionError unless ``sol`` was solved on the patches of ``scene``."""
     if not isinstance(sol, Solution):

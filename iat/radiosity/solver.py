@@ -93,7 +93,7 @@ from dataclasses import replace
 import numpy as np
 
 from iat.progress import Progress
-from iat.radiosity.checks import check_mesh, check_scene, validated_options
+from iat.radiosity.checks import check_mesh, check_scene, validated_options, warn_if_unlit
 from iat.radiosity.context import Context
 from iat.radiosity.options import SolveOptions
 from iat.radiosity.run import SolveRun
@@ -119,10 +119,13 @@ def solve(
       taken from it) and only the radiance is solved afresh, so solutions of different
       lighting share one tree and can be blended per vertex or texel.
     Raises :class:`iat.errors.OptionError` for invalid options or a mesh of other patches.
+    Warns (:class:`iat.errors.IATWarning`) when nothing in the scene emits.
     """
     opts = validated_options(options)
     check_scene(scene)
-    if mesh is not None:
+    if mesh is None:
+        warn_if_unlit(scene)
+    else:
         check_mesh(mesh, scene, "solve mesh")
         opts = replace(opts, max_depth=int(mesh.max_depth)).validate()
     t_start = time.perf_counter()
