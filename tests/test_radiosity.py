@@ -278,7 +278,7 @@ def test_point_light_touching_a_wall_shoots_what_the_wall_received():
     scene = floor_scene(occluder=False, light_height=1.0)
     scene.lights = [Light(kind="point", position=[0.0, 1e-4, 0.0], intensity=1.0)]  # over a vertex
     opts = SolveOptions(max_depth=4, min_element_size=0.0)
-    with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
+    with Visibility(scene.world_triangles()) as vis:
         run = SolveRun(scene, opts, None, vis, 0.0)
         run.mesh_by_direct_light()
         shot = run.patch_power(run.unshot).sum()

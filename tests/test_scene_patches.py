@@ -64,6 +64,26 @@ def test_only_near_parallelograms_become_quad_roots():
     assert len(merge_quads(near, F, np.zeros(2, dtype=np.int64))[0]) == 2
 
 
+def test_panels_group_coplanar_patches_and_fit_their_rectangle(tmp_path):
+    """A 4 x 2 wall with a 1 x 1 window hole (8 triangles, fan-like) and a floor of another
+    material: two panels; the wall's rectangle is 4 x 2 and its fill is 7/8."""
+    from iat.geometry.panels import find_panels, sliver_count
+
+    v = "v 0 0 0\nv 4 0 0\nv 4 2 0\nv 0 2 0\nv 1.5 0.5 0\nv 2.5 0.5 0\nv 2.5 1.5 0\nv 1.5 1.5 0\n"
+    v += "v 0 0 0\nv 0 0 3\nv 4 0 3\nv 4 0 0\n"
+    f = "usemtl wall\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n"
+    f += "usemtl floor\nf 9 10 11 12\n"
+    mtl = write(tmp_path / "m.mtl", "newmtl wall\nKd 0.5 0.5 0.5\nnewmtl floor\nKd 0.3 0.3 0.3\n")
+    s = load_scene(write(tmp_path / "wall.obj", f"mtllib {mtl.name}\n{v}{f}"))
+    p = find_panels(s)
+    assert p.n_panels == 2
+    wall = int(np.argmax(np.abs(p.normal[:, 2])))
+    np.testing.assert_allclose(sorted(p.extent[wall]), [2.0, 4.0], atol=1e-9)
+    assert p.fill[wall] == pytest.approx(7 / 8)
+    assert p.area.sum() == pytest.approx(7 + 12)
+    assert sliver_count(s) == 0
+
+
 def test_gltf_quad_keeps_corner_order(tmp_path):
     s = load_scene(quad_gltf(tmp_path / "q.glb"))
     assert s.n_patches == 1 and s.patch_is_quad[0]

@@ -154,8 +154,8 @@ class Baker:
                 f"scene has {scene.n_patches} patches but the solution has {P}; "
                 "solve the model again (or load it with the same pre-split)"
             )
-        self._vert_pos = np.asarray(solution.vert_position, dtype=np.float32)
         self._corners = np.asarray(solution.patch_corners, dtype=np.float32)
+        self._clip_start = np.searchsorted(solution.clip_patch, np.arange(P + 1))
         self._material = np.asarray(solution.patch_material, dtype=np.int64)
         albedo = np.asarray(solution.patch_albedo, dtype=np.float64)
         self.inv_albedo = np.where(albedo > 1e-4, 1.0 / np.maximum(albedo, 1e-4), 0.0)
@@ -411,7 +411,10 @@ class Baker:
         """Mesh part of the patches of depth < threshold (:func:`~iat.bake.polygons.mesh_prefix`)."""
         self.stats["mesh_hits"] += self._mesh_sorted is not None
         if self._mesh_sorted is None:
-            self._mesh_sorted = depth_sorted_mesh(self.index, self._vert_pos)
+            drawn = self.solution.drawn_mesh()
+            self._mesh_sorted = depth_sorted_mesh(
+                self.index.depth, drawn, drawn.radiance(self.index.radiance)
+            )
         return mesh_prefix(self._mesh_sorted, threshold)
 
     def _detail_textures(self, ps: np.ndarray, dmask: np.ndarray) -> dict:
@@ -462,7 +465,16 @@ class Baker:
         t0 = time.perf_counter()
         dmask = self.detail_mask(policy)
         tpos, tuv, tlayer, tduv, tmat, tdet, tpatch, tidx = textured_polygons(
-            self.index.is_quad, self._corners, self._patch_uv, self._material, dmask, ps, sides, packing
+            self.index.is_quad,
+            self._corners,
+            self._patch_uv,
+            self._material,
+            dmask,
+            ps,
+            sides,
+            packing,
+            self.solution.clip_uv,
+            self._clip_start,
         )
         tm["textured"] = time.perf_counter() - t0
         detail_textures = self._detail_textures(ps, dmask)

@@ -7,7 +7,6 @@ from __future__ import annotations
 import numpy as np
 
 from iat.bake import atlas
-from iat.bake.flatten import SolutionIndex
 
 # lattice corner offsets (units of m - 1 texels) of the polygon corners: quads, triangles
 _QUAD_OX = np.array([0, 1, 1, 0])
@@ -16,25 +15,29 @@ _TRI_OX = np.array([0, 1, 0, 0])
 _TRI_OY = np.array([0, 0, 1, 1])
 
 
-def depth_sorted_mesh(index: SolutionIndex, vert_position: np.ndarray) -> tuple:
-    """The solution's vertices and triangles sorted by their patch's tree depth (stable, so
+def depth_sorted_mesh(patch_depth: np.ndarray, drawn, radiance: np.ndarray) -> tuple:
+    """The drawn mesh's vertices and triangles sorted by their patch's tree depth (stable, so
     vertex-table order within a depth): ``(positions (V, 3) float32, radiance (V, 3) float32,
     indices (T, 3) uint32, vertex patch (V,) int32, vertex depth (V,), triangle depth (T,))``,
     read-only. The mesh part of threshold ``t`` (patches of depth ``< t``) is then a prefix of
     each (:func:`mesh_prefix`): views, no copy, and the renderer keeps one upload of the whole
-    arrays for every threshold."""
-    idx = index
-    vdepth = idx.depth[idx.vert_patch]
+    arrays for every threshold.
+
+    patch_depth : (P,) int; drawn : :class:`iat.radiosity.solution.DrawnMesh`;
+    radiance : (V, 3) its vertices' radiance (:meth:`~iat.radiosity.solution.DrawnMesh.radiance`)
+    """
+    tri = drawn.triangles
+    vdepth = patch_depth[drawn.patch]
     order_v = np.argsort(vdepth, kind="stable")
-    tdepth = idx.depth[idx.tri_patch] if len(idx.tri) else np.zeros(0, np.int64)
+    tdepth = patch_depth[drawn.patch[tri[:, 0]]] if len(tri) else np.zeros(0, np.int64)
     order_t = np.argsort(tdepth, kind="stable")
     new_of_old = np.empty(len(order_v), dtype=np.int64)
     new_of_old[order_v] = np.arange(len(order_v))
     parts = (
-        np.ascontiguousarray(vert_position[order_v]),
-        np.ascontiguousarray(idx.radiance[order_v], dtype=np.float32),
-        new_of_old[idx.tri[order_t]].astype(np.uint32).reshape(-1, 3),
-        idx.vert_patch[order_v].astype(np.int32),
+        np.ascontiguousarray(drawn.position[order_v], dtype=np.float32),
+        np.ascontiguousarray(radiance[order_v], dtype=np.float32),
+        new_of_old[tri[order_t]].astype(np.uint32).reshape(-1, 3),
+        drawn.patch[order_v].astype(np.int32),
         vdepth[order_v],
         tdepth[order_t],
     )
@@ -61,14 +64,71 @@ def textured_polygons(
     ps: np.ndarray,
     sides: np.ndarray,
     packing: atlas.Packing,
+    clip_uv: np.ndarray | None = None,
+    clip_start: np.ndarray | None = None,
 ) -> tuple:
-    """One polygon per textured patch ``ps`` (k,), tile sides ``sides`` (k,), placed by ``packing``.
+    """One polygon per textured patch ``ps`` (k,), tile sides ``sides`` (k,), placed by ``packing``;
+    a panel cell's polygon is its clip triangles (``clip_uv`` (C, 3, 2) lattice uv, patch p's rows
+    ``clip_start[p]:clip_start[p + 1]``), so holes stay holes.
 
     is_quad (P,) bool, corners (P, 4, 3) float32, patch_uv (P, 4, 2) detail uv, material (P,),
     detail (P,) bool (texels hold incoming light). Returns ``(positions (K, 3), uv (K, 2) atlas,
     layer (K,), detail uv (K, 2), material (K,) int32, detail flag (K,) float32, patch (K,)
     int32, indices (Tt, 3) uint32)``, float32 unless said.
     """
+    whole = np.ones(len(ps), dtype=bool)
+    if clip_start is not None and len(clip_uv):
+        whole = np.diff(clip_start)[ps] == 0
+    out = _whole_polygons(is_quad, corners, patch_uv, material, detail, ps, sides, packing, whole)
+    if whole.all():
+        return out
+    cut = _clipped_polygons(
+        corners, patch_uv, material, detail, ps, sides, packing, ~whole, clip_uv, clip_start
+    )
+    n0 = len(out[0])
+    return tuple(
+        np.concatenate([a, b + (n0 if i == 7 else 0)]) for i, (a, b) in enumerate(zip(out, cut, strict=True))
+    )
+
+
+def _bilinear(c: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(n, d) bilinear blend of corner values c (n, 4, d) at lattice (u, v) (n,)."""
+    u, v = u[:, None], v[:, None]
+    return (1 - u) * (1 - v) * c[:, 0] + u * (1 - v) * c[:, 1] + u * v * c[:, 2] + (1 - u) * v * c[:, 3]
+
+
+def _clipped_polygons(corners, patch_uv, material, detail, ps, sides, packing, sel, clip_uv, clip_start):
+    """The clip triangles of the panel cells ``ps[sel]``, in :func:`textured_polygons`' layout."""
+    from iat.geometry.clip import ranges
+
+    rows = np.flatnonzero(sel)
+    k, t = ranges(clip_start, ps[rows])
+    r = rows[k]  # position in ps of each clip triangle
+    p = ps[r]
+    u = clip_uv[t, :, 0].reshape(-1)
+    v = clip_uv[t, :, 1].reshape(-1)
+    rr, pp = np.repeat(r, 3), np.repeat(p, 3)
+    pl = packing.placements
+    W, H = max(packing.width, 1), max(packing.height, 1)
+    m1 = (sides[rr] - 1).astype(np.float64)
+    auv = np.stack([(pl[rr, 1] + u * m1 + 0.5) / W, (pl[rr, 2] + v * m1 + 0.5) / H], axis=1)
+    n = len(u)
+    return (
+        _bilinear(np.asarray(corners, np.float64)[pp], u, v).astype(np.float32),
+        auv.astype(np.float32),
+        pl[rr, 0].astype(np.float32),
+        _bilinear(np.asarray(patch_uv, np.float64)[pp], u, v).astype(np.float32),
+        material[pp].astype(np.int32),
+        detail[pp].astype(np.float32),
+        pp.astype(np.int32),
+        np.arange(n, dtype=np.uint32).reshape(-1, 3),
+    )
+
+
+def _whole_polygons(is_quad, corners, patch_uv, material, detail, ps, sides, packing, sel) -> tuple:
+    """The polygons (quads, triangles) of the whole patches ``ps[sel]``."""
+    pl_all = packing.placements
+    ps, sides = ps[sel], sides[sel]
     k = len(ps)
     q = is_quad[ps]
     nv = np.where(q, 4, 3)
@@ -77,7 +137,7 @@ def textured_polygons(
     m1 = (sides - 1)[:, None]
     ox = np.where(q[:, None], _QUAD_OX, _TRI_OX) * m1
     oy = np.where(q[:, None], _QUAD_OY, _TRI_OY) * m1
-    pl = packing.placements
+    pl = pl_all[sel]
     W, H = max(packing.width, 1), max(packing.height, 1)
     u = (pl[:, 1:2] + ox + 0.5) / W
     v = (pl[:, 2:3] + oy + 0.5) / H

@@ -105,6 +105,8 @@ def _open(args, what: str):
 
 # -- commands --------------------------------------------------------------------
 def cmd_info(args) -> int:
+    from iat.geometry.panels import find_panels, sliver_count
+
     scene = _load(args, args.input)
     q = scene.patch_is_quad
     info = {
@@ -113,6 +115,8 @@ def cmd_info(args) -> int:
         "patches": scene.n_patches,
         "quads": int(q.sum()),
         "triangle_patches": int((~q).sum()),
+        "panels": find_panels(scene).n_panels,
+        "slivers": sliver_count(scene),
         "materials": len(scene.materials),
         "emissive_materials": int(sum(m.emission.max() > 0 for m in scene.materials)),
         "lights": len(scene.lights),

@@ -403,7 +403,8 @@ class GlbBuilder:
             nq = np.linalg.norm(q)
             if nq < 1e-12:
                 raise ValueError(f"node {name!r}: zero quaternion")
-            node["rotation"] = [float(x) for x in q / nq]
+            # rounded: the last bits of a normalised quaternion differ between CPUs (SIMD paths)
+            node["rotation"] = [round(float(x), 12) for x in q / nq]
         if translation is not None:
             node["translation"] = _floats(translation, 3, what=f"node {name!r} translation")
         if light is not None:

@@ -1,8 +1,11 @@
 """Scenes: world-space arrays of root patches, materials, lights and cameras.
 
 A *patch* is a root polygon of the report: a planar convex quad (coplanar
-triangle pairs merged back) or a triangle. Quads keep their corners in order
-around the polygon; triangles store ``-1`` as their fourth corner.
+triangle pairs merged back, near-parallelograms only), a triangle, or a cell of a
+*panel* (:mod:`iat.geometry.panels`): a rectangle root of which only the part covered by
+its *clip triangles* is surface (``clip_uv`` in the patch's lattice coordinates; holes
+stay holes). Quads keep their corners in order around the polygon; triangles store
+``-1`` as their fourth corner.
 
 Lattice parametrisation (shared by the solver, the baker and the renderer):
 for a quad with corners c0..c3 the point at ``(u, v)`` in ``[0, 1]^2`` is
@@ -85,6 +88,8 @@ class Scene:
     materials, lights, cameras : lists
     camera_paths : named lists of Camera poses (walkthrough paths), may be empty
     path : the file it came from ("" when built in memory)
+    clip_uv : (C, 3, 2) float64 clip triangles in their patch's lattice (u, v), sorted by patch
+    clip_patch : (C,) int64 the (quad) patch each clip triangle belongs to; a patch with none is whole
     """
 
     vertices: np.ndarray
@@ -96,6 +101,8 @@ class Scene:
     cameras: list[Camera] = field(default_factory=list)
     camera_paths: dict[str, list[Camera]] = field(default_factory=dict)
     path: str = ""
+    clip_uv: np.ndarray | None = None
+    clip_patch: np.ndarray | None = None
 
     def __post_init__(self):
         self.vertices = np.asarray(self.vertices, dtype=np.float64).reshape(-1, 3)
@@ -104,6 +111,10 @@ class Scene:
         if self.patch_uv is None:
             self.patch_uv = np.zeros((len(self.patch_corners), 4, 2))
         self.patch_uv = np.asarray(self.patch_uv, dtype=np.float64).reshape(-1, 4, 2)
+        self.clip_uv = np.zeros((0, 3, 2)) if self.clip_uv is None else np.asarray(self.clip_uv, np.float64)
+        self.clip_uv = self.clip_uv.reshape(-1, 3, 2)
+        self.clip_patch = np.zeros(0, np.int64) if self.clip_patch is None else np.asarray(self.clip_patch)
+        self.clip_patch = self.clip_patch.astype(np.int64).reshape(-1)
 
     # -- derived per-patch data -------------------------------------------------
     @property
@@ -133,13 +144,63 @@ class Scene:
         return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
     @property
-    def patch_area(self) -> np.ndarray:
-        """(p,) float64 areas in square scene units."""
+    def clip_start(self) -> np.ndarray:
+        """(p + 1,) int64: patch p's clip triangles are ``clip_uv[clip_start[p]:clip_start[p + 1]]``."""
+        return np.searchsorted(self.clip_patch, np.arange(self.n_patches + 1)).astype(np.int64)
+
+    @property
+    def patch_clipped(self) -> np.ndarray:
+        """(p,) bool: panel cells covered only in part (drawn and solved through their clip triangles)."""
+        return np.diff(self.clip_start) > 0
+
+    @property
+    def lattice_area(self) -> np.ndarray:
+        """(p,) float64 area of each root's whole lattice (its rectangle for a clipped cell)."""
         c = self.corner_positions
         a = 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
         q = self.patch_is_quad
         a[q] += 0.5 * np.linalg.norm(np.cross(c[q, 2] - c[q, 0], c[q, 3] - c[q, 0]), axis=1)
         return a
+
+    @property
+    def patch_area(self) -> np.ndarray:
+        """(p,) float64 surface areas in square scene units (a clipped cell: its clip triangles')."""
+        a = self.lattice_area
+        if len(self.clip_patch):
+            t = self.clip_uv
+            uv_area = 0.5 * np.abs(
+                (t[:, 1, 0] - t[:, 0, 0]) * (t[:, 2, 1] - t[:, 0, 1])
+                - (t[:, 1, 1] - t[:, 0, 1]) * (t[:, 2, 0] - t[:, 0, 0])
+            )
+            cov = np.bincount(self.clip_patch, weights=uv_area, minlength=self.n_patches)
+            a = np.where(self.patch_clipped, a * cov, a)
+        return a
+
+    def world_triangles(self) -> np.ndarray:
+        """(T, 3, 3) float64 the surface as triangles: whole patches' (one, or two for a quad) and
+        clipped cells' clip triangles, in patch order (what rays hit and references render)."""
+        c = self.corner_positions
+        whole = ~self.patch_clipped
+        q = self.patch_is_quad
+        parts = [c[whole][:, [0, 1, 2]], c[whole & q][:, [0, 2, 3]]]
+        if len(self.clip_patch):
+            u = self.clip_uv[..., 0:1]
+            v = self.clip_uv[..., 1:2]
+            cc = c[self.clip_patch][:, None]  # (C, 1, 4, 3): rectangles, so bilinear is affine
+            w = (
+                (1 - u) * (1 - v) * cc[:, :, 0]
+                + u * (1 - v) * cc[:, :, 1]
+                + u * v * cc[:, :, 2]
+                + (1 - u) * v * cc[:, :, 3]
+            )
+            parts.append(w)
+        return np.concatenate(parts)
+
+    def world_triangle_patch(self) -> np.ndarray:
+        """(T,) int64 the patch of each of :meth:`world_triangles`."""
+        whole = ~self.patch_clipped
+        idx = np.arange(self.n_patches)
+        return np.concatenate([idx[whole], idx[whole & self.patch_is_quad], self.clip_patch])
 
     @property
     def patch_albedo(self) -> np.ndarray:
@@ -189,6 +250,9 @@ def scene_digest(scene: Scene) -> str:
     h.update(np.ascontiguousarray(scene.vertices, dtype="<f8").tobytes())
     h.update(np.ascontiguousarray(scene.patch_corners, dtype="<i8").tobytes())
     h.update(np.ascontiguousarray(scene.patch_material, dtype="<i8").tobytes())
+    if len(scene.clip_patch):
+        h.update(np.ascontiguousarray(scene.clip_uv, dtype="<f8").tobytes())
+        h.update(np.ascontiguousarray(scene.clip_patch, dtype="<i8").tobytes())
     for m in scene.materials:
         h.update(np.ascontiguousarray(m.albedo, dtype="<f8").tobytes())
         h.update(np.ascontiguousarray(m.emission, dtype="<f8").tobytes())

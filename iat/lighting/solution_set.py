@@ -157,6 +157,8 @@ def merge_meshes(solutions):
         np.zeros((len(keys), 3), np.float32),
         options=dict(first.options),
         model_path=first.model_path,
+        clip_uv=first.clip_uv,
+        clip_patch=first.clip_patch,
     )
 
 

@@ -134,23 +134,12 @@ def _camera_frame(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _group_triangles(scene: Scene) -> dict[int, np.ndarray]:
-    """Triangles per material, ``{material: (t, 3) int64 vertex indices}``.
-
-    A quad (c0, c1, c2, c3) becomes (c0, c1, c2) and (c0, c2, c3): both keep the
-    winding of the patch, so their face normal ``cross(v1 - v0, v2 - v0)`` is
-    :attr:`Scene.patch_normal`.
-    """
-    pc = scene.patch_corners
-    quad = scene.patch_is_quad
-    out: dict[int, np.ndarray] = {}
-    for m in np.unique(scene.patch_material):
-        sel = scene.patch_material == m
-        q = pc[sel & quad]
-        t = pc[sel & ~quad, :3]
-        tris = np.concatenate([t, q[:, [0, 1, 2]], q[:, [0, 2, 3]]], axis=0)
-        if len(tris):
-            out[int(m)] = tris
-    return out
+    """World triangles per material, ``{material: (t, 3, 3) float64}``
+    (:meth:`Scene.world_triangles`: the winding of their patch, so their face normal
+    ``cross(v1 - v0, v2 - v0)`` is :attr:`Scene.patch_normal`)."""
+    tris = scene.world_triangles()
+    mat = scene.patch_material[scene.world_triangle_patch()]
+    return {int(m): tris[mat == m] for m in np.unique(mat)}
 
 
 def _make_mesh(mi, name: str, positions: np.ndarray, faces: np.ndarray, props):
@@ -213,9 +202,8 @@ def build_mitsuba_scene(
 
     for m, tris in _group_triangles(scene).items():
         mat = scene.materials[m]
-        used, inv = np.unique(tris.ravel(), return_inverse=True)
-        positions = scene.vertices[used]
-        faces = inv.reshape(-1, 3)
+        positions = tris.reshape(-1, 3)
+        faces = np.arange(len(positions)).reshape(-1, 3)
         bsdf = {"type": "diffuse", "reflectance": _rgb(np.clip(mat.albedo, 0.0, 1.0))}
         if two_sided:
             bsdf = {"type": "twosided", "material": bsdf}
@@ -296,6 +284,9 @@ def reference_key(
     arr(scene.vertices, np.float64)
     arr(scene.patch_corners, np.int64)
     arr(scene.patch_material, np.int64)
+    if len(scene.clip_patch):
+        arr(scene.clip_uv, np.float64)
+        arr(scene.clip_patch, np.int64)
     arr([m.albedo for m in scene.materials] or np.zeros((0, 3)), np.float64)
     arr([m.emission for m in scene.materials] or np.zeros((0, 3)), np.float64)
     meta = {

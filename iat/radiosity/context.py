@@ -12,6 +12,7 @@ import numpy as np
 
 from iat.color import LUMINANCE_WEIGHTS
 from iat.geometry import quadtree as qt
+from iat.geometry.clip import clamp_into, coverage_grid
 from iat.radiosity.formfactor import point_polygon
 from iat.radiosity.options import (
     CULL_RAYS,
@@ -25,6 +26,7 @@ from iat.radiosity.options import (
     MIN_ELEMENT_FRACTION,
     RAY_EPS,
     RAY_EPS_PATCH,
+    SHOOTER_COVERAGE,
     SolveOptions,
 )
 from iat.radiosity.pointlight import lumped_light
@@ -93,6 +95,13 @@ class Context:
         self.is_quad = scene.patch_is_quad
         self.normal = scene.patch_normal
         self.area = scene.patch_area
+        self.lattice_area = scene.lattice_area
+        # panel cells: clip triangles (lattice uv) per patch, their world triangles, coverage grids
+        self.clip_uv, self.clip_start = scene.clip_uv, scene.clip_start
+        self.clipped = scene.patch_clipped
+        tri_world = scene.world_triangles()
+        self.clip_world = tri_world[len(tri_world) - len(self.clip_uv) :]
+        self._coverage: dict[tuple[int, int], np.ndarray] = {}
         self.albedo = solver_albedo(scene)
         self.emission = scene.patch_emission
         self.n_patches = len(self.area)
@@ -139,7 +148,10 @@ class Context:
     def geometry(self, keys: np.ndarray) -> ReceiverGeometry:
         keys = np.asarray(keys, dtype=np.int64)
         p, i, j = qt.decode_key(keys, self.n)
-        pos = qt.lattice_to_world(self.corners, self.is_quad, p, i, j, self.n)
+        if self.clipped.any() and self.clipped[p].any():
+            pos = self.world_at(p, *self.clamped_uv(p, i / self.n, j / self.n))
+        else:
+            pos = qt.lattice_to_world(self.corners, self.is_quad, p, i, j, self.n)
         nrm = self.normal[p]
         t = self.centre[p] - pos
         t -= np.einsum("nc,nc->n", t, nrm)[:, None] * nrm
@@ -153,6 +165,51 @@ class Context:
             start = np.searchsorted(keys, qt.make_key(np.arange(self.n_patches + 1), 0, 0, self.n))
         return ReceiverGeometry(keys, p, pos, nrm, ff, origin, start)
 
+    def clamped_uv(self, p: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Lattice (u, v) of points on patches ``p`` moved into their clip triangles (points of a
+        panel cell outside its surface take the nearest surface point, 2 ray offsets inside)."""
+        u, v = np.asarray(u, dtype=np.float64).copy(), np.asarray(v, dtype=np.float64).copy()
+        sel = np.flatnonzero(self.clipped[p])
+        if len(sel) == 0:
+            return u, v
+        side = np.linalg.norm(self.corners[p[sel], 1] - self.corners[p[sel], 0], axis=1)
+        margin = 2.0 * self.eps_patch[p[sel]] / np.maximum(side, 1e-300)
+        out = clamp_into(np.stack([u[sel], v[sel]], axis=1), p[sel], self.clip_uv, self.clip_start, margin)
+        u[sel], v[sel] = out[:, 0], out[:, 1]
+        return u, v
+
+    def world_at(self, p: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(n, 3) world points at lattice (u, v) of patches ``p``."""
+        c = self.corners[p]
+        u, v = u[:, None], v[:, None]
+        quad = (1 - u) * (1 - v) * c[:, 0] + u * (1 - v) * c[:, 1] + u * v * c[:, 2] + (1 - u) * v * c[:, 3]
+        tri = c[:, 0] + u * (c[:, 1] - c[:, 0]) + v * (c[:, 2] - c[:, 0])
+        return np.where(self.is_quad[p][:, None], quad, tri)
+
+    def coverage(self, p: int, res: int) -> np.ndarray:
+        """(res, res) bool surface coverage of clipped patch p at cell centres (``grid[v, u]``)."""
+        key = (int(p), int(res))
+        if key not in self._coverage:
+            a, b = self.clip_start[p], self.clip_start[p + 1]
+            self._coverage[key] = coverage_grid(self.clip_uv[a:b], res)
+        return self._coverage[key]
+
+    def leaf_has_surface(self, forest: qt.Forest) -> np.ndarray:
+        """(L,) bool: False for leaves of panel cells that cover none of the cell's surface (at
+        the finest lattice's cell centres): they are not split."""
+        out = np.ones(forest.n_leaves, dtype=bool)
+        lp = np.asarray(forest.leaf_patch, dtype=np.int64)
+        for p in np.unique(lp[self.clipped[lp]]):
+            sat = np.zeros((self.n + 1, self.n + 1))
+            sat[1:, 1:] = self.coverage(p, self.n).cumsum(axis=0).cumsum(axis=1)
+            sel = np.flatnonzero(lp == p)
+            size = self.n >> np.asarray(forest.leaf_level[sel], dtype=np.int64)
+            i0 = np.asarray(forest.leaf_i[sel], dtype=np.int64)
+            j0 = np.asarray(forest.leaf_j[sel], dtype=np.int64)
+            i1, j1 = i0 + size, j0 + size
+            out[sel] = (sat[j1, i1] - sat[j0, i1] - sat[j1, i0] + sat[j0, i0]) > 0
+        return out
+
     def pattern(self, s: int, m: int, shot: int) -> np.ndarray:
         """(m*m, 2) stratified jittered (u, v) in [0, 1)^2 for patch s (fixed per seed, patch, shot)."""
         rng = np.random.default_rng([self.opts.seed, int(s), int(shot), int(m)])
@@ -165,8 +222,9 @@ class Context:
                 self.corners[s],
                 bool(self.is_quad[s]),
                 self.normal[s],
-                float(self.area[s]),
+                float(self.lattice_area[s]),
                 float(self.eps_patch[s]),
+                self.coverage(s, SHOOTER_COVERAGE) if self.clipped[s] else None,
             )
         return self._shooters[s]
 
@@ -257,6 +315,10 @@ class Context:
         triangles; within 0.5 % of the analytic value there, 0.06 % on average)."""
         f = np.zeros(len(x))
         if len(x) == 0:
+            return f
+        if self.clipped[s]:  # a panel cell: the sum over its clip triangles
+            for tri in self.clip_world[self.clip_start[s] : self.clip_start[s + 1]]:
+                f += point_polygon(x, nr, tri)
             return f
         poly = self.polygon(s)
         h = np.einsum("kc,nc->nk", poly, nr) - np.einsum("nc,nc->n", x, nr)[:, None]
@@ -354,6 +416,8 @@ class Context:
             d0 = sh.origin - x  # (b, 3) receiver -> shooter origin
             ka = sh.kernel(ua, va, d0, nr)  # (b or 1.., S) broadcast to (b, S)
             ja = sh.jacobian(ua, va)
+            if sh.mask is not None:  # a panel cell: area samples off its surface count for nothing
+                ka = ka * sh.on_surface(ua, va)
             near = fb >= F_DIRECTION
             wa = ka / (n_s / ja + n_s * ka * near[:, None] + 1e-300)
             ua, va = np.broadcast_to(ua, wa.shape), np.broadcast_to(va, wa.shape)
@@ -433,6 +497,8 @@ class Context:
             vd = ((xs - sh.origin) @ sh.a2)[:, None] + t * proj(sh.a2)
             hit = ok & (t > 0) & sh.inside_uv(ud, vd)
             ud, vd = sh.clip_uv(ud, vd)
+            if sh.mask is not None:
+                hit &= sh.on_surface(ud, vd)
             jd = sh.area
         else:
             w = (

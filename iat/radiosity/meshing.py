@@ -185,7 +185,7 @@ def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, re
     try:
         while True:
             keys = qt.vertex_keys(forest)
-            cand = forest.leaf_level < D
+            cand = (forest.leaf_level < D) & ctx.leaf_has_surface(forest)
             if ctx.min_size > 0 and cand.any():
                 cand[cand] = leaf_longest_edge(forest.take(cand), ctx.corners) / 2 >= ctx.min_size
             sub = forest.take(cand)

@@ -56,6 +56,8 @@ RESOLVE_MAX_CHANGE = 1.0
 AMBIENT_RAYS = 16
 #: upper bound of the measured reflected fraction r in the ambient term (keeps r / (1 - r) finite)
 MAX_REFLECTANCE = 0.95
+#: side of the coverage grid that tells a panel cell's area samples on its surface from off it
+SHOOTER_COVERAGE = 256
 
 
 @dataclass

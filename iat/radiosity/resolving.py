@@ -87,7 +87,7 @@ def resolve(
     if delta_power > RESOLVE_MAX_CHANGE * new_power:
         return solve(scene, opts, progress, mesh=previous)
     t_start = time.perf_counter()
-    with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
+    with Visibility(scene.world_triangles()) as vis:
         run = SolveRun(scene, opts, progress, vis, t_start)
         ctx = run.ctx
         run.take_mesh(previous)

@@ -505,6 +505,8 @@ class SolveRun:
             radiance,
             options=opts.to_dict(),
             model_path=str(getattr(self.scene, "path", "") or ""),
+            clip_uv=self.scene.clip_uv,
+            clip_patch=self.scene.clip_patch,
         )
         area_tot = float(ctx.area.sum())
         sol.stats = {

@@ -65,10 +65,21 @@ class Shooter:
     area Jacobian.
 
     Quads: ``p(u, v) = c0 + u e1 + v e2 + u v e3`` (bilinear); triangles: ``c0 + u e1 + v e2``.
+    ``area`` is the lattice's whole area (a panel cell's rectangle) and ``mask`` a panel cell's
+    surface coverage (samples off it count for nothing).
     """
 
-    def __init__(self, corners: np.ndarray, is_quad: bool, normal: np.ndarray, area: float, eps: float):
+    def __init__(
+        self,
+        corners: np.ndarray,
+        is_quad: bool,
+        normal: np.ndarray,
+        area: float,
+        eps: float,
+        mask: np.ndarray | None = None,
+    ):
         self.is_quad = is_quad
+        self.mask = mask  # (r, r) bool surface of a panel cell (mask[v, u]), None: all of it
         self.normal = normal
         self.area = area
         c = corners if is_quad else corners[:3]
@@ -124,6 +135,13 @@ class Shooter:
             ds = ds + uv * bn[2]
             r2 = r2 + 2 * uv * de[:, 2:3] + uv * uv * g[2, 2] + 2 * uv * (u * g[0, 2] + v * g[1, 2])
         return np.maximum(dn, 0.0) * np.maximum(-ds, 0.0) / (np.pi * np.maximum(r2 * r2, 1e-300))
+
+    def on_surface(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(...) bool: lattice (u, v) is on a panel cell's surface (its mask)."""
+        r = self.mask.shape[0]
+        a = np.clip((np.asarray(u) * r).astype(np.int64), 0, r - 1)
+        b = np.clip((np.asarray(v) * r).astype(np.int64), 0, r - 1)
+        return self.mask[b, a]
 
     def inside(self, pts: np.ndarray) -> np.ndarray:
         """(...) bool: points (..., 3) on the plane inside the convex polygon."""

@@ -16,6 +16,7 @@ import numpy as np
 from iat.errors import SolutionFileError
 from iat.fsutil import atomic_write
 from iat.geometry import quadtree as qt
+from iat.geometry.clip import clip_mesh
 
 SOLUTION_FORMAT = "iat-solution"
 SOLUTION_VERSION = 1
@@ -34,6 +35,32 @@ _ARRAYS = {
     "vert_radiance": np.float32,
     "tri_vertices": np.int32,
 }
+#: arrays a file may lack (solutions of scenes without panel cells)
+_OPTIONAL = {"clip_uv": (np.float64, (0, 3, 2)), "clip_patch": (np.int64, (0,))}
+
+
+@dataclass
+class DrawnMesh:
+    """The mesh as drawn: the vertex table's vertices, then the pieces of panel cells' triangles
+    cut to their clip triangles (each a weighted sum of three table vertices).
+
+    position : (V', 3) float64; patch : (V',) int64; triangles : (T', 3) int64 into the V' rows
+    source : (V' - V, 3) int64 table vertices and weight : (V' - V, 3) float32 of the extra rows
+    """
+
+    position: np.ndarray
+    patch: np.ndarray
+    triangles: np.ndarray
+    source: np.ndarray
+    weight: np.ndarray
+
+    def radiance(self, vert_radiance: np.ndarray) -> np.ndarray:
+        """(V', 3) float32: table radiance (V, 3), then the pieces' interpolated radiance."""
+        r = np.asarray(vert_radiance, dtype=np.float32)
+        if len(self.source) == 0:
+            return r
+        extra = np.einsum("kj,kjc->kc", self.weight, r[self.source])
+        return np.concatenate([r, extra.astype(np.float32)])
 
 
 @dataclass
@@ -49,6 +76,7 @@ class Solution:
     vert_key : (V,) int64 sorted vertex keys
     vert_radiance : (V, 3) float32 outgoing radiance, linear RGB
     tri_vertices : (T, 3) int32 anchored mesh triangles (indices into the vertex table)
+    clip_uv, clip_patch : (C, 3, 2) float64, (C,) int64 panel cells' clip triangles (the scene's)
     stats, options : JSON-able dicts
     model_path : the model file it was solved from ("" if built in memory)
     """
@@ -69,6 +97,8 @@ class Solution:
     stats: dict = field(default_factory=dict)
     options: dict = field(default_factory=dict)
     model_path: str = ""
+    clip_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 2)))
+    clip_patch: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     # -- views ---------------------------------------------------------------
     @property
@@ -92,6 +122,35 @@ class Solution:
     def vert_position(self) -> np.ndarray:
         """(V, 3) float64 world positions of the vertices."""
         return qt.keys_to_world(self.patch_corners, self.patch_is_quad, self.vert_key, self.n)
+
+    def drawn_mesh(self) -> DrawnMesh:
+        """The mesh as drawn (:class:`DrawnMesh`): a panel cell's triangles cut to its surface."""
+        pos = self.vert_position
+        p, i, j = qt.decode_key(self.vert_key, self.n)
+        tri = np.asarray(self.tri_vertices, dtype=np.int64).reshape(-1, 3)
+        if len(self.clip_patch) == 0:
+            return DrawnMesh(pos, p, tri, np.zeros((0, 3), np.int64), np.zeros((0, 3), np.float32))
+        n_p = len(self.patch_is_quad)
+        start = np.searchsorted(self.clip_patch, np.arange(n_p + 1))
+        clipped = np.diff(start) > 0
+        tp = p[tri[:, 0]] if len(tri) else np.zeros(0, np.int64)
+        cut = clipped[tp]
+        uv = np.stack([i, j], axis=1) / self.n
+        piece_uv, w, src = clip_mesh(uv[tri[cut]], tp[cut], self.clip_uv, start)
+        source = tri[cut][src]  # (k, 3) table vertices of each piece's source triangle
+        k = len(piece_uv)
+        pp = np.repeat(tp[cut][src], 3)
+        flat_uv = piece_uv.reshape(-1, 2)
+        extra_pos = qt.lattice_to_world(
+            self.patch_corners, self.patch_is_quad, pp, flat_uv[:, 0] * self.n, flat_uv[:, 1] * self.n, self.n
+        )
+        return DrawnMesh(
+            position=np.concatenate([pos, extra_pos]),
+            patch=np.concatenate([p, pp]),
+            triangles=np.concatenate([tri[~cut], len(pos) + np.arange(3 * k).reshape(k, 3)]),
+            source=np.repeat(source, 3, axis=0),
+            weight=w.reshape(-1, 3).astype(np.float32),
+        )
 
     def patch_depth(self) -> np.ndarray:
         """(P,) int8 deepest leaf level per patch."""
@@ -135,6 +194,7 @@ class Solution:
         (older than an hour) are removed after a successful write.
         """
         arrays = {k: np.asarray(getattr(self, k), dtype=t) for k, t in _ARRAYS.items()}
+        arrays.update({k: np.asarray(getattr(self, k), dtype=t) for k, (t, _) in _OPTIONAL.items()})
         meta = {
             "format": np.array(SOLUTION_FORMAT),
             "version": np.array(SOLUTION_VERSION),
@@ -170,6 +230,8 @@ class Solution:
                 if missing:
                     raise SolutionFileError(f"damaged solution file: missing {', '.join(missing)}", path)
                 data = {k: np.asarray(z[k], dtype=t) for k, t in _ARRAYS.items()}
+                for k, (t, shape) in _OPTIONAL.items():
+                    data[k] = np.asarray(z[k], dtype=t) if k in names else np.zeros(shape, dtype=t)
                 sol = cls(
                     max_depth=int(z["max_depth"]),
                     stats=json.loads(str(z["stats"])),
@@ -190,11 +252,12 @@ class Solution:
             self.vert_radiance.shape == (v, 3)
             and self.patch_corners.shape == (p, 4, 3)
             and (
-                self.tri_vertices.size == 0
-                or (0 <= self.tri_vertices.min() and self.tri_vertices.max() < v)
+                self.tri_vertices.size == 0 or (0 <= self.tri_vertices.min() and self.tri_vertices.max() < v)
             )
             and (len(self.leaf_patch) == 0 or self.leaf_patch.max() < p)
             and np.isfinite(self.vert_radiance).all()
+            and self.clip_uv.shape == (len(self.clip_patch), 3, 2)
+            and (len(self.clip_patch) == 0 or (0 <= self.clip_patch.min() and self.clip_patch.max() < p))
         )
         if not ok:
             raise SolutionFileError("damaged solution file: inconsistent arrays", path)

@@ -131,7 +131,7 @@ def solve(
     t_start = time.perf_counter()
     if progress is not None:  # building the ray-tracing scene takes seconds on big models
         progress(0.0, f"preparing: {scene.n_patches} patches")  # a cancel is seen at the next report
-    with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
+    with Visibility(scene.world_triangles()) as vis:
         run = SolveRun(scene, opts, progress, vis, t_start)
         target = opts.convergence * run.power0
         if mesh is None:
@@ -155,6 +155,6 @@ def evaluate_direct(scene, keys: np.ndarray, options: SolveOptions | None = None
     Exposed for tests and diagnostics (re-evaluating a solution's vertices exactly).
     """
     opts = (SolveOptions() if options is None else options).validate()
-    with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
+    with Visibility(scene.world_triangles()) as vis:
         ctx = Context(scene, opts, vis)
         return ctx.direct(np.asarray(keys, dtype=np.int64), lambda: None)

@@ -1,8 +1,9 @@
 """Ray-traced visibility between points, with embreex (Embree 4).
 
-Every patch of the scene becomes one (triangle) or two (quad) float32 triangles
-in one Embree scene. :meth:`Visibility.occluded` answers shadow-ray queries in
-chunks, spread over a few threads (embreex releases the GIL during a query).
+The scene's surface as triangles (:meth:`iat.io.scene.Scene.world_triangles`: a patch's one
+or two, a panel cell's clip triangles) becomes one float32 Embree scene.
+:meth:`Visibility.occluded` answers shadow-ray queries in chunks, spread over a few threads
+(embreex releases the GIL during a query).
 Callers offset their ray origins off the surfaces (see the solver).
 """
 
@@ -21,27 +22,17 @@ from embreex.mesh_construction import TriangleMesh
 CHUNK = 1 << 16
 
 
-def patch_triangles(patch_corners: np.ndarray, patch_is_quad: np.ndarray) -> np.ndarray:
-    """(T, 3, 3) float64 triangles of the patches: (c0, c1, c2) for all, (c0, c2, c3) for quads too."""
-    c = np.asarray(patch_corners, dtype=np.float64)
-    q = np.asarray(patch_is_quad, dtype=bool)
-    first = c[:, [0, 1, 2]]
-    second = c[q][:, [0, 2, 3]]
-    return np.concatenate([first, second])
-
-
 class Visibility:
-    """Occlusion queries against all patches.
+    """Occlusion queries against the scene's surface.
 
-    patch_corners : (P, 4, 3) float64 (triangles repeat corner 2 in slot 3)
-    patch_is_quad : (P,) bool
+    triangles : (T, 3, 3) float64 world triangles
     threads : worker threads for large queries (default: min(2, CPU count))
 
     ``rays`` counts the rays traced so far and ``seconds`` the time spent tracing them.
     """
 
-    def __init__(self, patch_corners: np.ndarray, patch_is_quad: np.ndarray, threads: int | None = None):
-        tris = patch_triangles(patch_corners, patch_is_quad).astype(np.float32)
+    def __init__(self, triangles: np.ndarray, threads: int | None = None):
+        tris = np.asarray(triangles, dtype=np.float32).reshape(-1, 3, 3)
         self._scene = rtcs.EmbreeScene()
         self._n_tris = len(tris)
         if self._n_tris:

@@ -52,7 +52,6 @@ from typing import Any
 import numpy as np
 
 from iat.errors import RenderError
-from iat.geometry.quadtree import lattice_to_world
 from iat.render import gl
 from iat.render.buffers import Geometry, upload_buffer
 from iat.render.gl import Registry
@@ -276,16 +275,17 @@ class Renderer:
         if not solutions:
             raise RenderError("set_solution_set needs at least one solution")
         solution = solutions[0]
-        n = 2 ** int(solution.max_depth)
         key = np.asarray(solution.vert_key, dtype=np.int64).reshape(-1)
-        m = n + 1
-        j, i, patch = key % m, (key // m) % m, key // (m * m)
+        m = 2 ** int(solution.max_depth) + 1
         corners = np.asarray(solution.patch_corners, dtype=np.float64).reshape(-1, 4, 3)
-        if key.size and (key.min() < 0 or patch.max() >= len(corners)):
-            raise RenderError(f"solution vertex keys refer to patch {int(patch.max())} of {len(corners)}")
-        pos = lattice_to_world(corners, np.asarray(solution.patch_is_quad, dtype=bool), patch, i, j, n)
+        if key.size and (key.min() < 0 or (key // (m * m)).max() >= len(corners)):
+            raise RenderError(
+                f"solution vertex keys refer to patch {int((key // (m * m)).max())} of {len(corners)}"
+            )
         tris = np.asarray(solution.tri_vertices, dtype=np.int64).reshape(-1, 3)
         _check_indices(tris, len(key), "solution tri_vertices")
+        drawn = solution.drawn_mesh()  # panel cells' triangles cut to their surface
+        pos, tris = drawn.position, drawn.triangles
         colors = []
         for k, sol in enumerate(solutions):
             rad = _vec(sol.vert_radiance, 3, "vert_radiance")
@@ -293,10 +293,10 @@ class Renderer:
                 raise RenderError(f"solution has {len(key)} vertex keys but {len(rad)} radiance values")
             if k and (
                 not np.array_equal(np.asarray(sol.vert_key).reshape(-1), key)
-                or not np.array_equal(np.asarray(sol.tri_vertices).reshape(-1, 3), tris)
+                or not np.array_equal(np.asarray(sol.tri_vertices).reshape(-1, 3), solution.tri_vertices)
             ):
                 raise RenderError(f"solution {k} of the set is not on the same mesh as solution 0")
-            colors.append(np.ascontiguousarray(rad))
+            colors.append(np.ascontiguousarray(drawn.radiance(rad)))
         self._colors["mesh"] = colors
         a, b = self._pair("mesh")
         self._solution.upload(
