@@ -59,8 +59,12 @@ BAD_FILES = {
 def test_bad_input_gives_one_line_error_and_exit_2(tmp_path, name, command):
     bad = tmp_path / name
     bad.write_bytes(BAD_FILES[name])
-    extra = {"info": [], "solve": ["-o", tmp_path / "s.npz"], "bake": ["-o", tmp_path / "o.glb"],
-             "render": ["-o", tmp_path / "o.png"]}[command]
+    extra = {
+        "info": [],
+        "solve": ["-o", tmp_path / "s.npz"],
+        "bake": ["-o", tmp_path / "o.glb"],
+        "render": ["-o", tmp_path / "o.png"],
+    }[command]
     r = iat(command, bad, *extra)
     assert r.returncode == 2, (r.stdout, r.stderr)
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
@@ -95,8 +99,20 @@ def test_bake_json_and_render_modes(tmp_path, cornell_solution):
     images = {}
     for mode in ("mesh", "iat"):
         out = tmp_path / f"{mode}.npy"
-        r = iat("render", cornell_solution, "-o", out, "--mode", mode, "--size", "96x72", "--camera", "0",
-                "--threshold", "0")
+        r = iat(
+            "render",
+            cornell_solution,
+            "-o",
+            out,
+            "--mode",
+            mode,
+            "--size",
+            "96x72",
+            "--camera",
+            "0",
+            "--threshold",
+            "0",
+        )
         assert r.returncode == 0, r.stderr
         images[mode] = np.load(out)
         assert images[mode].shape == (72, 96, 3) and images[mode].dtype == np.float32
@@ -156,15 +172,28 @@ def test_no_light_source_warns_and_still_writes_the_solution(tmp_path):
     r = iat("solve", obj, "-o", out)
     assert r.returncode == 0 and out.is_file()
     assert r.stderr.splitlines() == [
-        f"iat solve: warning: {obj}: no light sources (no lights, no emissive materials): the solution is black"
+        f"iat solve: warning: {obj}: no light sources (no lights, no emissive materials):"
+        " the solution is black"
     ]
 
 
 def test_negative_coordinates_in_eye_and_target(tmp_path):
     """``--eye -1,0.5,-3``: argparse alone takes a value starting with '-' for an option."""
     out = tmp_path / "neg.png"
-    r = iat("render", CORNELL, "--mode", "preview", "--eye", "-1,0.5,-3", "--target", "-0.1,0.5,0",
-            "--size", "32x24", "-o", out)
+    r = iat(
+        "render",
+        CORNELL,
+        "--mode",
+        "preview",
+        "--eye",
+        "-1,0.5,-3",
+        "--target",
+        "-0.1,0.5,0",
+        "--size",
+        "32x24",
+        "-o",
+        out,
+    )
     assert r.returncode == 0, r.stderr
     assert out.is_file()
 

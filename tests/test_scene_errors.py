@@ -36,6 +36,7 @@ def test_load_progress_is_monotone_and_ends_at_one(tmp_path):
         "placing geometry",
         "welding vertices",
         "merging quads",
+        "making panels",
         "reading lights and cameras",
         "loaded",
     ]

@@ -74,7 +74,7 @@ def test_panels_group_coplanar_patches_and_fit_their_rectangle(tmp_path):
     f = "usemtl wall\nf 1 2 6\nf 1 6 5\nf 2 3 7\nf 2 7 6\nf 3 4 8\nf 3 8 7\nf 4 1 5\nf 4 5 8\n"
     f += "usemtl floor\nf 9 10 11 12\n"
     mtl = write(tmp_path / "m.mtl", "newmtl wall\nKd 0.5 0.5 0.5\nnewmtl floor\nKd 0.3 0.3 0.3\n")
-    s = load_scene(write(tmp_path / "wall.obj", f"mtllib {mtl.name}\n{v}{f}"))
+    s = load_scene(write(tmp_path / "wall.obj", f"mtllib {mtl.name}\n{v}{f}"), panels=False)
     p = find_panels(s)
     assert p.n_panels == 2
     wall = int(np.argmax(np.abs(p.normal[:, 2])))
@@ -146,8 +146,12 @@ def test_non_planar_pair_stays_two_triangles(tmp_path):
 def test_non_convex_pair_stays_two_triangles(tmp_path):
     # a dart: coplanar but concave at vertex 3
     p = write(tmp_path / "dart.obj", "v 0 0 0\nv 2 0 0\nv 1 2 0\nv 1 0.5 0\nf 1 2 4\nf 2 3 4\n")
-    s = load_scene(p)
+    s = load_scene(p, panels=False)
     assert s.n_patches == 2 and not s.patch_is_quad.any()
+    panel = load_scene(p)  # a panel of rectangle cells cut to the dart
+    assert panel.patch_is_quad.all() and panel.patch_area.sum() == pytest.approx(
+        s.patch_area.sum(), rel=1e-12
+    )
 
 
 def test_pair_with_different_materials_stays_two_triangles(tmp_path):
@@ -216,7 +220,7 @@ def test_max_edge_splits_quads_into_grids(tmp_path):
 
 def test_max_edge_splits_triangles_regularly(tmp_path):
     p = write(tmp_path / "tri.obj", "v 0 0 0\nv 3 0 0\nv 0 3 0\nf 1 2 3\n")
-    s = load_scene(p, max_edge=1.0)  # longest edge 3*sqrt(2): k = ceil(log2(4.24)) = 3
+    s = load_scene(p, max_edge=1.0, panels=False)  # longest edge 3*sqrt(2): k = ceil(log2(4.24)) = 3
     assert s.n_patches == 4**3 and not s.patch_is_quad.any()
     assert s.patch_area.sum() == pytest.approx(4.5)
     np.testing.assert_allclose(s.patch_area, 4.5 / 64)

@@ -176,7 +176,7 @@ class OpenJob(_Job):
         else:
             self.message = "loading model"
             self.load_started = time.perf_counter()
-            scene = load_scene(p, max_edge=self.options.max_edge, progress=self.load_progress)
+            scene = load_scene(p, progress=self.load_progress, **self.options.load_kwargs())
             solution = None
             cpath = solution_cache_path(p, self.options) if self.use_cache else None
             solution = load_cached(cpath, scene.n_patches) if cpath is not None else None

@@ -62,12 +62,12 @@ def _solution_not_a_model(args, path) -> None:
 
 
 def _load(args, path, max_edge=None):
-    """:func:`iat.io.load.load_scene` with a progress bar."""
+    """:func:`iat.io.load.load_scene` with a progress bar (``--no-panels`` honoured)."""
     from iat.io.load import load_scene
 
     _solution_not_a_model(args, path)
     with _progress_bar(args, f"load {Path(path).name}") as bar:
-        return load_scene(path, max_edge=max_edge, progress=bar)
+        return load_scene(path, max_edge=max_edge, progress=bar, panels=not getattr(args, "no_panels", False))
 
 
 def _solve_options(args):
@@ -78,6 +78,8 @@ def _solve_options(args):
         v = getattr(args, name, None)
         if v is not None:
             kw[name] = v
+    if getattr(args, "no_panels", False):
+        kw["panels"] = False
     return SolveOptions(**kw)
 
 
@@ -111,10 +113,11 @@ def cmd_info(args) -> int:
     q = scene.patch_is_quad
     info = {
         "file": str(args.input),
-        "triangles": int(q.sum() * 2 + (~q).sum()),
+        "triangles": int(len(scene.world_triangles())),
         "patches": scene.n_patches,
         "quads": int(q.sum()),
         "triangle_patches": int((~q).sum()),
+        "panel_cells": int(scene.patch_clipped.sum()),
         "panels": find_panels(scene).n_panels,
         "slivers": sliver_count(scene),
         "materials": len(scene.materials),
@@ -404,6 +407,12 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--tolerance", type=float, help="relative radiance change that splits an element")
         sp.add_argument("--max-edge", type=float, dest="max_edge", help="pre-split patches longer than this")
         sp.add_argument("--samples", type=int, help="shooter samples for visibility")
+        sp.add_argument(
+            "--no-panels",
+            action="store_true",
+            dest="no_panels",
+            help="keep coplanar triangles as roots of their own (default: panels)",
+        )
 
     def set_flags(sp):
         sp.add_argument(
@@ -427,6 +436,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("info", help="counts: triangles, patches, materials, lights, cameras")
     s.add_argument("input", metavar="MODEL")
+    s.add_argument("--no-panels", action="store_true", dest="no_panels", help="count without panels")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_info)
 

@@ -218,6 +218,7 @@ def make_panels(
     material: np.ndarray,
     uv: np.ndarray,
     has_detail: np.ndarray,
+    cell_max: float | None = None,
 ) -> PanelRoots:
     """Turn groups of coplanar patches that hold triangles into panels (report §6.1).
 
@@ -230,7 +231,8 @@ def make_panels(
     it misses is dropped. Groups of parallelogram quads (already good roots) stay as they are.
 
     vertices (n, 3) float64, corners (p, 4) int64, material (p,) int64, uv (p, 4, 2) float64,
-    has_detail (materials,) bool. Patches come back in order: kept patches first (input
+    has_detail (materials,) bool; cell_max : cells no longer than this either (scene units).
+    Patches come back in order: kept patches first (input
     order), then the panels' cells.
     """
     from iat.geometry.clip import clip_to_boxes, fan, triangle_area
@@ -251,7 +253,7 @@ def make_panels(
     if len(cand) == 0:
         return empty
     _, _, p_area = patch_geometry(V, corners)
-    cell_max = PANEL_CELL_FRACTION * np.sqrt(float(p_area.sum()))
+    cell_max = min(PANEL_CELL_FRACTION * np.sqrt(float(p_area.sum())), cell_max or np.inf)
     members = members_of(pan.panel, k)
     tri_of_quad = np.array([[0, 1, 2], [0, 2, 3]])
     keep = np.ones(len(corners), dtype=bool)

@@ -22,6 +22,7 @@ import numpy as np
 from iat.camera import Camera
 from iat.errors import LoadError
 from iat.io.glb import quat_to_matrix
+from iat.io.gltf_primitives import check_primitives, check_version, convert_primitives
 from iat.io.images import decode_texture
 from iat.io.messages import one_line
 from iat.io.scene import Light, Material, Scene
@@ -60,13 +61,15 @@ def local_matrix(node) -> np.ndarray:
 
 class GltfDocument:
     """A glTF file opened with pygltflib (``doc``); raises :class:`iat.errors.LoadError` for an
-    unparsable file or a missing buffer or texture file."""
+    unparsable file, a glTF version other than 2, a missing buffer or texture file, or
+    inconsistent accessors (:mod:`iat.io.gltf_primitives`)."""
 
     def __init__(self, path: Path):
         import pygltflib
 
         self.path = path
         self.base = path.parent
+        check_version(path)
         try:
             doc = pygltflib.GLTF2().load(str(path))
         except Exception as e:  # noqa: BLE001 - pygltflib raises struct.error, JSONDecodeError, ...
@@ -77,6 +80,11 @@ class GltfDocument:
         self._buffers: dict[int, bytes] = {}
         self._material_cache: dict[int, Material] = {}
         self._check_external_files()
+        check_primitives(self)
+        #: the file as a GLB with fans and Draco primitives converted (``doc`` matches it), or None
+        self.converted_glb = convert_primitives(self)
+        if self.converted_glb is not None:
+            self._buffers = {}
 
     # -- raw bytes ---------------------------------------------------------------
     def _external(self, uri: str) -> Path:
@@ -99,7 +107,8 @@ class GltfDocument:
             return base64.b64decode(data)
         return urllib.parse.unquote_to_bytes(data)
 
-    def _buffer(self, i: int) -> bytes:
+    def buffer(self, i: int) -> bytes:
+        """The bytes of buffer ``i`` (the GLB chunk, a data URI or a file next to the glTF)."""
         if i not in self._buffers:
             b = self.doc.buffers[i]
             if b.uri is None:
@@ -119,7 +128,7 @@ class GltfDocument:
             if im.bufferView is not None:
                 v = self.doc.bufferViews[im.bufferView]
                 off = v.byteOffset or 0
-                data = self._buffer(v.buffer)[off : off + v.byteLength]
+                data = self.buffer(v.buffer)[off : off + v.byteLength]
             elif im.uri:
                 data = (
                     self._data_uri(im.uri)

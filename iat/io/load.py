@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import io
 import logging
-import re
 import warnings
 from pathlib import Path
 
@@ -38,16 +37,20 @@ import numpy as np
 
 from iat.errors import Cancelled, IATWarning, LoadError, OptionError
 from iat.geometry.mesh import compact_vertices, degenerate_faces, merge_quads, split_patches, weld_vertices
+from iat.geometry.panels import make_panels
+from iat.io.dae import dae_frame
 from iat.io.gltf import GltfDocument
+from iat.io.ifc import read_ifc
 from iat.io.images import decode_texture
 from iat.io.messages import one_line
+from iat.io.obj import check_obj_textures, decode_text, obj_index_out_of_range, triangulate_ngons
 from iat.io.scene import Material, Scene
 from iat.progress import Progress
 
 log = logging.getLogger(__name__)
 
 #: File extensions :func:`load_scene` reads.
-SUPPORTED_EXTENSIONS = (".glb", ".gltf", ".obj", ".off", ".ply", ".stl")
+SUPPORTED_EXTENSIONS = (".glb", ".gltf", ".obj", ".off", ".ply", ".stl", ".dae", ".zae", ".ifc")
 
 _DEFAULT_KEY = ("default",)
 
@@ -104,87 +107,69 @@ def _trimesh_material(mat, path: Path) -> Material:
     return Material(name=name, albedo=albedo, emission=emission, detail=detail)  # clamped by load_scene
 
 
-def _check_obj_textures(path: Path):
-    """Raise LoadError when an OBJ's material library names a texture file that is missing."""
-    try:
-        data = path.read_bytes()
-    except OSError as e:
-        raise LoadError(f"cannot read file: {one_line(e)}", path) from e
-    libs = [
-        m.decode("utf-8", "replace").strip()
-        for m in re.findall(rb"^[ \t]*mtllib[ \t]+([^\r\n]+)", data, re.M)
-    ]
-    for lib in libs:
-        mtl = path.parent / lib
-        if mtl.is_file():
-            mtls = [mtl]
-        else:
-            mtls = [path.parent / t for t in lib.split() if (path.parent / t).is_file()]
-            if not mtls:
-                log.warning("%s: material library %s not found; default materials used", path, lib)
-                continue
-        for m in mtls:
-            for line in m.read_text(errors="replace").splitlines():
-                toks = line.strip().split()
-                if len(toks) < 2:
-                    continue
-                key = toks[0].lower()
-                if not (key.startswith("map_") or key in ("bump", "disp", "decal", "norm", "refl")):
-                    continue
-                rest = line.strip()[len(toks[0]) :].strip()
-                last = toks[-1].replace("\\", "/")
-                cands = {rest, toks[-1], last, last.rsplit("/", 1)[-1]}
-                if any((m.parent / c).is_file() for c in cands):
-                    continue
-                raise LoadError(f"missing texture file {toks[-1]}", path)
+def _trimesh_material_key(tm) -> tuple:
+    """What makes two trimesh materials the same IAT material: trimesh's COLLADA reader copies
+    one material per geometry (the copies share their texture images)."""
+    fields = ("name", "baseColorFactor", "emissiveFactor", "baseColorTexture", "image", "kwargs", "diffuse")
+    key = []
+    for f in fields:
+        v = getattr(tm, f, None)
+        if isinstance(v, np.ndarray | list | tuple):
+            v = tuple(np.ravel(v).tolist())
+        elif isinstance(v, dict):
+            v = repr(sorted(v.items()))
+        elif v is not None and not isinstance(v, str):
+            v = id(v)
+        key.append(v)
+    return ("trimesh", type(tm).__name__, *key)
 
 
-def _obj_index_out_of_range(path: Path) -> bool:
-    """True when an OBJ face refers to a vertex that does not exist (only run after a failed load)."""
-    try:
-        lines = path.read_bytes().decode("latin-1").splitlines()
-    except OSError:
-        return False
-    nv = sum(1 for ln in lines if ln.startswith("v ") or ln.startswith("v\t"))
-    for ln in lines:
-        if not (ln.startswith("f ") or ln.startswith("f\t")):
-            continue
-        for tok in ln.split()[1:]:
-            try:
-                i = int(tok.split("/")[0])
-            except ValueError:
-                continue
-            if i == 0 or i > nv or -i > nv:
-                return True
-    return False
+def _check_binary_stl(path: Path) -> None:
+    """Raise LoadError for a binary STL whose size disagrees with its triangle count (trimesh then
+    tries it as ASCII and finds nothing)."""
+    with open(path, "rb") as f:
+        head = f.read(84)
+    size = path.stat().st_size
+    if head.lstrip().startswith(b"solid") or len(head) < 84:
+        return  # ASCII (or too short to be binary): trimesh's to judge
+    n = int.from_bytes(head[80:84], "little")
+    if size != 84 + 50 * n:
+        raise LoadError(
+            f"cannot read STL file (truncated or corrupt file): {n} triangles need {84 + 50 * n} bytes, "
+            f"the file has {size}",
+            path,
+        )
 
 
-def _load_trimesh(path: Path, ext: str):
+def _load_trimesh(path: Path, ext: str, gl: GltfDocument | None):
+    """A trimesh Scene of the file: OBJ from its decoded, re-triangulated text
+    (:mod:`iat.io.obj`), a glTF whose primitives were converted from ``gl.converted_glb``."""
     import trimesh
 
     kind = ext[1:].upper()
+    text = None
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            try:
+            resolver = trimesh.resolvers.FilePathResolver(str(path))
+            if ext in (".obj", ".off"):
+                # trimesh guesses the encoding of non-UTF-8 text with charset_normalizer, which is absent
+                text = decode_text(path.read_bytes(), path, kind)
+                if ext == ".obj":
+                    text = triangulate_ngons(text, path)
+                data, file_type = io.BytesIO(text.encode("utf-8")), ext[1:]
+            elif gl is not None and gl.converted_glb is not None:
+                data, file_type = io.BytesIO(gl.converted_glb), "glb"
+            else:
                 return trimesh.load_scene(str(path), process=False)
-            except ImportError as e:
-                # trimesh guesses the encoding of non-UTF-8 text with charset_normalizer, which is absent:
-                # text formats in Latin-1 are read here, anything else is not a text file
-                data = path.read_bytes()
-                if ext not in (".obj", ".off") or b"\0" in data:
-                    raise LoadError(
-                        f"cannot read {kind} file (truncated or corrupt file): not valid data", path
-                    ) from e
-                text = io.BytesIO(data.decode("latin-1").encode("utf-8"))
-                resolver = trimesh.resolvers.FilePathResolver(str(path))
-                return trimesh.load_scene(text, file_type=ext[1:], resolver=resolver, process=False)
+            return trimesh.load_scene(data, file_type=file_type, resolver=resolver, process=False)
     except LoadError:
         raise
     except Exception as e:  # noqa: BLE001 - trimesh raises a zoo of types on bad input
-        if ext == ".obj" and isinstance(e, IndexError) and _obj_index_out_of_range(path):
+        if ext == ".obj" and isinstance(e, IndexError) and text is not None and obj_index_out_of_range(text):
             raise LoadError("face index out of range", path) from e
-        raise LoadError(f"cannot read {kind} file (truncated or corrupt file): {one_line(e)}", path) from e
+        cause = "not valid data" if isinstance(e, ImportError) else one_line(e)  # charset_normalizer
+        raise LoadError(f"cannot read {kind} file (truncated or corrupt file): {cause}", path) from e
 
 
 def _instances(tscene, path: Path, gl: GltfDocument | None, world: dict | None):
@@ -219,6 +204,7 @@ def _collect(tscene, path: Path, gl: GltfDocument | None, world: dict | None = N
     face_uv (f, 3, 2) float64 (glTF convention: v down from the image top), materials.
     """
     import trimesh
+    from trimesh.path.path import Path as LinePath
     from trimesh.visual.texture import TextureVisuals
 
     materials: list[Material] = []
@@ -232,11 +218,14 @@ def _collect(tscene, path: Path, gl: GltfDocument | None, world: dict | None = N
 
     Vs, Fs, Ms, UVs = [], [], [], []
     offset = 0
-    n_points = 0
+    n_points = n_lines = 0
     for T, gname, spec in _instances(tscene, path, gl, world):
         geom = tscene.geometry.get(gname)
         if isinstance(geom, trimesh.PointCloud):
             n_points += 1
+            continue
+        if isinstance(geom, LinePath):
+            n_lines += 1
             continue
         if not isinstance(geom, trimesh.Trimesh):
             continue
@@ -282,15 +271,16 @@ def _collect(tscene, path: Path, gl: GltfDocument | None, world: dict | None = N
             if tm is None:
                 mi = material_index(_DEFAULT_KEY, lambda: Material(name="default"))
             else:
-                mi = material_index(("trimesh", id(tm)), lambda tm=tm: _trimesh_material(tm, path))
+                mi = material_index(_trimesh_material_key(tm), lambda tm=tm: _trimesh_material(tm, path))
         Vs.append(W)
         Fs.append(F + offset)
         Ms.append(np.full(len(F), mi, dtype=np.int64))
         UVs.append(uvc)
         offset += len(W)
     if not Fs:
-        if n_points:
-            raise LoadError("no triangles (point cloud only)", path)
+        if n_points or n_lines:
+            only = {(True, False): "point cloud", (False, True): "lines", (True, True): "points and lines"}
+            raise LoadError(f"no triangles ({only[bool(n_points), bool(n_lines)]} only)", path)
         raise LoadError("no triangles", path)
     return np.concatenate(Vs), np.concatenate(Fs), np.concatenate(Ms), np.concatenate(UVs), materials
 
@@ -330,7 +320,9 @@ def _clamp_albedo(materials: list[Material], path: Path) -> None:
         )
 
 
-def load_scene(path: str | Path, max_edge: float | None = None, progress: Progress | None = None) -> Scene:
+def load_scene(
+    path: str | Path, max_edge: float | None = None, progress: Progress | None = None, panels: bool = True
+) -> Scene:
     """Load a model file (glTF/GLB, OBJ+MTL, PLY, STL, OFF) into a :class:`Scene`.
 
     Geometry is read by trimesh (each node's transform applied here, winding
@@ -342,6 +334,8 @@ def load_scene(path: str | Path, max_edge: float | None = None, progress: Progre
 
     max_edge : pre-split patches longer than this (scene units) into a regular grid
       (:func:`split_patches`); None keeps the root patches as they are.
+    panels : group coplanar patches that hold triangles into panels, rectangle roots cut to the
+      surface (:func:`iat.geometry.panels.make_panels`; cells no longer than ``max_edge``).
     progress : ``progress(fraction, message) -> bool``, called at the start of each
       stage (parse, weld, quad merge, pre-split) and with 1.0 at the end, fractions
       non-decreasing; returning False raises :class:`iat.errors.Cancelled`.
@@ -368,13 +362,21 @@ def load_scene(path: str | Path, max_edge: float | None = None, progress: Progre
 
     report(0.0, f"reading {path.name}")
     gl = GltfDocument(path) if ext in (".gltf", ".glb") else None
-    if ext == ".obj":
-        _check_obj_textures(path)
-    tscene = _load_trimesh(path, ext)
-    report(_STAGES["parse"], "placing geometry")
-    world = gl.node_world() if gl is not None else None
-    V, F, M, UV, materials = _collect(tscene, path, gl, world)
-    del tscene
+    world = None
+    if ext == ".ifc":
+        V, F, M, UV, materials = read_ifc(path, report, 0.0, _STAGES["collect"])
+    else:
+        if ext == ".obj":
+            check_obj_textures(path)
+        elif ext == ".stl":
+            _check_binary_stl(path)
+        tscene = _load_trimesh(path, ext, gl)
+        report(_STAGES["parse"], "placing geometry")
+        world = gl.node_world() if gl is not None else None
+        V, F, M, UV, materials = _collect(tscene, path, gl, world)
+        del tscene
+        if ext in (".dae", ".zae"):
+            V = V @ dae_frame(path).T
     _clamp_albedo(materials, path)
 
     report(_STAGES["collect"], "welding vertices")
@@ -390,8 +392,14 @@ def load_scene(path: str | Path, max_edge: float | None = None, progress: Progre
     if max_edge is not None:
         report(_STAGES["merge"], "splitting patches")
         V, corners, pmat, puv = split_patches(V, corners, pmat, puv, max_edge)
-    else:
-        V, corners = compact_vertices(V, corners)  # dropped faces may leave vertices unused
+    clip_uv = clip_patch = None
+    if panels:
+        report(_STAGES["split"], "making panels")
+        has_detail = np.array([m.detail is not None for m in materials], dtype=bool)
+        roots = make_panels(V, corners, pmat, puv, has_detail, cell_max=max_edge)
+        V, corners, pmat, puv = roots.vertices, roots.corners, roots.material, roots.uv
+        clip_uv, clip_patch = roots.clip_uv, roots.clip_patch
+    V, corners = compact_vertices(V, corners)  # dropped faces and panels leave vertices unused
 
     scene = Scene(
         vertices=V,
@@ -400,6 +408,8 @@ def load_scene(path: str | Path, max_edge: float | None = None, progress: Progre
         materials=materials,
         patch_uv=puv,
         path=str(path),
+        clip_uv=clip_uv,
+        clip_patch=clip_patch,
     )
     if gl is not None:
         report(_STAGES["split"], "reading lights and cameras")

@@ -79,7 +79,7 @@ def cached_solve(model, options=None, directory=None, progress: Progress | None 
     options = SolveOptions() if options is None else options
     model = Path(model)
     t0 = time.perf_counter()
-    scene = load_scene(model, max_edge=options.max_edge)
+    scene = load_scene(model, **options.load_kwargs())
     load_s = time.perf_counter() - t0
     path = solution_cache_path(model, options, directory)
     sol = load_cached(path, scene.n_patches)

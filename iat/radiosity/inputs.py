@@ -38,7 +38,8 @@ def open_solution(path: str | Path, options=None, progress=None, load_progress=N
         if model is not None and not model.is_absolute():
             model = (path.parent / model).resolve() if not model.exists() else model
         if model is not None and model.exists():
-            scene = load_scene(model, max_edge=sol.options.get("max_edge"), progress=load_progress)
+            kw = SolveOptions.recorded_load_kwargs(sol.options)
+            scene = load_scene(model, progress=load_progress, **kw)
             if scene.n_patches != len(sol.patch_is_quad):
                 raise SolutionFileError(
                     f"solution has {len(sol.patch_is_quad)} patches but {model} has {scene.n_patches};"
@@ -51,7 +52,7 @@ def open_solution(path: str | Path, options=None, progress=None, load_progress=N
     if not path.exists():
         raise LoadError("file not found", path)
     options = options or SolveOptions()
-    scene = load_scene(path, max_edge=getattr(options, "max_edge", None), progress=load_progress)
+    scene = load_scene(path, progress=load_progress, **options.load_kwargs())
     return scene, solve(scene, options, progress=progress)
 
 

@@ -98,6 +98,8 @@ class SolveOptions:
     max_edge : float > 0 or None. Recorded for the loader's pre-split of long
         patches into a grid of roots (``load_scene(max_edge=...)``); the solver
         itself takes the scene as it is.
+    panels : bool, default True. Recorded for the loader too (``load_scene(panels=...)``):
+        coplanar patches holding triangles become panels (:mod:`iat.geometry.panels`).
     seed : int, default 0. Seed of the sample jitter; a solve is deterministic.
     criterion : "interpolation" (default), "variation" or "uniform". What ``tolerance`` bounds:
         "interpolation" splits on the largest gap between a probe and the value the
@@ -124,6 +126,7 @@ class SolveOptions:
     samples: int = 16
     max_shots: int = 20000
     max_edge: float | None = None
+    panels: bool = True
     seed: int = 0
     criterion: str = "interpolation"
     refine_indirect: bool = True
@@ -168,6 +171,8 @@ class SolveOptions:
             bad("refine_indirect", "must be True or False")
         if not isinstance(self.ambient, bool | np.bool_):
             bad("ambient", "must be True or False")
+        if not isinstance(self.panels, bool | np.bool_):
+            bad("panels", "must be True or False")
         if self.criterion not in ("variation", "interpolation", "uniform"):
             bad("criterion", 'must be "variation", "interpolation" or "uniform"')
         return self
@@ -176,6 +181,15 @@ class SolveOptions:
         """JSON-able dict of the options."""
         d = asdict(self)
         return {k: (v.item() if isinstance(v, np.generic) else v) for k, v in d.items()}
+
+    def load_kwargs(self) -> dict:
+        """The loader's keywords these options record (``load_scene(path, **opts.load_kwargs())``)."""
+        return {"max_edge": self.max_edge, "panels": bool(self.panels)}
+
+    @staticmethod
+    def recorded_load_kwargs(d: dict) -> dict:
+        """:meth:`load_kwargs` of a solution's recorded options (solved before panels: none)."""
+        return {"max_edge": d.get("max_edge"), "panels": bool(d.get("panels", False))}
 
     @classmethod
     def from_dict(cls, d: dict) -> SolveOptions:
