@@ -24,6 +24,7 @@ import numpy as np
 from imgui_bundle import ImVec2, ImVec4, hello_imgui, imgui, implot
 
 from iat.bake.flatten import METHODS
+from iat.io.load import SUPPORTED_EXTENSIONS
 from viewer.bake_worker import snap_scale
 from viewer.navigation import paths_file
 from viewer.state import MODE_LABELS, MODES, AppState
@@ -32,7 +33,12 @@ RED = ImVec4(0.85, 0.2, 0.2, 1.0)
 GREEN = ImVec4(0.3, 0.75, 0.35, 1.0)
 DIM = ImVec4(0.65, 0.65, 0.65, 1.0)
 MB = float(1 << 20)
-MODEL_FILTERS = ["Models and solutions", "*.glb *.gltf *.obj *.ply *.stl *.off *.npz", "All files", "*"]
+MODEL_FILTERS = [
+    "Models and solutions",
+    " ".join(f"*{e}" for e in (*SUPPORTED_EXTENSIONS, ".npz")),
+    "All files",
+    "*",
+]
 
 
 def has_native_dialogs() -> bool:

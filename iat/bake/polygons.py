@@ -7,6 +7,10 @@ from __future__ import annotations
 import numpy as np
 
 from iat.bake import atlas
+from iat.geometry.mesh import QUAD_SKEW_TOL
+
+#: a quad root further than QUAD_SKEW_TOL from a parallelogram is drawn as this many cells a side
+SKEW_GRID = 16
 
 # lattice corner offsets (units of m - 1 texels) of the polygon corners: quads, triangles
 _QUAD_OX = np.array([0, 1, 1, 0])
@@ -69,26 +73,55 @@ def textured_polygons(
 ) -> tuple:
     """One polygon per textured patch ``ps`` (k,), tile sides ``sides`` (k,), placed by ``packing``;
     a panel cell's polygon is its clip triangles (``clip_uv`` (C, 3, 2) lattice uv, patch p's rows
-    ``clip_start[p]:clip_start[p + 1]``), so holes stay holes.
+    ``clip_start[p]:clip_start[p + 1]``), so holes stay holes, and a quad far from a
+    parallelogram (an in-memory scene; the loader makes none) a :data:`SKEW_GRID` grid, so its
+    texture follows its bilinear lattice.
 
     is_quad (P,) bool, corners (P, 4, 3) float32, patch_uv (P, 4, 2) detail uv, material (P,),
     detail (P,) bool (texels hold incoming light). Returns ``(positions (K, 3), uv (K, 2) atlas,
     layer (K,), detail uv (K, 2), material (K,) int32, detail flag (K,) float32, patch (K,)
     int32, indices (Tt, 3) uint32)``, float32 unless said.
     """
-    whole = np.ones(len(ps), dtype=bool)
+    cut = np.zeros(len(ps), dtype=bool)
     if clip_start is not None and len(clip_uv):
-        whole = np.diff(clip_start)[ps] == 0
-    out = _whole_polygons(is_quad, corners, patch_uv, material, detail, ps, sides, packing, whole)
-    if whole.all():
+        cut = np.diff(clip_start)[ps] > 0
+    c = np.asarray(corners, dtype=np.float64)[ps]
+    twist = np.linalg.norm(c[:, 0] - c[:, 1] + c[:, 2] - c[:, 3], axis=1)
+    diag = 0.5 * (np.linalg.norm(c[:, 2] - c[:, 0], axis=1) + np.linalg.norm(c[:, 3] - c[:, 1], axis=1))
+    skewed = is_quad[ps] & ~cut & (twist > QUAD_SKEW_TOL * np.maximum(diag, 1e-300))
+    out = _whole_polygons(is_quad, corners, patch_uv, material, detail, ps, sides, packing, ~cut & ~skewed)
+    if not (cut.any() or skewed.any()):
         return out
-    cut = _clipped_polygons(
-        corners, patch_uv, material, detail, ps, sides, packing, ~whole, clip_uv, clip_start
+    # pieces drawn through their lattice (u, v): a panel cell's clip triangles, and a grid over a
+    # quad far from a parallelogram (its lattice is bilinear: affine per small triangle follows it)
+    rows, tri_uv = [], []
+    if cut.any():
+        from iat.geometry.clip import ranges
+
+        k, t = ranges(clip_start, ps[cut])
+        rows.append(np.flatnonzero(cut)[k])
+        tri_uv.append(clip_uv[t])
+    if skewed.any():
+        grid = _grid_triangles(SKEW_GRID)
+        rows.append(np.repeat(np.flatnonzero(skewed), len(grid)))
+        tri_uv.append(np.tile(grid, (int(skewed.sum()), 1, 1)))
+    pieces = _piece_polygons(
+        corners, patch_uv, material, detail, ps, sides, packing, np.concatenate(rows), np.concatenate(tri_uv)
     )
     n0 = len(out[0])
     return tuple(
-        np.concatenate([a, b + (n0 if i == 7 else 0)]) for i, (a, b) in enumerate(zip(out, cut, strict=True))
+        np.concatenate([a, b + (n0 if i == 7 else 0)])
+        for i, (a, b) in enumerate(zip(out, pieces, strict=True))
     )
+
+
+def _grid_triangles(n: int) -> np.ndarray:
+    """(2 n², 3, 2) triangles of an n x n grid over the unit square."""
+    a, b = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    o = np.stack([a.ravel(), b.ravel()], axis=1)[:, None, :]
+    t1 = o + np.array([[0, 0], [1, 0], [1, 1]])
+    t2 = o + np.array([[0, 0], [1, 1], [0, 1]])
+    return np.concatenate([t1, t2]).astype(np.float64) / n
 
 
 def _bilinear(c: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -97,16 +130,12 @@ def _bilinear(c: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return (1 - u) * (1 - v) * c[:, 0] + u * (1 - v) * c[:, 1] + u * v * c[:, 2] + (1 - u) * v * c[:, 3]
 
 
-def _clipped_polygons(corners, patch_uv, material, detail, ps, sides, packing, sel, clip_uv, clip_start):
-    """The clip triangles of the panel cells ``ps[sel]``, in :func:`textured_polygons`' layout."""
-    from iat.geometry.clip import ranges
-
-    rows = np.flatnonzero(sel)
-    k, t = ranges(clip_start, ps[rows])
-    r = rows[k]  # position in ps of each clip triangle
+def _piece_polygons(corners, patch_uv, material, detail, ps, sides, packing, r, tri_uv):
+    """Triangles ``tri_uv`` (n, 3, 2) in the lattices of patches ``ps[r]``, in
+    :func:`textured_polygons`' layout (positions and detail uvs blended bilinearly)."""
     p = ps[r]
-    u = clip_uv[t, :, 0].reshape(-1)
-    v = clip_uv[t, :, 1].reshape(-1)
+    u = tri_uv[:, :, 0].reshape(-1)
+    v = tri_uv[:, :, 1].reshape(-1)
     rr, pp = np.repeat(r, 3), np.repeat(p, 3)
     pl = packing.placements
     W, H = max(packing.width, 1), max(packing.height, 1)

@@ -130,10 +130,8 @@ def read_ifc(path: Path, report, start: float, end: float):
         raise LoadError(f"cannot mesh IFC file: {one_line(e)}", path) from e
     if not ok:
         raise LoadError("no triangles (no IFC element with geometry)", path)
-    materials: list[Material] = []
-    keys: dict = {}
-    Vs, Fs, Ms = [], [], []
-    offset = done = 0
+    shapes = []  # (element id, V, F, material ids, styles, type): the kernel's threads finish in any order
+    done = 0
     step = max(1, total // _REPORTS)
     while True:
         try:
@@ -142,25 +140,9 @@ def read_ifc(path: Path, report, start: float, end: float):
             V = np.asarray(g.verts, dtype=np.float64).reshape(-1, 3)
             F = np.asarray(g.faces, dtype=np.int64).reshape(-1, 3)
             mids = np.asarray(g.material_ids, dtype=np.int64).reshape(-1)
-            styles = list(g.materials)
+            shapes.append((int(shape.id), V, F, mids, list(g.materials), shape.type))
         except Exception as e:  # noqa: BLE001
             raise LoadError(f"cannot mesh IFC file: {one_line(e)}", path) from e
-        if len(F):
-            mids = mids if len(mids) == len(F) else np.full(len(F), -1)
-            mids = np.where((mids >= 0) & (mids < len(styles)), mids, -1)
-            local = np.empty(len(styles) + 1, dtype=np.int64)  # style id + 1 -> material index
-            for s in np.unique(mids):
-                key, mat = (
-                    (("default",), Material(name="default")) if s < 0 else _material(styles[s], shape.type)
-                )
-                if key not in keys:
-                    keys[key] = len(materials)
-                    materials.append(mat)
-                local[s + 1] = keys[key]
-            Vs.append(V @ UP_TO_Y[b"Z"].T)
-            Fs.append(F + offset)
-            Ms.append(local[mids + 1])
-            offset += len(V)
         done += 1
         if done % step == 0:
             report(
@@ -169,6 +151,26 @@ def read_ifc(path: Path, report, start: float, end: float):
             )
         if not it.next():
             break
+    materials: list[Material] = []
+    keys: dict = {}
+    Vs, Fs, Ms = [], [], []
+    offset = 0
+    for _, V, F, mids, styles, kind in sorted(shapes, key=lambda t: t[0]):  # file order: deterministic
+        if not len(F):
+            continue
+        mids = mids if len(mids) == len(F) else np.full(len(F), -1)
+        mids = np.where((mids >= 0) & (mids < len(styles)), mids, -1)
+        local = np.empty(len(styles) + 1, dtype=np.int64)  # style id + 1 -> material index
+        for s in np.unique(mids):
+            key, mat = (("default",), Material(name="default")) if s < 0 else _material(styles[s], kind)
+            if key not in keys:
+                keys[key] = len(materials)
+                materials.append(mat)
+            local[s + 1] = keys[key]
+        Vs.append(V @ UP_TO_Y[b"Z"].T)
+        Fs.append(F + offset)
+        Ms.append(local[mids + 1])
+        offset += len(V)
     if not Fs:
         raise LoadError("no triangles (no IFC element with geometry)", path)
     F = np.concatenate(Fs)

@@ -124,33 +124,8 @@ class Solution:
         return qt.keys_to_world(self.patch_corners, self.patch_is_quad, self.vert_key, self.n)
 
     def drawn_mesh(self) -> DrawnMesh:
-        """The mesh as drawn (:class:`DrawnMesh`): a panel cell's triangles cut to its surface."""
-        pos = self.vert_position
-        p, i, j = qt.decode_key(self.vert_key, self.n)
-        tri = np.asarray(self.tri_vertices, dtype=np.int64).reshape(-1, 3)
-        if len(self.clip_patch) == 0:
-            return DrawnMesh(pos, p, tri, np.zeros((0, 3), np.int64), np.zeros((0, 3), np.float32))
-        n_p = len(self.patch_is_quad)
-        start = np.searchsorted(self.clip_patch, np.arange(n_p + 1))
-        clipped = np.diff(start) > 0
-        tp = p[tri[:, 0]] if len(tri) else np.zeros(0, np.int64)
-        cut = clipped[tp]
-        uv = np.stack([i, j], axis=1) / self.n
-        piece_uv, w, src = clip_mesh(uv[tri[cut]], tp[cut], self.clip_uv, start)
-        source = tri[cut][src]  # (k, 3) table vertices of each piece's source triangle
-        k = len(piece_uv)
-        pp = np.repeat(tp[cut][src], 3)
-        flat_uv = piece_uv.reshape(-1, 2)
-        extra_pos = qt.lattice_to_world(
-            self.patch_corners, self.patch_is_quad, pp, flat_uv[:, 0] * self.n, flat_uv[:, 1] * self.n, self.n
-        )
-        return DrawnMesh(
-            position=np.concatenate([pos, extra_pos]),
-            patch=np.concatenate([p, pp]),
-            triangles=np.concatenate([tri[~cut], len(pos) + np.arange(3 * k).reshape(k, 3)]),
-            source=np.repeat(source, 3, axis=0),
-            weight=w.reshape(-1, 3).astype(np.float32),
-        )
+        """The mesh as drawn (:func:`drawn_mesh`)."""
+        return drawn_mesh(self)
 
     def patch_depth(self) -> np.ndarray:
         """(P,) int8 deepest leaf level per patch."""
@@ -261,3 +236,38 @@ class Solution:
         )
         if not ok:
             raise SolutionFileError("damaged solution file: inconsistent arrays", path)
+
+
+def drawn_mesh(solution) -> DrawnMesh:
+    """The mesh as drawn (:class:`DrawnMesh`) of a solution, or of any object with its fields
+    ``max_depth, patch_corners, patch_is_quad, vert_key, tri_vertices`` (and ``clip_uv``,
+    ``clip_patch`` when it has panel cells): a panel cell's triangles cut to its surface."""
+    n = 1 << int(solution.max_depth)
+    corners = np.asarray(solution.patch_corners, dtype=np.float64).reshape(-1, 4, 3)
+    is_quad = np.asarray(solution.patch_is_quad, dtype=bool)
+    key = np.asarray(solution.vert_key, dtype=np.int64).reshape(-1)
+    pos = qt.keys_to_world(corners, is_quad, key, n)
+    p, i, j = qt.decode_key(key, n)
+    tri = np.asarray(solution.tri_vertices, dtype=np.int64).reshape(-1, 3)
+    clip_uv = np.asarray(getattr(solution, "clip_uv", np.zeros((0, 3, 2))), dtype=np.float64)
+    clip_uv = clip_uv.reshape(-1, 3, 2)
+    clip_patch = np.asarray(getattr(solution, "clip_patch", np.zeros(0)), dtype=np.int64).reshape(-1)
+    if len(clip_patch) == 0:
+        return DrawnMesh(pos, p, tri, np.zeros((0, 3), np.int64), np.zeros((0, 3), np.float32))
+    start = np.searchsorted(clip_patch, np.arange(len(is_quad) + 1))
+    clipped = np.diff(start) > 0
+    tp = p[tri[:, 0]] if len(tri) else np.zeros(0, np.int64)
+    cut = clipped[tp]
+    uv = np.stack([i, j], axis=1) / n
+    piece_uv, w, src = clip_mesh(uv[tri[cut]], tp[cut], clip_uv, start)
+    k = len(piece_uv)
+    pp = np.repeat(tp[cut][src], 3)
+    flat = piece_uv.reshape(-1, 2) * n
+    extra_pos = qt.lattice_to_world(corners, is_quad, pp, flat[:, 0], flat[:, 1], n)
+    return DrawnMesh(
+        position=np.concatenate([pos, extra_pos]),
+        patch=np.concatenate([p, pp]),
+        triangles=np.concatenate([tri[~cut], len(pos) + np.arange(3 * k).reshape(k, 3)]),
+        source=np.repeat(tri[cut][src], 3, axis=0),  # each piece's corners blend its source's corners
+        weight=w.reshape(-1, 3).astype(np.float32),
+    )

@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 
 from iat.errors import RenderError
+from iat.radiosity.solution import drawn_mesh
 from iat.render import gl
 from iat.render.buffers import Geometry, upload_buffer
 from iat.render.gl import Registry
@@ -284,7 +285,7 @@ class Renderer:
             )
         tris = np.asarray(solution.tri_vertices, dtype=np.int64).reshape(-1, 3)
         _check_indices(tris, len(key), "solution tri_vertices")
-        drawn = solution.drawn_mesh()  # panel cells' triangles cut to their surface
+        drawn = drawn_mesh(solution)  # panel cells' triangles cut to their surface
         pos, tris = drawn.position, drawn.triangles
         colors = []
         for k, sol in enumerate(solutions):

@@ -1,0 +1,148 @@
+"""How IAT does on small models written by real tools: prints a markdown table.
+
+Generates the models of ``tests/support/real_models.py`` (IFC house by ifcopenshell, room by
+Blender as GLB and OBJ, COLLADA room by pycollada) into a temporary directory, then per model:
+load time, patches, solve time (default SolveOptions), triangles of the mesh and IAT modes (default
+BakePolicy), texture memory, and on the interior view (256 x 256) the PSNR of IAT against the mesh
+(peak: 99.5th percentile of the mesh luminance) and the dotted fraction (lit pixels where IAT is
+below half the mesh). Then the skewed-quad highlight offsets and the keyhole ring's area.
+
+    .venv/bin/python benchmarks/real_models_bench.py      (under xvfb-run or with EGL)
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from iat.bake.baker import bake  # noqa: E402
+from iat.bake.policy import BakePolicy  # noqa: E402
+from iat.errors import LoadError  # noqa: E402
+from iat.io.load import load_scene  # noqa: E402
+from iat.io.scene import Light, Material, Scene  # noqa: E402
+from iat.radiosity import SolveOptions, solve  # noqa: E402
+from iat.render.renderer import Renderer  # noqa: E402
+from tests.support import real_models as rm  # noqa: E402
+
+
+def generate(out: Path) -> dict:
+    """``name -> path or error string`` of the interior models."""
+    paths: dict = {}
+    for name, make in (("ifc", rm.ifc_house), ("dae", rm.collada_room)):
+        t0 = time.perf_counter()
+        try:
+            paths[name] = make(out)
+        except Exception as e:  # a missing package: report it in the table
+            paths[name] = f"not generated: {e}"
+        print(f"generated {name} in {time.perf_counter() - t0:.2f} s", file=sys.stderr)
+    reason = rm.bpy_available()
+    t0 = time.perf_counter()
+    if reason is None:
+        files = rm.blender_room(out)
+        paths["glb"], paths["obj"] = files["glb"], files["obj"]
+        print(f"generated glb + obj (Blender) in {time.perf_counter() - t0:.2f} s", file=sys.stderr)
+    else:
+        paths["glb"] = paths["obj"] = reason
+    return {k: paths[k] for k in ("ifc", "glb", "obj", "dae")}
+
+
+def measure(name: str, path: Path, renderer: Renderer) -> dict:
+    t0 = time.perf_counter()
+    scene = load_scene(path)
+    load_s = time.perf_counter() - t0
+    if name == "ifc":
+        rm.add_ifc_light(scene)
+    t0 = time.perf_counter()
+    sol = solve(scene, SolveOptions())
+    solve_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    baked = bake(sol, scene, BakePolicy())
+    bake_s = time.perf_counter() - t0
+    cam = rm.model_cameras()[name]
+    renderer.set_solution(sol)
+    renderer.set_baked(baked)
+    mesh = renderer.render(cam, size=rm.IMAGE_SIZE, mode="mesh")
+    iat = renderer.render(cam, size=rm.IMAGE_SIZE, mode="iat")
+    times = {"load_s": load_s, "solve_s": solve_s, "bake_s": bake_s, "bytes": path.stat().st_size}
+    return {**rm.figures(scene, sol, baked, mesh, iat), **times}
+
+
+def skewed(out: Path, renderer: Renderer) -> list[str]:
+    path, light = rm.skewed_quad_obj(out)
+    lines = []
+    for form in ("obj file", "one quad patch"):
+        if form == "obj file":
+            scene = load_scene(path)
+        else:
+            scene = Scene(vertices=rm.skewed_quad_corners(), patch_corners=[[0, 1, 2, 3]], patch_material=[0],
+                          materials=[Material(name="floor", albedo=[0.6, 0.6, 0.6])])
+            if scene.patch_normal[0, 1] < 0:
+                scene.patch_corners = scene.patch_corners[:, ::-1].copy()
+        scene.lights.append(Light(kind="point", position=light, intensity=1.0))
+        sol = solve(scene, SolveOptions())
+        baked = bake(sol, scene, BakePolicy())
+        centre = rm.skewed_quad_corners().mean(axis=0)
+        cam = rm.camera(centre + [0.0, 3.0, 0.0], centre, yfov=45.0, up=(0.0, 0.0, -1.0))
+        renderer.set_solution(sol)
+        renderer.set_baked(baked)
+        mesh = renderer.render(cam, size=rm.IMAGE_SIZE, mode="mesh")
+        iat = renderer.render(cam, size=rm.IMAGE_SIZE, mode="iat")
+        d = float(np.linalg.norm(rm.highlight(mesh) - rm.highlight(iat)))
+        lines.append(f"- skewed quad ({form}): {scene.n_patches} patches, highlight IAT vs mesh {d:.2f} px, "
+                     f"PSNR {rm.percentile_psnr(iat, mesh):.2f} dB")
+    return lines
+
+
+def ring(out: Path) -> str:
+    try:
+        scene = load_scene(rm.ngon_obj(out))
+    except LoadError as e:
+        return f"- keyhole ring: not loaded: {e}"
+    centre = scene.corner_positions.mean(axis=1)
+    a = float(scene.patch_area[centre[:, 0] > 3.5].sum())
+    el = float(scene.patch_area[centre[:, 0] <= 3.5].sum())
+    return f"- keyhole ring: area {a:.6f} (exact {rm.RING_AREA:.6f}), L-shape {el:.6f} (exact {rm.L_AREA})"
+
+
+def main() -> int:
+    with tempfile.TemporaryDirectory(prefix="iat-real-") as tmp:
+        out = Path(tmp)
+        paths = generate(out)
+        renderer = Renderer()
+        print("| model | file | load s | patches | solve s | bake s | mesh tris | IAT tris (mesh + tex) "
+              "| texture MiB | PSNR dB | dotted % |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
+        for name, path in paths.items():
+            if isinstance(path, str):
+                print(f"| {name} | {path} | | | | | | | | | |")
+                continue
+            try:
+                f = measure(name, path, renderer)
+            except LoadError as e:
+                print(f"| {name} | {path.name} | {e} | | | | | | | | |")
+                continue
+            print(
+                f"| {name} | {path.name} ({f['bytes'] / 1024:.1f} KiB) | {f['load_s']:.2f} | {f['patches']} "
+                f"| {f['solve_s']:.1f} | {f['bake_s']:.2f} | {f['mesh_tris']} "
+                f"| {f['iat_tris']} ({f['iat_mesh_tris']} + {f['iat_tex_tris']}) "
+                f"| {f['texture_bytes'] / 2**20:.3f} | {f['psnr_db']:.2f} | {100 * f['dotted']:.3f} |"
+            )
+        print()
+        for line in skewed(out, renderer) + [ring(out)]:
+            print(line)
+        lights = rm.glb_point_lights(paths["glb"]) if not isinstance(paths["glb"], str) else []
+        for lt in lights:
+            print(f"- Blender's GLB point light: {lt['intensity']:.3f} cd for {5.0} W "
+                  f"(= W x 683 / 4 pi = {5.0 * 683 / (4 * np.pi):.3f})")
+        renderer.release()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
