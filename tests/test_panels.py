@@ -143,3 +143,43 @@ def test_panel_solve_matches_the_plain_solve_and_keeps_the_hole(egl_ctx, wall_so
     peak = np.percentile(y1, 99.5)
     psnr = 10 * np.log10(peak**2 / np.mean((i1 - m1) ** 2))
     assert psnr >= 40.0, f"IAT vs mesh {psnr:.1f} dB"
+
+
+def test_panels_through_scale_variants_and_export(egl_ctx, wall_solves, tmp_path):
+    """What works on roots works on panel cells: a light-only variant on the same mesh, a bake at
+    scale 0.5 (clamped scaling keeps the cells' edges), and the exported GLB drawn by our GLB
+    drawer shows the same lit pixels (the window a hole) as IAT mode."""
+    from iat.export.gltf import export_glb
+    from iat.render.glb_view import GlbView
+    from iat.render.renderer import Renderer
+
+    scene, sol = wall_solves[True]
+    dim = solve(
+        _scaled_emission(scene, 0.5), SolveOptions(max_depth=5), mesh=sol
+    )  # same leaves, half the light
+    np.testing.assert_array_equal(dim.vert_key, sol.vert_key)
+    lit = sol.vert_radiance.sum(axis=1) > 0
+    ratio = dim.vert_radiance[lit].sum(axis=1) / sol.vert_radiance[lit].sum(axis=1)
+    assert np.median(ratio) == pytest.approx(0.5, rel=0.05)
+    cam = Camera(eye=[2.0, 1.3, 2.9], target=[2.0, 1.1, 0.0], yfov=60.0)
+    r = Renderer(ctx=egl_ctx)
+    r.set_solution(sol)
+    mesh = r.render(cam, size=(160, 120), mode="mesh")
+    half = bake(sol, scene, BakePolicy(scale=0.5))
+    r.set_baked(half)
+    iat = r.render(cam, size=(160, 120), mode="iat")
+    y, yi = mesh @ LUMINANCE_WEIGHTS, iat @ LUMINANCE_WEIGHTS
+    peak = np.percentile(y, 99.5)
+    assert 10 * np.log10(peak**2 / np.mean((iat - mesh) ** 2)) >= 30.0
+    assert ((y == 0) != (yi == 0)).sum() <= 0.01 * (y == 0).sum()
+    path = export_glb(half, tmp_path / "wall.glb")
+    with GlbView(path, egl_ctx) as view:
+        img = view.render(cam, (160, 120))
+    assert ((img.max(axis=-1) > 0) != (iat.max(axis=-1) > 0)).sum() <= 0.01 * (y == 0).sum()
+
+
+def _scaled_emission(scene, k: float):
+    import dataclasses
+
+    mats = [dataclasses.replace(m, emission=m.emission * k) for m in scene.materials]
+    return dataclasses.replace(scene, materials=mats)

@@ -128,7 +128,7 @@ class ModelState:
 
     @property
     def mesh_triangles(self) -> int:
-        return 0 if self.solution is None else int(len(self.solution.tri_vertices))
+        return 0 if self.solution is None else int(len(self.solution.drawn_mesh().triangles))
 
     @property
     def iat_triangles(self) -> int:

@@ -512,7 +512,7 @@ class SolveRun:
         sol.stats = {
             "elements": int(forest.n_leaves),
             "vertices": int(len(keys)),
-            "triangles": int(len(sol.tri_vertices)),
+            "triangles": int(len(sol.drawn_mesh().triangles)),
             "shots": int(self.shots),
             "rays": int(vis.rays),
             "rays_per_s": float(vis.rays / vis.seconds) if vis.seconds > 0 else 0.0,

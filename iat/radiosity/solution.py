@@ -99,6 +99,7 @@ class Solution:
     model_path: str = ""
     clip_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 2)))
     clip_patch: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    _drawn: DrawnMesh | None = field(default=None, init=False, repr=False, compare=False)
 
     # -- views ---------------------------------------------------------------
     @property
@@ -124,8 +125,10 @@ class Solution:
         return qt.keys_to_world(self.patch_corners, self.patch_is_quad, self.vert_key, self.n)
 
     def drawn_mesh(self) -> DrawnMesh:
-        """The mesh as drawn (:func:`drawn_mesh`)."""
-        return drawn_mesh(self)
+        """The mesh as drawn (:func:`drawn_mesh`), made once (the mesh arrays are not changed)."""
+        if self._drawn is None:
+            self._drawn = drawn_mesh(self)
+        return self._drawn
 
     def patch_depth(self) -> np.ndarray:
         """(P,) int8 deepest leaf level per patch."""

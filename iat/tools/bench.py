@@ -407,7 +407,7 @@ def bench_model(
         r.release()
     step(1.0, "done")
 
-    tri_mesh = int(len(sol.tri_vertices))
+    tri_mesh = int(len(sol.drawn_mesh().triangles))
     tri_iat = int(len(baked.mesh_indices) + len(baked.tex_indices))
     textured = np.asarray(baked.patch_textured, dtype=bool)
     row = {

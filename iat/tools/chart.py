@@ -101,7 +101,8 @@ def _geometry_bytes_baked(baked) -> int:
 
 
 def _geometry_bytes_mesh(sol) -> int:
-    return int(len(sol.vert_key) * MESH_VERTEX_BYTES + len(sol.tri_vertices) * INDEX_BYTES)
+    drawn = sol.drawn_mesh()
+    return int(len(drawn.position) * MESH_VERTEX_BYTES + len(drawn.triangles) * INDEX_BYTES)
 
 
 def _mean_flip(images, refs, exposures) -> float:
@@ -227,7 +228,7 @@ def chart_model(
                         "method": None,
                         "texture_mb": 0.0,
                         "gpu_mb": _geometry_bytes_mesh(sol) / 2**20,
-                        "triangles": int(len(sol.tri_vertices)),
+                        "triangles": int(len(sol.drawn_mesh().triangles)),
                         "draw_calls": int(st["draw_calls"]),
                         "frame_ms": frame_ms("mesh"),
                         "bake_s": None,
