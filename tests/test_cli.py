@@ -217,3 +217,35 @@ def test_load_draws_a_progress_bar_on_a_terminal(tmp_path, monkeypatch, capsys):
     err.truncate(0)
     assert cli.main(["info", str(CORNELL), "--json"]) == 0
     assert err.getvalue() == ""  # --json: no bar
+
+
+def test_solve_with_sun_and_sky(tmp_path):
+    """``--sun LAT,LON,WHEN,TZ`` and ``--sky`` light an open box (no lights in the file)."""
+    obj = tmp_path / "court.obj"
+    obj.write_text(
+        "v 0 0 0\nv 0 0 4\nv 4 0 4\nv 4 0 0\nv 0 2 0\nv 0 2 4\nv 4 2 4\nv 4 2 0\n"
+        "f 1 2 3 4\nf 1 5 6 2\nf 4 3 7 8\nf 1 4 8 5\n"  # floor and three walls, open to the sky
+    )
+    out = tmp_path / "court.npz"
+    r = iat(
+        "solve",
+        obj,
+        "-o",
+        out,
+        "--max-depth",
+        "3",
+        "--sun",
+        "48.14,11.58,2026-06-21T14:00,Europe/Berlin",
+        "--sky",
+        "preetham:3",
+        "--sky-scale",
+        "0.01",
+        "--json",
+    )
+    assert r.returncode == 0, r.stderr
+    stats = json.loads(r.stdout)
+    assert stats["received_power"] > 0 and stats["shots"] > 0 and stats["sources"]["daylight"]
+    r = iat("solve", obj, "-o", out, "--sun", "48.14,11.58,2026-06-21T23:30,Europe/Berlin")
+    assert r.returncode == 2 and "below the horizon" in r.stderr
+    r = iat("solve", obj, "-o", out, "--sky", "cloudy")
+    assert r.returncode == 2 and r.stderr.startswith("iat solve: error: --sky must be")

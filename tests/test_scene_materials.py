@@ -148,12 +148,14 @@ def test_obj_materials_kd_ke(tmp_path):
 # ----------------------------------------------------------------------------
 
 
-def test_point_and_spot_lights(tmp_path, caplog):
+def test_point_spot_and_directional_lights(tmp_path, caplog):
     g = Gltf()
     g.node(mesh=g.mesh(QUAD, QUAD_TRIS))
     pl = g.light({"type": "point", "color": [1.0, 0.5, 0.25], "intensity": 40.0, "name": "bulb"})
     sl = g.light({"type": "spot", "intensity": 10.0, "spot": {"innerConeAngle": 0.2, "outerConeAngle": 0.5}})
-    dl = g.light({"type": "directional", "intensity": 3.0, "name": "sun"})
+    dl = g.light(
+        {"type": "directional", "intensity": 3.0, "name": "sun", "extras": {"angular_diameter": 1.0}}
+    )
     g.node(translation=[1.0, 2.0, 3.0], extensions={"KHR_lights_punctual": {"light": pl}})
     # rotated -90 degrees about X: local -Z points along world -Y
     c, s_ = math.cos(math.pi / 4), math.sin(math.pi / 4)
@@ -167,9 +169,11 @@ def test_point_and_spot_lights(tmp_path, caplog):
     g.node(extensions={"KHR_lights_punctual": {"light": dl}})
     with caplog.at_level(logging.WARNING, logger="iat.io.gltf"):
         s = load_scene(g.save(tmp_path / "lights.glb"))
-    assert "directional light 'sun' skipped" in caplog.text
-    assert [lt.kind for lt in s.lights] == ["point", "spot"]
-    p, sp = s.lights
+    assert "skipped" not in caplog.text
+    assert [lt.kind for lt in s.lights] == ["point", "spot", "directional"]
+    p, sp, sun = s.lights
+    np.testing.assert_allclose(sun.direction, [0, 0, -1])  # a node's -Z: where the light travels
+    assert sun.intensity == 3.0 and sun.angular_diameter == pytest.approx(math.radians(1.0))
     np.testing.assert_allclose(p.position, [1, 2, 3])
     np.testing.assert_allclose(p.color, [1.0, 0.5, 0.25])
     assert p.intensity == 40.0 and p.name == "bulb"

@@ -156,6 +156,8 @@ class Baker:
             )
         self._corners = np.asarray(solution.patch_corners, dtype=np.float32)
         self._clip_start = np.searchsorted(solution.clip_patch, np.arange(P + 1))
+        tau = np.asarray(getattr(solution, "patch_transmission", np.zeros(0)), dtype=np.float64)
+        self._glass = tau > 0 if len(tau) == P else np.zeros(P, dtype=bool)
         self._material = np.asarray(solution.patch_material, dtype=np.int64)
         albedo = np.asarray(solution.patch_albedo, dtype=np.float64)
         self.inv_albedo = np.where(albedo > 1e-4, 1.0 / np.maximum(albedo, 1e-4), 0.0)
@@ -245,9 +247,10 @@ class Baker:
 
     def textured_set(self, policy: BakePolicy) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(textured (P,) bool, ps (k,) int64 textured patches, sides (k,) int64 tile sides)``:
-        the patches of depth >= ``policy.threshold`` and their scaled tile sides."""
+        the patches of depth >= ``policy.threshold`` (never glass: it is not drawn) and their
+        scaled tile sides."""
         idx = self.index
-        textured = idx.depth >= policy.threshold
+        textured = (idx.depth >= policy.threshold) & ~self._glass
         ps = np.flatnonzero(textured).astype(np.int64)
         sides = (
             scaled_side(tile_side(idx.depth[ps]), policy.scale).astype(np.int64)

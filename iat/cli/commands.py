@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from iat.cli.args import join_negative_values, parse_size, parse_vec
+from iat.cli.args import join_negative_values, parse_size, parse_sky, parse_sun, parse_vec
 from iat.errors import IATError, IATWarning, OptionError
 from iat.progress import ProgressBar
 from iat.tools.common import policy_dict
@@ -133,6 +133,23 @@ def cmd_info(args) -> int:
     return 0
 
 
+def _daylight(args, scene) -> None:
+    """``--sun`` adds (or replaces) the scene's sun; ``--sky`` puts a sky around it (a Preetham sky
+    towards the sun)."""
+    if getattr(args, "sun", None):
+        sun, az, el = parse_sun(args.sun, getattr(args, "north", None))
+        if el <= 0:
+            raise OptionError(f"--sun: the sun is below the horizon then (elevation {el:.1f} degrees)")
+        scene.lights = [lt for lt in scene.lights if lt.kind != "directional"] + [sun]
+    if getattr(args, "sky", None):
+        scene.sky = parse_sky(args.sky, args.sky_scale)
+        suns = [lt for lt in scene.lights if lt.kind == "directional"]
+        if scene.sky.kind == "preetham":
+            if not suns:
+                raise OptionError("--sky preetham needs a sun (--sun, or a directional light in the model)")
+            scene.sky.sun_direction = -suns[0].direction
+
+
 def _set_output(out: Path, name: str) -> Path:
     """``OUT.npz`` -> ``OUT-<name>.npz`` (a solution per lighting state)."""
     return out.with_name(f"{out.stem}-{name}{out.suffix or '.npz'}")
@@ -143,6 +160,7 @@ def cmd_solve(args) -> int:
 
     opts = _solve_options(args)
     scene = _load(args, args.input, max_edge=opts.max_edge)
+    _daylight(args, scene)
     if getattr(args, "states", False):
         from iat.lighting.solution_set import solve_set
 
@@ -408,6 +426,11 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--max-edge", type=float, dest="max_edge", help="pre-split patches longer than this")
         sp.add_argument("--samples", type=int, help="shooter samples for visibility")
         sp.add_argument(
+            "--convergence",
+            type=float,
+            help="stop shooting below this fraction of the received power (default 0.05)",
+        )
+        sp.add_argument(
             "--no-panels",
             action="store_true",
             dest="no_panels",
@@ -442,6 +465,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("solve", help="radiosity solution with adaptive quad-tree meshing")
     s.add_argument("input", metavar="MODEL")
+    s.add_argument("--sun", metavar="LAT,LON,DATETIME[,TZ]", help="a sun at that place and time")
+    s.add_argument("--north", metavar="X,Y,Z", help="the model's north (default 0,0,-1)")
+    s.add_argument(
+        "--sky", metavar="KIND[:ARG]", help="uniform[:R,G,B], overcast[:R,G,B], preetham[:T], hdr:FILE"
+    )
+    s.add_argument("--sky-scale", type=float, default=1.0, dest="sky_scale", help="sky radiance factor")
     s.add_argument("-o", "--output", required=True, metavar="SOL.npz")
     solve_flags(s)
     s.add_argument(

@@ -59,6 +59,10 @@ def local_matrix(node) -> np.ndarray:
     return m
 
 
+#: a material of alphaMode BLEND with less alpha than this is glass (transmittance 1 - alpha)
+GLASS_ALPHA = 0.5
+
+
 class GltfDocument:
     """A glTF file opened with pygltflib (``doc``); raises :class:`iat.errors.LoadError` for an
     unparsable file, a glTF version other than 2, a missing buffer or texture file, or
@@ -191,11 +195,20 @@ class GltfDocument:
             img = self.texture_image(m.emissiveTexture)
             if img is not None:
                 emission = emission * img.reshape(-1, 3).mean(axis=0, dtype=np.float64)
+        # glass: KHR_materials_transmission, or a blended material mostly see-through
+        transmission = float(
+            _get(_get(m.extensions or {}, "KHR_materials_transmission"), "transmissionFactor", 0.0)
+        )
+        rgba = np.asarray(_get(pbr, "baseColorFactor", [1.0, 1.0, 1.0, 1.0]), dtype=np.float64).reshape(-1)
+        alpha = float(rgba[3]) if len(rgba) > 3 else 1.0
+        if m.alphaMode == "BLEND" and alpha < GLASS_ALPHA:
+            transmission = max(transmission, 1.0 - alpha)
         mat = Material(
             name=m.name or f"material_{index}",
             albedo=albedo,  # clamped by load_scene, which warns
             emission=emission,
             detail=detail,
+            transmission=float(np.clip(transmission, 0.0, 1.0)),
         )
         self._material_cache[index] = mat
         return mat
@@ -277,6 +290,9 @@ class GltfDocument:
         return world
 
     def lights(self, world: dict[int, np.ndarray]) -> list[Light]:
+        """``KHR_lights_punctual`` lights placed by ``world``: point and spot (candela read as
+        W/sr), directional as a sun (lux read as W/m², a disc of ``extras.angular_diameter``
+        degrees, default 0.53)."""
         ext = _get(self.doc.extensions or {}, "KHR_lights_punctual")
         defs = _get(ext, "lights", [])
         out = []
@@ -291,10 +307,7 @@ class GltfDocument:
             d = defs[li]
             kind = d.get("type", "point")
             name = d.get("name") or node.name or f"light_{li}"
-            if kind == "directional":
-                log.warning("%s: directional light %r skipped (not supported)", self.path, name)
-                continue
-            if kind not in ("point", "spot"):
+            if kind not in ("point", "spot", "directional"):
                 log.warning("%s: light %r of unknown type %r skipped", self.path, name, kind)
                 continue
             m = world[i]
@@ -312,6 +325,7 @@ class GltfDocument:
                     inner_cone=float(spot.get("innerConeAngle", 0.0)),
                     outer_cone=float(spot.get("outerConeAngle", np.pi / 4)),
                     name=name,
+                    **_sun_disc(d),
                 )
             )
         return out
@@ -363,3 +377,11 @@ class GltfDocument:
                         log.warning("%s: camera path %r ignored (%s)", self.path, name, one_line(e))
                 return paths
         return {}
+
+
+def _sun_disc(d: dict) -> dict:
+    """``{"angular_diameter": radians}`` from a directional light's ``extras`` (degrees), or {}."""
+    extras = d.get("extras") or {}
+    if d.get("type") != "directional" or "angular_diameter" not in extras:
+        return {}
+    return {"angular_diameter": float(np.radians(float(extras["angular_diameter"])))}

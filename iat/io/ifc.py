@@ -10,7 +10,8 @@ on every core, and returns the arrays :func:`iat.io.load.load_scene` welds and m
 - Materials: one per surface style (named by the style, ``use-material-names``):
   albedo = the style's diffuse colour (surface colour when it has none). Glass
   (a window, door, plate or curtain wall part whose style transparency is over 0.5,
-  or a style named glass) is its own material named ``"glass: <style> (transparency t)"``.
+  or a style named glass) is its own material named ``"glass: <style> (transparency t)"``,
+  of transmission ``t`` (``GLASS_DEFAULT_TRANSMISSION`` when a style named glass gives none).
 - IFC files carry no lights or cameras.
 """
 
@@ -93,6 +94,10 @@ def _colour(style) -> np.ndarray:
     return np.full(3, 0.5)
 
 
+#: transmittance of a glass whose style gives no transparency (clear float glass, normal incidence)
+GLASS_DEFAULT_TRANSMISSION = 0.85
+
+
 def _material(style, element_type: str) -> tuple[tuple, Material]:
     """(key, Material) of an ifcopenshell style on an element of class ``element_type``."""
     name = style.name or "default"
@@ -102,7 +107,8 @@ def _material(style, element_type: str) -> tuple[tuple, Material]:
     glass = "glass" in name.lower() or (element_type in GLAZED and t > GLASS_TRANSPARENCY)
     if glass:
         name = f"glass: {name} (transparency {t:g})"
-    return (name, albedo.tobytes(), glass), Material(name=name, albedo=albedo)
+    tau = (t if t > 0 else GLASS_DEFAULT_TRANSMISSION) if glass else 0.0
+    return (name, albedo.tobytes(), glass), Material(name=name, albedo=albedo, transmission=tau)
 
 
 def read_ifc(path: Path, report, start: float, end: float):

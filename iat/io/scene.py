@@ -33,12 +33,15 @@ class Material:
     albedo : (3,) float64 linear RGB in [0, 1] (baseColorFactor x mean of its texture)
     emission : (3,) float64 emitted radiance, linear RGB (emissiveFactor x strength)
     detail : (h, w, 3) float32 linear RGB albedo texture repeated on the surface, or None
+    transmission : float in [0, 1], the transmittance of a thin glass (0: opaque); light
+      crossing it is multiplied by it, and it reflects and stores nothing
     """
 
     name: str = ""
     albedo: np.ndarray = field(default_factory=lambda: np.full(3, 0.5))
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     detail: np.ndarray | None = None
+    transmission: float = 0.0
 
     def __post_init__(self):
         self.albedo = np.asarray(self.albedo, dtype=np.float64).reshape(3)
@@ -47,14 +50,17 @@ class Material:
 
 @dataclass
 class Light:
-    """A KHR_lights_punctual point or spot light.
+    """A KHR_lights_punctual point, spot or directional light.
 
-    kind : "point" or "spot" (directional lights are not supported by the solver)
-    position : (3,) float64 world
-    direction : (3,) float64 unit vector the spot points along (world)
+    kind : "point", "spot" or "directional" (the sun: a disc of ``angular_diameter``)
+    position : (3,) float64 world (unused by a directional light)
+    direction : (3,) float64 unit vector the light points along (world): a spot's axis, and for a
+      directional light the direction its light travels (from the sun towards the scene)
     color : (3,) float64 linear RGB
-    intensity : float, W/sr per unit colour (glTF candela read as radiometric)
+    intensity : float, W/sr per unit colour for point and spot lights (glTF candela read as
+      radiometric); W/m² per unit colour on a surface facing a directional light (glTF lux)
     inner_cone, outer_cone : spot cone half-angles in radians
+    angular_diameter : a directional light's disc, radians (the sun: 0.53 degrees)
     """
 
     kind: str = "point"
@@ -65,6 +71,7 @@ class Light:
     inner_cone: float = 0.0
     outer_cone: float = np.pi / 4
     name: str = ""
+    angular_diameter: float = float(np.radians(0.53))
 
     def __post_init__(self):
         self.position = np.asarray(self.position, dtype=np.float64).reshape(3)
@@ -75,6 +82,36 @@ class Light:
     def radiant_intensity(self) -> np.ndarray:
         """(3,) float64 intensity x colour."""
         return self.color * float(self.intensity)
+
+
+@dataclass
+class Sky:
+    """An environment that emits from every direction the geometry does not block.
+
+    kind : "uniform" (``radiance`` everywhere above the horizon), "cie_overcast" (CIE overcast,
+      ``radiance`` at the zenith), "preetham" (clear sky of ``turbidity`` for ``sun_direction``,
+      scaled by ``radiance``), "hdr" (the equirectangular ``image``, times ``radiance``)
+    radiance : (3,) float64 linear RGB radiance scale, W/(m² sr) per unit colour
+    sun_direction : (3,) float64 unit vector from the scene towards the sun (preetham)
+    turbidity : float, the atmosphere's turbidity (preetham; 2 clear ... 10 hazy)
+    image : (h, w, 3) float32 linear radiance, equirectangular (hdr), or None
+    rotation : float, radians about +Y applied to the image
+    ground : (3,) float64 radiance below the horizon (0: the model brings its ground)
+    """
+
+    kind: str = "uniform"
+    radiance: np.ndarray = field(default_factory=lambda: np.ones(3))
+    sun_direction: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
+    turbidity: float = 3.0
+    image: np.ndarray | None = None
+    rotation: float = 0.0
+    ground: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    name: str = "sky"
+
+    def __post_init__(self):
+        self.radiance = np.asarray(self.radiance, dtype=np.float64).reshape(3)
+        self.sun_direction = np.asarray(self.sun_direction, dtype=np.float64).reshape(3)
+        self.ground = np.asarray(self.ground, dtype=np.float64).reshape(3)
 
 
 @dataclass
@@ -90,6 +127,7 @@ class Scene:
     path : the file it came from ("" when built in memory)
     clip_uv : (C, 3, 2) float64 clip triangles in their patch's lattice (u, v), sorted by patch
     clip_patch : (C,) int64 the (quad) patch each clip triangle belongs to; a patch with none is whole
+    sky : a :class:`Sky` around the model, or None
     """
 
     vertices: np.ndarray
@@ -103,6 +141,7 @@ class Scene:
     path: str = ""
     clip_uv: np.ndarray | None = None
     clip_patch: np.ndarray | None = None
+    sky: Sky | None = None
 
     def __post_init__(self):
         self.vertices = np.asarray(self.vertices, dtype=np.float64).reshape(-1, 3)
@@ -206,6 +245,11 @@ class Scene:
     def patch_albedo(self) -> np.ndarray:
         """(p, 3) float64 albedo per patch."""
         return np.array([m.albedo for m in self.materials])[self.patch_material]
+
+    @property
+    def patch_transmission(self) -> np.ndarray:
+        """(p,) float64 transmittance per patch (0 opaque; glass passes that much light)."""
+        return np.array([float(m.transmission) for m in self.materials] or [0.0])[self.patch_material]
 
     @property
     def patch_emission(self) -> np.ndarray:

@@ -22,7 +22,7 @@ from iat.errors import OptionError
 from iat.io.scene import Light, Material, Scene
 
 #: the light kinds the solver takes (directional lights are not supported)
-LIGHT_KINDS = ("point", "spot")
+LIGHT_KINDS = ("point", "spot", "directional")
 
 
 def copy_light(lt: Light, **changes) -> Light:
@@ -36,6 +36,7 @@ def copy_light(lt: Light, **changes) -> Light:
         "inner_cone": float(lt.inner_cone),
         "outer_cone": float(lt.outer_cone),
         "name": lt.name,
+        "angular_diameter": float(getattr(lt, "angular_diameter", Light().angular_diameter)),
     }
     kw.update(changes)
     return checked_light(Light(**kw))
@@ -43,7 +44,13 @@ def copy_light(lt: Light, **changes) -> Light:
 
 def copy_material(m: Material, **changes) -> Material:
     """A copy of ``m`` (own albedo and emission arrays, shared detail texture) with ``changes``."""
-    kw = {"name": m.name, "albedo": np.array(m.albedo), "emission": np.array(m.emission), "detail": m.detail}
+    kw = {
+        "name": m.name,
+        "albedo": np.array(m.albedo),
+        "emission": np.array(m.emission),
+        "detail": m.detail,
+        "transmission": float(m.transmission),
+    }
     kw.update(changes)
     return Material(**kw)
 

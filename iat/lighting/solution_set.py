@@ -159,6 +159,7 @@ def merge_meshes(solutions):
         model_path=first.model_path,
         clip_uv=first.clip_uv,
         clip_patch=first.clip_patch,
+        patch_transmission=first.patch_transmission,
     )
 
 

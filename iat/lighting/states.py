@@ -16,6 +16,12 @@ A model may carry named lighting states in its root ``extras["iat_lighting_state
 - ``emission``: by material name; a number scales the material's emission as loaded (its
   *strength*: 0 is off, 1 as in the file), a list of three is the emitted radiance itself
   (linear RGB). Materials not named keep the file's emission.
+- ``sun`` (daylight, :func:`iat.lighting.sun.sun_states` writes them): ``{"direction": [x, y, z]``
+  (where the light travels), ``"intensity"`` (W/m²), ``"color"``, optional
+  ``"angular_diameter"`` (degrees)``}``: the scene's directional light named ``sun`` (added
+  if there is none; intensity 0 takes it out).
+- ``sky``: ``{"kind", "radiance", "sun_direction", "turbidity", "ground"}`` (an
+  :class:`iat.io.scene.Sky`; ``null`` takes the sky away).
 
 :func:`union_lighting` lights one scene with every state's sources at once (the mesh that
 resolves all of them).
@@ -30,7 +36,7 @@ import numpy as np
 
 from iat.errors import LoadError, OptionError
 from iat.io.gltf import GltfDocument
-from iat.io.scene import Light, Scene
+from iat.io.scene import Light, Scene, Sky
 from iat.lighting.edits import copy_light, copy_lighting, copy_material
 
 #: root extras key holding the named lighting states
@@ -45,7 +51,7 @@ def check_states(states: Any, where) -> dict[str, dict]:
     for name, st in states.items():
         if not isinstance(st, dict):
             raise LoadError(f"lighting state {name!r} must be an object", where)
-        unknown = set(st) - {"time", "lights", "emission", "label"}
+        unknown = set(st) - {"time", "lights", "emission", "label", "sun", "sky", "elevation", "azimuth"}
         if unknown:
             raise LoadError(f"lighting state {name!r}: unknown key(s) {', '.join(sorted(unknown))}", where)
         if "time" in st and not (isinstance(st["time"], int | float) and 0.0 <= float(st["time"]) <= 1.0):
@@ -119,7 +125,52 @@ def apply_lighting_state(scene: Scene, state: dict, base: Scene | None = None) -
             if (e < 0).any() or not np.isfinite(e).all():
                 raise OptionError(f"lighting state: emission of {name!r} must be finite and >= 0")
         mats[k] = copy_material(mats[k], emission=e)
-    return copy_lighting(scene, lights=lights, materials=mats)
+    out = copy_lighting(scene, lights=lights, materials=mats)
+    if "sun" in state:
+        out.lights = _with_sun(out.lights, state["sun"])
+    if "sky" in state:
+        out.sky = _sky_of(state["sky"])
+    return out
+
+
+def _with_sun(lights: list[Light], spec) -> list[Light]:
+    """``lights`` with the directional light ``sun`` set from a state's ``sun`` entry."""
+    if not isinstance(spec, dict) or "direction" not in spec:
+        raise OptionError("lighting state: sun must be an object with a direction")
+    rest = [lt for lt in lights if not (lt.kind == "directional" and lt.name == "sun")]
+    intensity = float(spec.get("intensity", 1.0))
+    if intensity <= 0:
+        return rest
+    d = np.asarray(spec["direction"], dtype=np.float64).reshape(3)
+    kw = (
+        {"angular_diameter": float(np.radians(spec["angular_diameter"]))}
+        if "angular_diameter" in spec
+        else {}
+    )
+    sun = Light(
+        kind="directional",
+        direction=d / max(float(np.linalg.norm(d)), 1e-300),
+        color=np.asarray(spec.get("color", [1.0, 1.0, 1.0]), dtype=np.float64).reshape(3),
+        intensity=intensity,
+        name="sun",
+        **kw,
+    )
+    return [*rest, sun]
+
+
+def _sky_of(spec) -> Sky | None:
+    """The :class:`Sky` of a state's ``sky`` entry (None: no sky)."""
+    if spec is None:
+        return None
+    if not isinstance(spec, dict):
+        raise OptionError("lighting state: sky must be an object or null")
+    known = {"kind", "radiance", "sun_direction", "turbidity", "ground"}
+    if set(spec) - known:
+        raise OptionError(f"lighting state: unknown sky key(s) {', '.join(sorted(set(spec) - known))}")
+    kw = {k: spec[k] for k in known if k in spec}
+    if "radiance" in kw and isinstance(kw["radiance"], int | float):
+        kw["radiance"] = [float(kw["radiance"])] * 3
+    return Sky(**kw)
 
 
 def state_scenes(scene: Scene, states: dict[str, dict] | None = None) -> dict[str, Scene]:
@@ -162,4 +213,8 @@ def union_lighting(scenes: list[Scene]) -> Scene:
         copy_material(m, emission=np.max([sc.materials[i].emission for sc in scenes], axis=0))
         for i, m in enumerate(first.materials)
     ]
-    return copy_lighting(first, lights=lights, materials=mats)
+    out = copy_lighting(first, lights=lights, materials=mats)
+    skies = [sc.sky for sc in scenes if getattr(sc, "sky", None) is not None]
+    if skies:  # the brightest sky (the mesh it settles resolves the others' smoother light)
+        out.sky = max(skies, key=lambda k: float(np.max(k.radiance)))
+    return out

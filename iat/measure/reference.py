@@ -52,6 +52,7 @@ import numpy as np
 
 from iat.camera import Camera
 from iat.io.scene import Scene
+from iat.radiosity.sky import mitsuba_emitter, sky_equirect
 
 __all__ = [
     "mitsuba_variant",
@@ -207,6 +208,9 @@ def build_mitsuba_scene(
         bsdf = {"type": "diffuse", "reflectance": _rgb(np.clip(mat.albedo, 0.0, 1.0))}
         if two_sided:
             bsdf = {"type": "twosided", "material": bsdf}
+        if mat.transmission > 0:  # thin glass as the solver has it: passes that much, keeps none
+            black = {"type": "diffuse", "reflectance": _rgb(np.zeros(3))}
+            bsdf = {"type": "mask", "opacity": 1.0 - float(mat.transmission), "material": black}
         props = mi.Properties()
         props["bsdf"] = mi.load_dict(bsdf)
         if np.any(mat.emission > 0):
@@ -231,8 +235,13 @@ def build_mitsuba_scene(
                 "cutoff_angle": outer,
                 "beam_width": min(inner, outer * 0.9999),
             }
+        elif light.kind == "directional":  # (a delta light: Mitsuba's sun has no disc)
+            dirn = light.direction / max(np.linalg.norm(light.direction), 1e-300)
+            d[f"light_{k}"] = {"type": "directional", "direction": dirn.tolist(), "irradiance": inten}
         else:
             raise ValueError(f"light {k} ({light.name!r}): unsupported kind {light.kind!r}")
+    if getattr(scene, "sky", None) is not None:
+        d["sky"] = mitsuba_emitter(scene.sky)
     return mi.load_dict(d)
 
 
@@ -289,6 +298,11 @@ def reference_key(
         arr(scene.clip_patch, np.int64)
     arr([m.albedo for m in scene.materials] or np.zeros((0, 3)), np.float64)
     arr([m.emission for m in scene.materials] or np.zeros((0, 3)), np.float64)
+    if any(m.transmission > 0 for m in scene.materials):
+        arr([m.transmission for m in scene.materials], np.float64)
+    sky = getattr(scene, "sky", None)
+    if sky is not None:
+        arr(sky_equirect(sky, 64), np.float32)
     meta = {
         "version": REFERENCE_VERSION,
         "lights": [

@@ -27,6 +27,8 @@ from iat.radiosity.options import (
     RAY_EPS,
     RAY_EPS_PATCH,
     SHOOTER_COVERAGE,
+    SKY_SAMPLES,
+    SUN_SAMPLES,
     SolveOptions,
 )
 from iat.radiosity.pointlight import lumped_light
@@ -41,6 +43,7 @@ from iat.radiosity.sampling import (
     sample_lattice,
     weighted_lattice_sums,
 )
+from iat.radiosity.sky import sky_radiance
 from iat.radiosity.visibility import Visibility
 
 
@@ -127,6 +130,8 @@ class Context:
         self.n = 1 << opts.max_depth
         self.vis = vis
         self.lights = [lt for lt in scene.lights if lt.kind in ("point", "spot")]
+        self.suns = [lt for lt in scene.lights if lt.kind == "directional" and np.any(lt.radiant_intensity)]
+        self.sky = getattr(scene, "sky", None)
         self.emitters = np.flatnonzero((self.emission > 0).any(axis=1))
         # a tangent frame per patch (for cosine-distributed directions)
         helper = np.where(np.abs(self.normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
@@ -444,7 +449,7 @@ class Context:
             dr -= o
             r = np.sqrt(np.einsum("kc,kc->k", dr, dr))
             dr /= np.maximum(r, np.float32(1e-30))[:, None]
-            vis = ~self.vis.occluded(o, dr, np.maximum(r - np.float32(0.5 * sh.eps), np.float32(0.0)))
+            vis = self.vis.visible(o, dr, np.maximum(r - np.float32(0.5 * sh.eps), np.float32(0.0)))
             rp = geo.patch[ii][bi]
             rays_p += np.bincount(rp, minlength=self.n_patches)
             seen_p += np.bincount(rp, weights=vis, minlength=self.n_patches)
@@ -537,10 +542,10 @@ class Context:
             return k, free
         do = light.position[None, :] - geo.origin[ok]
         ro = np.linalg.norm(do, axis=1)
-        occ = self.vis.occluded(
+        vis = self.vis.visible(
             geo.origin[ok], do / ro[:, None], np.maximum(ro - 0.5 * self.eps_patch[geo.patch[ok]], 0.0)
         )
-        k[ok] = cos[ok] * att[ok] / (r[ok] * r[ok]) * ~occ
+        k[ok] = cos[ok] * att[ok] / (r[ok] * r[ok]) * vis
         return k, free
 
     def light_irradiance(self, light, geo: ReceiverGeometry) -> np.ndarray:
@@ -607,7 +612,79 @@ class Context:
         for light in self.lights:
             incoming += self.light_irradiance(light, geo) / np.pi
             check()
+        for sun in self.suns:
+            incoming += self.sun_irradiance(sun, geo, check) / np.pi
+        if self.sky is not None:
+            incoming += self.sky_irradiance(geo, check) / np.pi
         return self.albedo[geo.patch] * incoming
+
+    def _escape(self, geo: ReceiverGeometry, idx: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+        """(k, S) float: what of the rays from vertices ``idx`` (k,) along ``dirs`` (k, S, 3) leaves
+        the scene (1 free, 0 blocked, a glass's transmittance through it)."""
+        k, S = dirs.shape[:2]
+        o = np.repeat(geo.origin32()[idx], S, axis=0)
+        free = self.vis.visible(o, dirs.reshape(-1, 3), np.full(k * S, 4.0 * self.scale, dtype=np.float32))
+        return free.reshape(k, S)
+
+    def sun_irradiance(self, sun, geo: ReceiverGeometry, check: Callable[[], None]) -> np.ndarray:
+        """(n, 3) irradiance from a directional light (the sun): ``E cos`` times the fraction of
+        its disc (``angular_diameter``) each vertex sees, from ``SUN_SAMPLES`` directions
+        stratified on the disc and rotated per vertex (soft shadow edges, exact where it is
+        fully seen or hidden)."""
+        to_sun = -np.asarray(sun.direction, dtype=np.float64)
+        to_sun /= max(float(np.linalg.norm(to_sun)), 1e-300)
+        out = np.zeros((len(geo.key), 3))
+        cos = geo.normal @ to_sun
+        lit = np.flatnonzero(cos > 0)
+        if len(lit) == 0:
+            return out
+        helper = np.array([1.0, 0.0, 0.0]) if abs(to_sun[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        t1 = np.cross(to_sun, helper)
+        t1 /= np.linalg.norm(t1)
+        t2 = np.cross(to_sun, t1)
+        m = pattern_side(SUN_SAMPLES)
+        pat = self.pattern(self.n_patches, m, 1)
+        half = math.tan(0.5 * max(float(sun.angular_diameter), 0.0))
+        frac = np.zeros(len(lit))
+        for a in range(0, len(lit), GATHER_BLOCK // 4):
+            idx = lit[a : a + GATHER_BLOCK // 4]
+            rot = hash_uniform(geo.key[idx], int(self.opts.seed) * 7919 + 17, 2)
+            dx, dy = concentric_disk(
+                (pat[None, :, 0] + rot[:, :1]) % 1.0, (pat[None, :, 1] + rot[:, 1:2]) % 1.0
+            )
+            d = to_sun + half * (dx[..., None] * t1 + dy[..., None] * t2)
+            d /= np.linalg.norm(d, axis=-1, keepdims=True)
+            frac[a : a + len(idx)] = self._escape(geo, idx, d).mean(axis=1)
+            check()
+        out[lit] = (cos[lit] * frac)[:, None] * sun.radiant_intensity[None, :]
+        return out
+
+    def sky_irradiance(self, geo: ReceiverGeometry, check: Callable[[], None]) -> np.ndarray:
+        """(n, 3) irradiance from the sky through whatever of each vertex's hemisphere is open:
+        ``pi`` times the mean sky radiance over ``SKY_SAMPLES`` cosine-distributed directions
+        (stratified, rotated per vertex) that leave the scene."""
+        out = np.zeros((len(geo.key), 3))
+        m = pattern_side(SKY_SAMPLES)
+        pat = self.pattern(self.n_patches, m, 2)
+        block = max(1, GATHER_BLOCK * 16 // (m * m))
+        for a in range(0, len(geo.key), block):
+            idx = np.arange(a, min(a + block, len(geo.key)))
+            rot = hash_uniform(geo.key[idx], int(self.opts.seed) * 7919 + 29, 2)
+            dx, dy = concentric_disk(
+                (pat[None, :, 0] + rot[:, :1]) % 1.0, (pat[None, :, 1] + rot[:, 1:2]) % 1.0
+            )
+            dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
+            t1, t2 = self.tangent[geo.patch[idx], 0], self.tangent[geo.patch[idx], 1]
+            w = (
+                dx[..., None] * t1[:, None]
+                + dy[..., None] * t2[:, None]
+                + dz[..., None] * geo.normal[idx][:, None]
+            )
+            free = self._escape(geo, idx, w)
+            L = sky_radiance(self.sky, w.reshape(-1, 3)).reshape(len(idx), m * m, 3)
+            out[idx] = np.pi * np.einsum("ks,ksc->kc", free, L) / (m * m)
+            check()
+        return out
 
     def max_mean_reflected(self) -> float:
         """Upper bound of the scene's area-mean reflected luminance radiance: all the emitted power
@@ -618,10 +695,22 @@ class Context:
         return float(luminance_of(self.albedo).max()) * self.emitted_power() / (np.pi * a)
 
     def emitted_power(self) -> float:
-        """Luminance power emitted by emissive patches and lights (W, luminance-weighted)."""
+        """Luminance power emitted by emissive patches and lights (W, luminance-weighted); for the
+        sun and the sky, what would reach the surfaces if nothing shadowed them (an upper bound)."""
         p = float(np.pi * (self.emission @ LUMINANCE_WEIGHTS * self.area).sum())
         for lt in self.lights:
             p += light_power(lt)
+        for sun in self.suns:
+            cos = np.maximum(self.normal @ -np.asarray(sun.direction, dtype=np.float64), 0.0)
+            p += abs(float(sun.radiant_intensity @ LUMINANCE_WEIGHTS)) * float((cos * self.area).sum())
+        if self.sky is not None:  # the brightest of 1024 directions over the whole area
+            k = np.arange(1024) + 0.5
+            z = 1.0 - 2.0 * k / 1024
+            phi = np.pi * (1.0 + 5.0**0.5) * k
+            r = np.sqrt(1.0 - z * z)
+            dirs = np.stack([r * np.cos(phi), z, r * np.sin(phi)], axis=1)
+            peak = float((sky_radiance(self.sky, dirs) @ LUMINANCE_WEIGHTS).max())
+            p += np.pi * max(peak, 0.0) * float(self.area.sum())
         return p
 
 
@@ -634,5 +723,7 @@ def light_power(lt) -> float:
 def solver_albedo(scene) -> np.ndarray:
     """(P, 3) the albedo the solver uses: the scene's, clamped to [0, 1] (albedo 1 is kept: an
     albedo-1 closed room never converges, and the solve stops at ``max_shots`` saying how much
-    light is left unshot; > 1 would create energy at every bounce)."""
-    return np.clip(scene.patch_albedo, 0.0, 1.0)
+    light is left unshot; > 1 would create energy at every bounce); 0 on glass (transmissive
+    patches pass light on and neither reflect nor store it)."""
+    alb = np.clip(scene.patch_albedo, 0.0, 1.0)
+    return np.where(scene.patch_transmission[:, None] > 0, 0.0, alb)  # glass passes light, keeps none

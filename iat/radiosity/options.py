@@ -58,6 +58,11 @@ AMBIENT_RAYS = 16
 MAX_REFLECTANCE = 0.95
 #: side of the coverage grid that tells a panel cell's area samples on its surface from off it
 SHOOTER_COVERAGE = 256
+#: directions per vertex on the sun's disc (soft shadow edges), a count
+SUN_SAMPLES = 64
+#: cosine-distributed directions per vertex towards the sky (through windows: the noise of the
+#: ~5 % of a room's hemisphere a window is, ~5 % per vertex at 1024), a count
+SKY_SAMPLES = 1024
 
 
 @dataclass
@@ -80,7 +85,9 @@ class SolveOptions:
         2.3 mm in the Cornell box), which stops the endless subdivision of tiny regions
         along hard shadow edges.
     convergence : float in (0, 1], default 0.05. Stop shooting when the unshot power is
-        below this fraction of the emitted power (patches and lights); with ``ambient``
+        below this fraction of the power the surfaces received from the sources in the direct
+        pass (in a closed scene the emitted power; in an open or daylit one what came in,
+        so an interior gets its bounces even when most of the light escapes); with ``ambient``
         its later bounces are added as a uniform ambient term, otherwise that light
         (amplified by interreflection) is missing from the result. Smaller costs more
         shots for the last, faint bounces.

@@ -43,7 +43,7 @@ def resolve(
     When the changed power exceeds the new emitted power (most of the light went away), the
     previous solution's noise would dominate the result: the scene is then solved afresh on
     the mesh (``stats['mode'] == 'mesh'``), as it is for a solution that lacks the record of
-    its sources (``stats['sources']``).
+    its sources (``stats['sources']``), and for a scene lit, now or before, by the sun or a sky.
 
     options : None takes ``previous``'s options (``max_depth`` always comes from it).
     """
@@ -54,7 +54,8 @@ def resolve(
     if not np.allclose(previous.patch_albedo, solver_albedo(scene), rtol=1e-6, atol=1e-9):
         raise OptionError("resolve: the albedos changed since the previous solution; solve again")
     src = previous.stats.get("sources") if isinstance(previous.stats, dict) else None
-    if not src:
+    daylight = getattr(scene, "sky", None) is not None or any(lt.kind == "directional" for lt in scene.lights)
+    if not src or daylight or src.get("daylight"):  # (the sun and the sky: solved afresh on the mesh)
         return solve(scene, opts, progress, mesh=previous)
     # what changed: emission per patch, lights added or removed (equal ones cancel)
     emission = scene.patch_emission
@@ -87,7 +88,7 @@ def resolve(
     if delta_power > RESOLVE_MAX_CHANGE * new_power:
         return solve(scene, opts, progress, mesh=previous)
     t_start = time.perf_counter()
-    with Visibility(scene.world_triangles()) as vis:
+    with Visibility.of_scene(scene) as vis:
         run = SolveRun(scene, opts, progress, vis, t_start)
         ctx = run.ctx
         run.take_mesh(previous)

@@ -63,6 +63,10 @@ class SolveRun:
         self.shot_power = np.zeros(self.P)  # luminance power each patch has shot so far
         self.shot_log: list[tuple[np.ndarray, np.ndarray]] = []  # (shot, received-and-reflected) power
         self.power0 = ctx.emitted_power()
+        # what convergence and sample shares are measured against: the power the scene received
+        # from its sources in the direct pass (the emitted power until then; in an open scene
+        # most of that escapes, and the rest would look converged before any bounce)
+        self.power_ref = self.power0
         self.mesh: dict = {}
         self.coarse: list[dict] | None = None  # coarse receiver grids, with what they received
         self.levels: dict[int, np.ndarray] = {}  # per shooter: receiver level of each patch (-1: vertices)
@@ -164,6 +168,7 @@ class SolveRun:
         self.unshot = self.reflected + self.offset
         self._step("meshing: power each patch shoots")
         self.gain = self.shot_gain(self.direct_cache)
+        self.power_ref = self.received_power()
         self.timings["meshing_s"] = time.perf_counter() - t0
 
     def take_mesh(self, sol: Solution) -> None:
@@ -192,7 +197,19 @@ class SolveRun:
             self.reflected = np.zeros((len(self.keys), 3))
         self.offset = self.light_correction()
         self.unshot = self.reflected + self.offset
+        self.power_ref = self.received_power()
         self.timings["meshing_s"] = time.perf_counter() - t0
+
+    def received_power(self) -> float:
+        """Luminance power the surfaces received in the direct pass: their reflected direct light
+        (with the point lights' element correction) over their albedo; surfaces of albedo 0 reflect
+        nothing and do not count. In a closed scene this is the emitted power."""
+        if not len(self.keys):
+            return 0.0
+        rho = self.ctx.albedo
+        mean = self.mesh["M"] @ np.abs(self.reflected + self.offset)
+        incident = np.where(rho > 1e-6, mean / np.maximum(rho, 1e-6), 0.0)
+        return float(np.pi * (luminance_of(incident) * self.ctx.area).sum())
 
     def light_correction(self, forest=None, keys=None, geo=None, lights=None, signs=None) -> np.ndarray:
         """(V, 3) :meth:`Context.light_correction` on the current mesh (or the given one): added to
@@ -231,7 +248,7 @@ class SolveRun:
     def shoot(self, span, target: float) -> None:
         """Shoot until the unshot power is below ``target`` or max_shots."""
         ctx, mesh, opts = self.ctx, self.mesh, self.opts
-        if self.power0 <= 0 or len(self.keys) == 0:
+        if self.power_ref <= 0 or len(self.keys) == 0:
             return
         t0 = time.perf_counter()
         u_start = self.u_start
@@ -245,7 +262,7 @@ class SolveRun:
                 done = min(1.0, max(0.0, math.log(u_start / max(total, 1e-300)) / span_log))
                 self.state["fraction"] = span[0] + (span[1] - span[0]) * done
                 self.state["message"] = (
-                    f"shooting: {self.shots} shots, unshot {total / self.power0:.3g} of emitted"
+                    f"shooting: {self.shots} shots, unshot {total / self.power_ref:.3g} of received"
                 )
                 self.check()
                 s = int(np.argmax(power))
@@ -254,7 +271,7 @@ class SolveRun:
                 field_mean = np.ravel(mesh["M"][s] @ self.unshot) * self.gain[s]
                 # fewer samples for faint shots: their noise matters less (sqrt keeps power / m flat-ish)
                 m_hi = SHOT_SAMPLE_FACTOR * self.m_side
-                share = float(power[s]) / (SHOT_FULL_SHARE * self.power0)
+                share = float(power[s]) / (SHOT_FULL_SHARE * self.power_ref)
                 m = max(1, min(m_hi, round(m_hi * math.sqrt(share))))
                 dv = self.shot_gather(s, m, field, field_mean)
                 self.shot_index[s] += 1
@@ -337,7 +354,7 @@ class SolveRun:
         # samples per source by the share of the power it has shot (as the shots themselves), but
         # REFINE_SAMPLE_FACTOR x more per side: one pattern serves all new vertices, so its error
         # is a coherent offset of them all, which the shots' per-vertex patterns average out
-        ref = max(SHOT_FULL_SHARE * self.power0, 1e-300)
+        ref = max(SHOT_FULL_SHARE * self.power_ref, 1e-300)
         m_ref = REFINE_SAMPLE_FACTOR * self.m_side
         m_src = {
             int(p): max(1, min(m_ref, round(m_ref * math.sqrt(self.shot_power[p] / ref)))) for p in sources
@@ -488,7 +505,7 @@ class SolveRun:
         if not np.isfinite(radiance).all():
             raise FloatingPointError("radiosity produced non-finite radiance (a solver bug)")
         radiance = np.maximum(radiance, 0.0)
-        unshot_fraction = float(unshot_power.sum() / self.power0) if self.power0 > 0 else 0.0
+        unshot_fraction = float(unshot_power.sum() / self.power_ref) if self.power_ref > 0 else 0.0
         if not self.state["cancelled"]:
             try:
                 self.report(1.0, f"done: {self.shots} shots, {len(keys)} vertices")
@@ -507,6 +524,7 @@ class SolveRun:
             model_path=str(getattr(self.scene, "path", "") or ""),
             clip_uv=self.scene.clip_uv,
             clip_patch=self.scene.clip_patch,
+            patch_transmission=self.scene.patch_transmission.astype(np.float32),
         )
         area_tot = float(ctx.area.sum())
         sol.stats = {
@@ -523,10 +541,11 @@ class SolveRun:
             "max_depth_reached": int(forest.leaf_level.max()) if forest.n_leaves else 0,
             "min_element_size": float(ctx.min_size),
             "emitted_power": float(self.power0),
+            "received_power": float(self.power_ref),
             "ambient_luminance_fraction": float(
-                np.pi * (ctx.area * luminance_of(self.mesh["M"] @ amb)).sum() / self.power0
+                np.pi * (ctx.area * luminance_of(self.mesh["M"] @ amb)).sum() / self.power_ref
             )
-            if self.power0 > 0 and area_tot > 0
+            if self.power_ref > 0 and area_tot > 0
             else 0.0,
             "reflectance": [float(x) for x in refl_frac],
             "culled_pairs": float(ctx.culled_fraction()),

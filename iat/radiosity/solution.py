@@ -36,7 +36,11 @@ _ARRAYS = {
     "tri_vertices": np.int32,
 }
 #: arrays a file may lack (solutions of scenes without panel cells)
-_OPTIONAL = {"clip_uv": (np.float64, (0, 3, 2)), "clip_patch": (np.int64, (0,))}
+_OPTIONAL = {
+    "clip_uv": (np.float64, (0, 3, 2)),
+    "clip_patch": (np.int64, (0,)),
+    "patch_transmission": (np.float32, (0,)),
+}
 
 
 @dataclass
@@ -77,6 +81,7 @@ class Solution:
     vert_radiance : (V, 3) float32 outgoing radiance, linear RGB
     tri_vertices : (T, 3) int32 anchored mesh triangles (indices into the vertex table)
     clip_uv, clip_patch : (C, 3, 2) float64, (C,) int64 panel cells' clip triangles (the scene's)
+    patch_transmission : (P,) float32 glass transmittance (empty: all opaque); glass is not drawn
     stats, options : JSON-able dicts
     model_path : the model file it was solved from ("" if built in memory)
     """
@@ -99,6 +104,7 @@ class Solution:
     model_path: str = ""
     clip_uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 2)))
     clip_patch: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    patch_transmission: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.float32))
     _drawn: DrawnMesh | None = field(default=None, init=False, repr=False, compare=False)
 
     # -- views ---------------------------------------------------------------
@@ -236,6 +242,7 @@ class Solution:
             and np.isfinite(self.vert_radiance).all()
             and self.clip_uv.shape == (len(self.clip_patch), 3, 2)
             and (len(self.clip_patch) == 0 or (0 <= self.clip_patch.min() and self.clip_patch.max() < p))
+            and len(self.patch_transmission) in (0, p)
         )
         if not ok:
             raise SolutionFileError("damaged solution file: inconsistent arrays", path)
@@ -244,7 +251,8 @@ class Solution:
 def drawn_mesh(solution) -> DrawnMesh:
     """The mesh as drawn (:class:`DrawnMesh`) of a solution, or of any object with its fields
     ``max_depth, patch_corners, patch_is_quad, vert_key, tri_vertices`` (and ``clip_uv``,
-    ``clip_patch`` when it has panel cells): a panel cell's triangles cut to its surface."""
+    ``clip_patch`` when it has panel cells, ``patch_transmission`` when it has glass): a panel
+    cell's triangles cut to its surface, glass left out (drawn fully transparent)."""
     n = 1 << int(solution.max_depth)
     corners = np.asarray(solution.patch_corners, dtype=np.float64).reshape(-1, 4, 3)
     is_quad = np.asarray(solution.patch_is_quad, dtype=bool)
@@ -252,6 +260,9 @@ def drawn_mesh(solution) -> DrawnMesh:
     pos = qt.keys_to_world(corners, is_quad, key, n)
     p, i, j = qt.decode_key(key, n)
     tri = np.asarray(solution.tri_vertices, dtype=np.int64).reshape(-1, 3)
+    tau = np.asarray(getattr(solution, "patch_transmission", np.zeros(0)), dtype=np.float64).reshape(-1)
+    if len(tau) and (tau > 0).any() and len(tri):
+        tri = tri[tau[p[tri[:, 0]]] <= 0]
     clip_uv = np.asarray(getattr(solution, "clip_uv", np.zeros((0, 3, 2))), dtype=np.float64)
     clip_uv = clip_uv.reshape(-1, 3, 2)
     clip_patch = np.asarray(getattr(solution, "clip_patch", np.zeros(0)), dtype=np.int64).reshape(-1)

@@ -58,7 +58,8 @@ C. **Refinement on the total radiance** (``refine_indirect``), once, after the
    interpolated from its parent. Its unshot radiance is what it received minus
    what its patch already shot from there, so light a coarse element could not
    hold is shot again, not lost. Shooting then continues to ``convergence``
-   (unshot power over emitted power).
+   (unshot power over the power the surfaces received in the direct pass: the emitted
+   power in a closed scene, what came in in an open one).
 D. **Ambient term** (``ambient``, after Cohen et al. 1988): the light still
    unshot at convergence would, over all its later bounces, add a reflected
    power of ``U * r / (1 - r)`` (``U`` the unshot power, ``r`` the fraction of a
@@ -131,19 +132,19 @@ def solve(
     t_start = time.perf_counter()
     if progress is not None:  # building the ray-tracing scene takes seconds on big models
         progress(0.0, f"preparing: {scene.n_patches} patches")  # a cancel is seen at the next report
-    with Visibility(scene.world_triangles()) as vis:
+    with Visibility.of_scene(scene) as vis:
         run = SolveRun(scene, opts, progress, vis, t_start)
-        target = opts.convergence * run.power0
         if mesh is None:
             run.mesh_by_direct_light()
-            first_target = max(target, math.sqrt(opts.convergence) * run.power0)
+            target = opts.convergence * run.power_ref  # of what the scene received (open scenes)
+            first_target = max(target, math.sqrt(opts.convergence) * run.power_ref)
             plan = [("shoot", first_target, (0.2, 0.6)), ("refine", "refining", (0.6, 0.75))]
             plan += [("shoot", target, (0.75, 1.0))]
         else:
             run.take_mesh(mesh)
             if not run.state["cancelled"]:
                 run.direct_on_mesh()
-            plan = [("shoot", target, (0.2, 1.0))]
+            plan = [("shoot", opts.convergence * run.power_ref, (0.2, 1.0))]
         if not run.state["cancelled"]:
             run.run_plan(plan)
         return run.finish(mode="solve" if mesh is None else "mesh")
@@ -155,6 +156,6 @@ def evaluate_direct(scene, keys: np.ndarray, options: SolveOptions | None = None
     Exposed for tests and diagnostics (re-evaluating a solution's vertices exactly).
     """
     opts = (SolveOptions() if options is None else options).validate()
-    with Visibility(scene.world_triangles()) as vis:
+    with Visibility.of_scene(scene) as vis:
         ctx = Context(scene, opts, vis)
         return ctx.direct(np.asarray(keys, dtype=np.int64), lambda: None)

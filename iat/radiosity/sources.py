@@ -11,10 +11,11 @@ import numpy as np
 def sources_record(ctx) -> dict:
     """JSON-able description of the light sources of a solve on ``ctx`` (a
     :class:`iat.radiosity.context.Context`): its point / spot lights and its emitting patches
-    (``[patch, r, g, b]``, emitted radiance)."""
+    (``[patch, r, g, b]``, emitted radiance), and whether a sun or a sky lit it (``daylight``)."""
     return {
         "lights": [light_record(lt) for lt in ctx.lights],
         "emitters": [[int(p), *(float(x) for x in ctx.emission[p])] for p in ctx.emitters],
+        "daylight": bool(ctx.suns or ctx.sky is not None),
     }
 
 

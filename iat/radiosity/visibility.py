@@ -26,13 +26,29 @@ class Visibility:
     """Occlusion queries against the scene's surface.
 
     triangles : (T, 3, 3) float64 world triangles
+    transmission : (T,) float transmittance of each triangle (glass), or None (all opaque)
     threads : worker threads for large queries (default: min(2, CPU count))
 
     ``rays`` counts the rays traced so far and ``seconds`` the time spent tracing them.
+    Transmissive triangles do not occlude; :meth:`visible` multiplies by the transmittance
+    of the first one a ray crosses (one pane: double glazing counts once).
     """
 
-    def __init__(self, triangles: np.ndarray, threads: int | None = None):
+    def __init__(
+        self, triangles: np.ndarray, transmission: np.ndarray | None = None, threads: int | None = None
+    ):
         tris = np.asarray(triangles, dtype=np.float32).reshape(-1, 3, 3)
+        tau = np.zeros(len(tris)) if transmission is None else np.asarray(transmission, dtype=np.float64)
+        glass = tau > 0
+        self._glass = None
+        if glass.any():
+            self._glass = rtcs.EmbreeScene()
+            gv = np.ascontiguousarray(tris[glass].reshape(-1, 3))
+            self._glass_mesh = TriangleMesh(
+                self._glass, gv, np.arange(len(gv), dtype=np.int32).reshape(-1, 3)
+            )
+            self._glass_tau = tau[glass]
+            tris = tris[~glass]
         self._scene = rtcs.EmbreeScene()
         self._n_tris = len(tris)
         if self._n_tris:
@@ -44,6 +60,11 @@ class Visibility:
         self._lock = threading.Lock()
         self.rays = 0
         self.seconds = 0.0
+
+    @classmethod
+    def of_scene(cls, scene, threads: int | None = None) -> Visibility:
+        """The visibility of a :class:`~iat.io.scene.Scene`'s surface, its glass transmissive."""
+        return cls(scene.world_triangles(), scene.patch_transmission[scene.world_triangle_patch()], threads)
 
     def close(self) -> None:
         """Stop the worker threads (also done when the object is collected)."""
@@ -99,4 +120,28 @@ class Visibility:
         with self._lock:
             self.rays += n
             self.seconds += time.perf_counter() - t0
+        return out
+
+    def visible(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray) -> np.ndarray:
+        """(n,) float64 what of each ray's light gets through before ``tfar``: 0 when something
+        opaque lies on it, else the transmittance of the first glass it crosses (1 if none)."""
+        out = (~self.occluded(origins, dirs, tfar)).astype(np.float64)
+        if self._glass is None or not out.any():
+            return out
+        free = np.flatnonzero(out > 0)
+        o = np.ascontiguousarray(np.asarray(origins, dtype=np.float32).reshape(-1, 3)[free])
+        d = np.ascontiguousarray(np.asarray(dirs, dtype=np.float32).reshape(-1, 3)[free])
+        t = np.ascontiguousarray(np.asarray(tfar, dtype=np.float32).reshape(-1)[free])
+        t0 = time.perf_counter()
+        prim = np.concatenate(
+            [
+                self._glass.run(o[a : a + CHUNK], d[a : a + CHUNK], dists=t[a : a + CHUNK])
+                for a in range(0, len(o), CHUNK)
+            ]
+        )
+        with self._lock:
+            self.rays += len(o)
+            self.seconds += time.perf_counter() - t0
+        hit = prim >= 0
+        out[free[hit]] = self._glass_tau[prim[hit]]
         return out

@@ -1,0 +1,121 @@
+"""Daylight: the sun (a directional light with a disc), a sky, glass, and convergence in open
+scenes, on a room lit through one window (tests/support/daylight.py), against Mitsuba 3.
+
+The reference (1024 spp, 96 x 72, Mitsuba's ``directional`` and an ``envmap`` of the same sky)
+is cached under ``tests/refs/`` (``pytest --regen-refs`` renders it again, ~3 min)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from iat.color import LUMINANCE_WEIGHTS
+from iat.radiosity import SolveOptions, solve
+from tests.support.daylight import CAMERA, daylit_room
+
+REFS = Path(__file__).parent / "refs"
+SIZE = (96, 72)
+
+
+def _render(egl_ctx, scene, sol):
+    from iat.render.renderer import Renderer
+
+    r = Renderer(egl_ctx)
+    try:
+        r.set_scene(scene)
+        r.set_solution(sol)
+        img = r.render(CAMERA, SIZE, mode="mesh")
+        surface = r.render(CAMERA, SIZE, mode="preview").max(axis=-1) > 0  # (the sky seen directly: no)
+    finally:
+        r.release()
+    return img, surface
+
+
+def _centroid(lum, mask):
+    yx = np.argwhere(mask)
+    w = lum[mask]
+    return (yx * w[:, None]).sum(axis=0) / w.sum()
+
+
+@pytest.fixture(scope="module")
+def reference():
+    pytest.importorskip("mitsuba")
+    from iat.measure.reference import render_reference_cached
+
+    return render_reference_cached(daylit_room(), CAMERA, SIZE, spp=1024, cache_dir=REFS, seed=1)
+
+
+@pytest.mark.parametrize("convergence", [0.05, 0.01])
+def test_sun_and_sky_through_a_window_against_mitsuba(egl_ctx, reference, convergence):
+    """The sunlit patch where Mitsuba has it, no surface black that Mitsuba lights, and the
+    relative error on the smooth lit pixels; the indirect light is the part that needs the
+    bounces (the default convergence leaves it ~13 % low: see docs/lighting.md)."""
+    from scipy.ndimage import uniform_filter
+
+    from iat.measure.metrics import reference_errors, smooth_lit_mask
+
+    scene = daylit_room()
+    sol = solve(scene, SolveOptions(convergence=convergence))
+    assert sol.stats["shots"] > 5  # the bounces happen (a sky-lit room stopped after 0-1 shots)
+    img, surface = _render(egl_ctx, scene, sol)
+    ref = np.where(surface[..., None], reference, 0.0)
+    yr, yi = ref @ LUMINANCE_WEIGHTS, img @ LUMINANCE_WEIGHTS
+    lit = surface & (uniform_filter(yr, 3) > 0.02 * np.percentile(yr[surface], 99))
+    assert not (lit & (yi <= 0)).any()
+    sm_r = uniform_filter(yr, 5)
+    sunlit = surface & (sm_r > 0.5 * np.percentile(sm_r[surface], 99))
+    sunlit_i = surface & (uniform_filter(yi, 5) > 0.5 * np.percentile(uniform_filter(yi, 5)[surface], 99))
+    shift = np.linalg.norm(_centroid(yr, sunlit) - _centroid(yi, sunlit_i)) / SIZE[0]
+    assert shift <= 0.02, f"sunlit patch {shift:.3f} of the width away"
+    assert yi[sunlit].mean() == pytest.approx(yr[sunlit].mean(), rel=0.05)  # the sun's light itself
+    e = reference_errors(img, ref, smooth_lit_mask(ref) & surface)
+    sun_ratio = yi[sunlit].mean() / yr[sunlit].mean()
+    st = sol.stats
+    print(f"convergence {convergence}: {e}, sun patch shift {shift:.4f}, ratio {sun_ratio:.3f}")
+    print(f"  {st['shots']} shots, {st['time_s']:.1f} s")
+    # measured: 0.05 -> smooth 0.126, blocks 0.088, bias -10.2 %; 0.01 -> 0.090, 0.031, -2.3 %
+    # (the per-pixel figure carries the reference's own noise at 1024 spp; the goal 0.08 is met
+    # by the 8 x 8 blocks at 0.01 only: docs/lighting.md)
+    if convergence <= 0.01:
+        assert e["rel_blocks"] <= 0.05 and e["rel_smooth"] <= 0.10 and abs(e["bias"]) <= 0.05
+    else:
+        assert e["rel_blocks"] <= 0.12 and e["rel_smooth"] <= 0.15 and abs(e["bias"]) <= 0.15
+
+
+def test_glass_passes_its_transmittance():
+    """Behind glass of transmittance 0.8 the room gets 0.8 of the light it gets through the open
+    window (sun and sky; everything inside is linear in what comes in); the glass itself keeps
+    nothing."""
+    open_room = solve(daylit_room(), SolveOptions(max_depth=4))
+    glazed_scene = daylit_room(glass=0.8)
+    glazed = solve(glazed_scene, SolveOptions(max_depth=4))
+
+    def interior(sol, scene):
+        from iat.geometry import quadtree as qt
+
+        p = qt.decode_key(sol.vert_key, 1 << sol.max_depth)[0]
+        floor = p == 0  # the floor patch: sunlit and sky-lit
+        glass = scene.patch_transmission[p] > 0
+        return sol.vert_radiance[floor].mean(axis=0) @ LUMINANCE_WEIGHTS, sol.vert_radiance[glass]
+
+    y_open, _ = interior(open_room, daylit_room())
+    y_glass, on_glass = interior(glazed, glazed_scene)
+    assert y_glass / y_open == pytest.approx(0.8, rel=0.03)
+    assert len(on_glass) and not on_glass.any()
+
+
+def test_sun_states_move_the_sun():
+    """A state's ``sun`` entry sets the scene's directional light named sun; intensity 0 removes it."""
+    from iat.lighting.states import apply_lighting_state
+    from iat.lighting.sun import sun_states
+
+    states = sun_states(52.52, 13.40, "2026-06-21", ["06:00", "12:00", "23:00"], "Europe/Berlin")
+    scene = daylit_room(sun=0.0)
+    lit = [apply_lighting_state(scene, st) for st in states.values()]
+    suns = [[lt for lt in s.lights if lt.kind == "directional"] for s in lit]
+    assert [len(s) for s in suns] == [1, 1, 0]
+    noon = suns[1][0]
+    assert noon.direction[1] < -0.8  # high in the sky at noon in June: light travels down
+    assert suns[0][0].direction[1] > noon.direction[1]
