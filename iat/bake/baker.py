@@ -337,7 +337,10 @@ class Baker:
         rings = self._rings(tex_inv, policy.method, policy.scale, policy.scale_mode)
         if len(mesh_inv):
             rings.update(self._rings(mesh_inv, "bilinear", 1.0, "clamped"))
-        new, sc.last_info = seams.harmonise_rings(rings, sides, textured, idx.is_quad, sc.pairs)
+        judge = None  # discontinuities judged on the solution's values (a bicubic fit overshoots)
+        if policy.method != "bilinear":
+            judge = {**rings, **self._rings(tex_inv, "bilinear", policy.scale, policy.scale_mode)}
+        new, sc.last_info = seams.harmonise_rings(rings, sides, textured, idx.is_quad, sc.pairs, judge)
         return new
 
     def _boxes_of(self, textured, ps, policy: BakePolicy, align: int, tm: dict) -> tuple[list, list]:

@@ -308,13 +308,21 @@ def _relative_step(a: np.ndarray, b: np.ndarray, peak: float) -> np.ndarray:
 
 
 def harmonise_rings(
-    rings: dict, sides: np.ndarray, textured: np.ndarray, is_quad: np.ndarray, pairs: EdgePairs
+    rings: dict,
+    sides: np.ndarray,
+    textured: np.ndarray,
+    is_quad: np.ndarray,
+    pairs: EdgePairs,
+    judge: dict | None = None,
 ) -> tuple[dict, dict]:
     """Make neighbours' boundary rings describe the same polyline along every shared segment.
 
     rings : {patch: (ring length, 3) ring} of every patch to take part: textured ones, and mesh
       ones (``textured`` False: their ring is the mesh along their edges, never written)
     sides : (P,) texels per side of each ring's tile
+    judge : rings of the same layout that decide which pairs are real discontinuities
+      (:data:`MAX_STEP`; default ``rings``): a bicubic fit overshoots where a shadow crosses an
+      edge, so the baker judges on the bilinear rings, the solution's own vertex values
     Returns ``(new, info)``: new {patch: (ring length, 3) float64} for the textured patches whose
     ring changed; info: pairs, passes, texels written.
     """
@@ -349,6 +357,7 @@ def harmonise_rings(
     if [len(x) for x in parts] != rlen.tolist():
         raise ValueError("harmonise_rings: a ring's length does not match its tile side in `sides`")
     R = np.concatenate(parts).astype(np.float64)
+    RJ = R if judge is None else np.concatenate([judge[p] for p in involved.tolist()]).astype(np.float64)
     # slave knots inside each segment (ends included), the master's polyline there
     pm, pl = P_[r, master], P_[r, sl]
     em, el = E_[r, master], E_[r, sl]
@@ -373,11 +382,11 @@ def harmonise_rings(
     dst = off[pl[rep]] + (el[rep] * (mL[rep] - 1) + k) % ring_len[pl[rep]]
     # real discontinuities (relative step above MAX_STEP anywhere on the segment) stay as they are
     R0 = R.copy()
-    peak = max(float(np.abs(R).max()), 1e-30)
+    peak = max(float(np.abs(RJ).max()), 1e-30)
     # judged by the mean step at the knots the two sides share (equal world points, where
     # independent subdivision leaves only solver noise: a vertex in a room's corner can be off by
     # half, a wall standing on the edge differs all along); without shared knots, at all knots
-    step = _relative_step((1.0 - fr) * R[ia] + fr * R[ib], R[dst], peak)
+    step = _relative_step((1.0 - fr) * RJ[ia] + fr * RJ[ib], RJ[dst], peak)
     shared = (fr[:, 0] == 0.0) | (fr[:, 0] == 1.0)
     n = len(P_)
     n_sh = np.bincount(rep[shared], minlength=n)
@@ -409,7 +418,7 @@ def harmonise_rings(
     c_dst, c_src = cring[order], cring[top_of]
     w = textured[cp[order]] & (c_dst != c_src)
     c_dst, c_src = c_dst[w], c_src[w]
-    w = _relative_step(R[c_src], R[c_dst], peak) <= MAX_STEP
+    w = _relative_step(RJ[c_src], RJ[c_dst], peak) <= MAX_STEP
     c_dst, c_src = c_dst[w], c_src[w]
     # Jacobi passes: edge copies, then corner groups, until nothing changes (a slave's corner
     # may be another pair's master knot)

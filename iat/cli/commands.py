@@ -118,7 +118,7 @@ def cmd_info(args) -> int:
         "quads": int(q.sum()),
         "triangle_patches": int((~q).sum()),
         "panel_cells": int(scene.patch_clipped.sum()),
-        "panels": find_panels(scene).n_panels,
+        "panels": find_panels(scene, fit="none").n_panels,
         "slivers": sliver_count(scene),
         "materials": len(scene.materials),
         "emissive_materials": int(sum(m.emission.max() > 0 for m in scene.materials)),

@@ -108,12 +108,15 @@ def patch_geometry(vertices: np.ndarray, corners: np.ndarray) -> tuple[np.ndarra
     return pos, n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300), area
 
 
-def group_panels(vertices: np.ndarray, corners: np.ndarray, material: np.ndarray) -> Panels:
+def group_panels(vertices: np.ndarray, corners: np.ndarray, material: np.ndarray, fit: str = "all") -> Panels:
     """Group root patches into panels: edge-connected, same material, coplanar
     (:data:`PANEL_ANGLE_TOL`, :data:`PANEL_PLANE_TOL`); each gets its minimal bounding
     rectangle, with ``axes[0] x axes[1]`` along the panel's normal.
 
     vertices : (n, 3) float64; corners : (p, 4) int64; material : (p,) int64
+    fit : which panels get their rectangle (a convex hull each: the slow part): ``"all"``,
+      ``"triangles"`` (groups of two or more patches holding a triangle: what
+      :func:`make_panels` may turn into cells) or ``"none"``; the others keep extent 0.
     """
     corners = np.asarray(corners, dtype=np.int64)
     n_p = len(corners)
@@ -140,7 +143,17 @@ def group_panels(vertices: np.ndarray, corners: np.ndarray, material: np.ndarray
     axes = np.zeros((k, 2, 3))
     origin = np.zeros((k, 3))
     extent = np.zeros((k, 2))
-    for q, idx in enumerate(members_of(panel, k)):  # one small hull per panel
+    members = members_of(panel, k)
+    if fit == "all":
+        todo = range(k)
+    elif fit == "triangles":
+        size = np.bincount(panel, minlength=k)
+        with_tri = np.bincount(panel, weights=corners[:, 3] < 0, minlength=k) > 0
+        todo = np.flatnonzero((size >= 2) & with_tri)
+    else:
+        todo = []
+    for q in todo:  # one small hull per panel
+        idx = members[q]
         helper = np.array([1.0, 0.0, 0.0]) if abs(pn[q, 0]) < 0.9 else np.array([0.0, 1.0, 0.0])
         u = np.cross(pn[q], helper)
         u /= np.linalg.norm(u)
@@ -161,9 +174,9 @@ def members_of(label: np.ndarray, k: int) -> list[np.ndarray]:
     return np.split(np.argsort(label, kind="stable"), np.cumsum(np.bincount(label, minlength=k))[:-1])
 
 
-def find_panels(scene) -> Panels:
+def find_panels(scene, fit: str = "all") -> Panels:
     """:func:`group_panels` of a :class:`~iat.io.scene.Scene`'s root patches."""
-    return group_panels(scene.vertices, scene.patch_corners, scene.patch_material)
+    return group_panels(scene.vertices, scene.patch_corners, scene.patch_material, fit)
 
 
 def sliver_count(scene) -> int:
@@ -244,7 +257,7 @@ def make_panels(
     empty = PanelRoots(V, corners, material, uv, np.zeros((0, 3, 2)), np.zeros(0, dtype=np.int64), 0)
     if len(corners) == 0:
         return empty
-    pan = group_panels(V, corners, material)
+    pan = group_panels(V, corners, material, fit="triangles")
     is_tri = corners[:, 3] < 0
     k = pan.n_panels
     size = np.bincount(pan.panel, minlength=k)
