@@ -249,3 +249,21 @@ def test_solve_with_sun_and_sky(tmp_path):
     assert r.returncode == 2 and "below the horizon" in r.stderr
     r = iat("solve", obj, "-o", out, "--sky", "cloudy")
     assert r.returncode == 2 and r.stderr.startswith("iat solve: error: --sky must be")
+
+
+def test_exported_glb_keeps_cameras_and_renders_as_baked(tmp_path, cornell_solution):
+    """The export carries the model's cameras; ``iat render OUT.glb`` draws the file as baked
+    (it once re-solved it as an unlit model: black, exit 0)."""
+    glb = tmp_path / "cornell.glb"
+    assert iat("bake", cornell_solution, "-o", glb).returncode == 0
+    a, b = tmp_path / "glb.npy", tmp_path / "sol.npy"
+    r = iat("render", glb, "--camera", "0", "--size", "64x64", "-o", a)
+    assert r.returncode == 0, r.stderr
+    assert iat("render", cornell_solution, "--camera", "0", "--size", "64x64", "-o", b).returncode == 0
+    img, ref = np.load(a), np.load(b)
+    assert img.max() > 0
+    peak = float(np.percentile(ref, 90))  # the walls (the lamp clips in the file's 8-bit scale)
+    psnr = 10 * np.log10(peak**2 / np.mean((np.minimum(img, peak) - np.minimum(ref, peak)) ** 2))
+    assert psnr > 30, psnr
+    r = iat("render", glb, "--mode", "mesh", "-o", a)
+    assert r.returncode == 2 and "exported bake" in r.stderr

@@ -252,7 +252,6 @@ def cmd_bake(args) -> int:
 def cmd_render(args) -> int:
     from iat.camera import Camera
     from iat.io.images import save_npy, save_png
-    from iat.render.renderer import Renderer
 
     size = parse_size(args.size)
     out = Path(args.output)
@@ -266,7 +265,11 @@ def cmd_render(args) -> int:
             raise OptionError("--set renders solutions: use --mode mesh, iat, split or diff")
         scene, sset = _open_set(args)
         sol = sset.first
-    elif Path(args.input).suffix.lower() in (".glb", ".gltf") and mode == "preview":
+    elif Path(args.input).suffix.lower() in (".glb", ".gltf") and (
+        mode == "preview" or _is_export(args.input)
+    ):
+        if mode not in ("iat", "preview"):
+            raise OptionError(f"{args.input} is an exported bake: render it with --mode iat (or preview)")
         scene, sol = _load(args, args.input), None
     else:
         scene, sol = _open(args, "render")
@@ -285,6 +288,30 @@ def cmd_render(args) -> int:
         cam = scene.cameras[args.camera]
     else:
         cam = scene.default_camera()
+    if sol is None and sset is None and mode == "iat":  # an exported bake, drawn as baked
+        from iat.render.glb_view import render_glb
+
+        img = render_glb(args.input, cam, size)
+    else:
+        img = _render_solution(args, scene, sol, sset, cam, size, mode)
+    if out.suffix.lower() == ".npy":
+        save_npy(out, img)
+    else:
+        from iat.color import auto_exposure
+
+        save_png(out, img, exposure=args.exposure if args.exposure else auto_exposure(img))
+    info = {"output": str(out), "mode": mode, "size": list(size)}
+    if sset is not None:
+        a, b, w = sset.weights(args.at)
+        info["set"] = {"states": sset.names, "at": float(args.at), "blend": [sset.names[a], sset.names[b], w]}
+    _emit(args, info)
+    return 0
+
+
+def _render_solution(args, scene, sol, sset, cam, size, mode) -> np.ndarray:
+    """(h, w, 3) linear radiance of a solution (or a set's blended moment, or the scene's preview)."""
+    from iat.render.renderer import Renderer
+
     r = Renderer()
     try:
         r.set_scene(scene)
@@ -301,21 +328,16 @@ def cmd_render(args) -> int:
                 from iat.bake.baker import Baker
 
                 r.set_baked(Baker(sol, scene).bake(_bake_policy(args)))
-        img = r.render(cam, size=size, mode=mode)
+        return r.render(cam, size=size, mode=mode)
     finally:
         r.release()
-    if out.suffix.lower() == ".npy":
-        save_npy(out, img)
-    else:
-        from iat.color import auto_exposure
 
-        save_png(out, img, exposure=args.exposure if args.exposure else auto_exposure(img))
-    info = {"output": str(out), "mode": mode, "size": list(size)}
-    if sset is not None:
-        a, b, w = sset.weights(args.at)
-        info["set"] = {"states": sset.names, "at": float(args.at), "blend": [sset.names[a], sset.names[b], w]}
-    _emit(args, info)
-    return 0
+
+def _is_export(path) -> bool:
+    """True for a GLB that ``iat bake`` wrote (its root extras say so)."""
+    from iat.render.glb_view import is_iat_export
+
+    return Path(path).is_file() and is_iat_export(path)
 
 
 def _size_and_frames(args, size: str, frames: int) -> tuple[tuple[int, int], int]:
@@ -361,6 +383,28 @@ def cmd_chart(args) -> int:
         front = row["pareto"].get("flip_vs_finest/gpu_mb", [])
         print(f"{row['model']}: {len(row['points'])} points, {len(front)} on the memory Pareto front")
     return 0
+
+
+def cmd_batch(args) -> int:
+    """``iat batch JOBS.toml [--workers N] [--scheduler ADDRESS] [--json]``: every job's tasks on a Dask
+    cluster; one line ``iat batch: error: <task>: <cause>`` per failed task on stderr. Exit 0 when
+    all succeed, 2 when the failures are all user errors (a bad file, a bad option), else 1."""
+    from iat.tools.batch import parse_jobs, print_errors, run_batch
+
+    batch = parse_jobs(args.jobs)
+    with _progress_bar(args, f"batch {Path(args.jobs).name}") as bar:
+        report = run_batch(batch, workers=args.workers, scheduler=args.scheduler, progress=bar)
+    if getattr(args, "json", False):
+        print(json.dumps(report.to_dict(), indent=2, default=_json_default))
+    else:
+        for r in report.results:
+            print(f"{r.name:>24}: {r.status} {r.seconds:.1f} s")
+        n, wall = len(report.results), report.wall_s
+        print(f"{n} tasks in {wall:.1f} s on {report.workers} workers: {report.output}")
+    print_errors(report)
+    if not report.failed:
+        return 0
+    return EXIT_USER_ERROR if all(r.user_error for r in report.failed) else 1
 
 
 def _app(name: str):
@@ -529,6 +573,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--size", default="320x240")
     s.add_argument("--frames", type=int, default=10)
     s.set_defaults(func=cmd_chart)
+
+    s = sub.add_parser("batch", help="solves, bakes and renders of a job file as Dask tasks")
+    s.add_argument("jobs", metavar="JOBS.toml")
+    s.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
+    s.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler (tcp://host:8786)")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_batch)
 
     s = sub.add_parser("view", help="the walkthrough viewer")
     s.add_argument("input", nargs="?", metavar="SOL|MODEL")

@@ -241,6 +241,13 @@ def export_glb(baked, path, scene=None, layered: bool = False) -> Path:
             "memory": baked.memory.to_dict(),
         }
     }
+    if scene is not None:  # the model's viewpoints and walkthrough paths come along
+        for cam in scene.cameras:
+            g.add_camera_node(cam, name=cam.name or None)
+        if scene.camera_paths:
+            g.extras["iat_camera_paths"] = {
+                k: [c.to_dict() for c in v] for k, v in scene.camera_paths.items()
+            }
     wrote = False
     if len(baked.mesh_indices):
         mat = g.add_material("iat_mesh", unlit=True)
