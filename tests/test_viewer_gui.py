@@ -142,7 +142,7 @@ def test_viewer_end_to_end(tmp_path, monkeypatch, gui_child):
 
         # a texture budget smaller than any texture: everything becomes mesh
         ctx.item_click("//**/Budget")
-        ctx.item_input_value("//**/Budget (MB)", 0.01)
+        ctx.item_input_value("//**/Budget (MB)", 0.001)
         settle(ctx)
         m = s.model.memory
         got["budget"] = (
@@ -212,7 +212,7 @@ def test_viewer_end_to_end(tmp_path, monkeypatch, gui_child):
     assert all(Path(p).is_file() and Path(p).parent == tmp_path / "shots" for p in got["shots"])
 
     on, budget_mb, tex, too_small, tris = got["budget"]
-    assert on and budget_mb == pytest.approx(0.01) and tex == 0 and too_small and tris == mesh_tris
+    assert on and budget_mb == pytest.approx(0.001) and tex == 0 and too_small and tris == mesh_tris
     assert got["budget_off"] > 0
 
     assert "exported" in got["export_status"]

@@ -253,6 +253,10 @@ class ViewerApp:
         if s.jobs.bake_worker is not None:
             s.jobs.bake_worker.close()
         s.model.path = opened.path
+        for key in ("export", "solution"):  # derived from the model shown: re-derived from this one
+            s.requests.file_fields[key] = ""
+        s.requests.file_fields["open"] = str(opened.path)
+        s.requests.auto_exposure = True
         s.model.scene, s.model.solution, s.model.baker = opened.scene, opened.solution, opened.baker
         s.model.baked = opened.baked
         s.jobs.bake_worker = BakeWorker(
@@ -647,6 +651,9 @@ class ViewerApp:
         if mode is None or vp is None or s.view.camera is None and s.view.nav is None:
             return
         cam = s.view.camera if s.view.camera is not None else s.view.nav.camera
+        if s.requests.auto_exposure:
+            s.requests.auto_exposure = False
+            self._auto_exposure(cam, mode, vp)
         try:
             self.renderer.draw(
                 cam,
@@ -671,6 +678,25 @@ class ViewerApp:
         if s.requests.screenshot is not None:
             path, s.requests.screenshot = s.requests.screenshot, None
             self._screenshot(path, vp, mode)
+
+    def _auto_exposure(self, cam, mode: str, vp) -> None:
+        """The exposure ``iat render`` would pick for this view: :func:`iat.color.auto_exposure` of
+        its linear radiance, drawn offscreen at the view's size (the split and difference views are
+        exposed as the mesh)."""
+        from iat.color import auto_exposure
+
+        s = self.state
+        w, h = int(vp[2]), int(vp[3])
+        scale = min(1.0, 512.0 / max(w, h))  # the 99th percentile does not need every pixel
+        size = (max(int(round(w * scale)), 1), max(int(round(h * scale)), 1))
+        try:
+            img = self.renderer.render(
+                cam, size=size, mode=mode if mode in ("mesh", "iat", "preview") else "mesh"
+            )
+        except Exception as e:
+            s.messages.set_error(f"cannot measure the exposure: {error_text(e)}")
+            return
+        s.tuning.exposure = float(auto_exposure(img))
 
     def read_view(self, vp=None) -> np.ndarray:
         """(h, w, 3) uint8 of the 3D view as drawn this frame (call during the background callback)."""
@@ -701,7 +727,7 @@ class ViewerApp:
             ms = (now - self._last_swap) * 1000.0
             s = self.state
             s.stats.add_frame_time(ms)
-            if s.paths.player is not None:
+            if s.paths.player is not None and s.paths.posed:  # only frames that drew a pose
                 s.paths.play_frame_ms.append(ms)
             if self.frame_log is not None:
                 self.frame_log.append(
@@ -717,6 +743,7 @@ class ViewerApp:
                 if self.swap_hook is not None:
                     self.swap_hook(self, self.frame_log[-1])
         self._last_swap = now
+        self.state.paths.posed = False
         self._uploaded_this_frame = False
         self._upload_ms = 0.0
 

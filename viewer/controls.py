@@ -155,6 +155,7 @@ def navigate(s: AppState, idle: bool) -> None:
             s.stop_playback()
         else:
             s.view.camera = cam
+            s.paths.posed = True  # this frame shows a pose of the path: counted after its swap
             return
     s.view.camera = s.view.nav.update(dt, inp)
     if s.paths.recorder is not None:
@@ -162,7 +163,8 @@ def navigate(s: AppState, idle: bool) -> None:
 
 
 def shortcuts(s: AppState) -> None:
-    """F12 screenshot; and, when no text field has the keyboard, 1-4 modes, R reset, Ctrl+O open."""
+    """F12 screenshot; and, when no text field has the keyboard, 1-4 modes, R reset, X auto exposure,
+    Ctrl+O open."""
     io = imgui.get_io()
     if imgui.is_key_pressed(imgui.Key.f12, False):
         s.requests.screenshot = ""
@@ -173,6 +175,8 @@ def shortcuts(s: AppState) -> None:
             s.view.mode = m
     if imgui.is_key_pressed(imgui.Key.r, False) and s.view.nav is not None:
         s.view.nav.reset()
+    if imgui.is_key_pressed(imgui.Key.x, False):  # E is taken: it rises
+        s.requests.auto_exposure = True
     if io.key_ctrl and imgui.is_key_pressed(imgui.Key.o, False):
         if panels.has_native_dialogs():
             panels.open_dialog(s)

@@ -26,6 +26,7 @@ from imgui_bundle import ImVec2, ImVec4, hello_imgui, imgui, implot
 from iat.bake.flatten import METHODS
 from iat.io.load import SUPPORTED_EXTENSIONS
 from viewer.bake_worker import snap_scale
+from viewer.lights import new_light_intensity, new_light_position
 from viewer.navigation import paths_file
 from viewer.state import MODE_LABELS, MODES, AppState
 
@@ -108,7 +109,7 @@ def tuning_panel(state: AppState) -> None:
     _help("When on, threshold and scale are chosen to fit the texture memory budget.")
     imgui.begin_disabled(not t.budget_on)
     changed, v = imgui.slider_float(
-        "Budget (MB)", float(t.budget_mb), 0.0, 256.0, "%.2f MB", imgui.SliderFlags_.logarithmic
+        "Budget (MB)", float(t.budget_mb), 0.0, 256.0, "%.3g MB", imgui.SliderFlags_.logarithmic
     )
     if changed:
         t.budget_mb = max(float(v), 0.0)
@@ -116,11 +117,16 @@ def tuning_panel(state: AppState) -> None:
 
     changed, t.detail = imgui.checkbox("Detail textures", t.detail)
     _help("Store incoming light where a material has a detail texture; the shader multiplies both.")
+    lo, hi = min(0.05, float(t.exposure)), max(20.0, float(t.exposure))  # an auto exposure may be outside
     changed, v = imgui.slider_float(
-        "Exposure", float(t.exposure), 0.05, 20.0, "%.2f", imgui.SliderFlags_.logarithmic
+        "Exposure", float(t.exposure), lo, hi, "%.3g", imgui.SliderFlags_.logarithmic
     )
     if changed:
         t.exposure = float(v)
+    _help(
+        "Multiplier on radiance before the tone map; set from the view when a model opens\n"
+        "(View: Auto exposure, key X)."
+    )
     changed, state.view.tonemap = imgui.checkbox("sRGB tone map", state.view.tonemap)
 
     imgui.separator()
@@ -160,6 +166,10 @@ def view_panel(state: AppState) -> None:
             state.view.nav.reset(cams[k])
     if imgui.button("Reset view") and state.view.nav is not None:
         state.view.nav.reset()
+    imgui.same_line()
+    if imgui.button("Auto exposure"):
+        state.requests.auto_exposure = True
+    _help("Exposure from the view on screen, as 'iat render' picks it: its 99th percentile at 0.8 (key X).")
     nav = state.view.nav
     if nav is not None:
         imgui.same_line()
@@ -179,16 +189,18 @@ def view_panel(state: AppState) -> None:
         state.paths.selected = names[k]
     else:
         imgui.text_disabled("no paths yet: record one")
-    if state.paths.recorder is None:
+    rec = state.paths.recorder  # read once: Stop recording clears it in this frame
+    if rec is None:
         if imgui.button("Record"):
             state.start_recording()
     else:
         if imgui.button("Stop recording"):
             state.stop_recording()
         imgui.same_line()
-        imgui.text_colored(RED, f"REC {len(state.paths.recorder.cameras)}")
+        imgui.text_colored(RED, f"REC {len(rec.cameras)}")
     imgui.same_line()
-    if state.paths.player is None:
+    p = state.paths.player  # read once: Stop clears it in this frame
+    if p is None:
         imgui.begin_disabled(not names)
         if imgui.button("Play"):
             state.start_playback(state.paths.selected or names[0])
@@ -197,7 +209,6 @@ def view_panel(state: AppState) -> None:
         if imgui.button("Stop"):
             state.stop_playback()
         imgui.same_line()
-        p = state.paths.player
         imgui.text(f"{p.index}/{p.frames}" if state.paths.playback_frames else f"{p.index} frames")
     changed, v = imgui.input_int("Frames", int(state.paths.playback_frames))
     if changed:
@@ -352,11 +363,12 @@ def lighting_panel(state: AppState) -> None:
         if not lights:
             imgui.text_disabled("no point or spot lights")
         imgui.end_list_box()
-    if imgui.button("Add point light"):
-        state.lighting.selected_light = ed.add("point", _add_position(state))
-    imgui.same_line()
-    if imgui.button("Add spot light"):
-        state.lighting.selected_light = ed.add("spot", _add_position(state))
+    for kind in ("point", "spot"):  # where the camera looks, as bright as the scene's lamps
+        if kind == "spot":
+            imgui.same_line()
+        if imgui.button(f"Add {kind} light"):
+            pos, power = new_light_position(ed.scene, state.view.camera), new_light_intensity(ed.scene)
+            state.lighting.selected_light = ed.add(kind, pos, intensity=power)
     imgui.same_line()
     imgui.begin_disabled(state.lighting.selected_light < 0)
     if imgui.button("Delete light") and state.lighting.selected_light >= 0:
@@ -438,18 +450,6 @@ def lighting_panel(state: AppState) -> None:
     )
 
     day_cycle_panel(state)
-
-
-def _add_position(state: AppState):
-    """A new light goes in front of the camera (one fifth of the model's size), inside the model."""
-    ed = state.lighting.editor
-    lo, hi = ed.scene.bounds
-    cam = state.view.camera
-    if cam is None:
-        return None
-    p = np.asarray(cam.eye) + np.asarray(cam.forward) * 0.2 * float(np.linalg.norm(hi - lo))
-    m = 0.05 * (hi - lo)
-    return np.clip(p, lo + m, hi - m)
 
 
 def day_cycle_panel(state: AppState) -> None:

@@ -178,7 +178,10 @@ class PathsState:
 
     record_started, play_started : ``time.perf_counter()`` when they began
     playback_frames : 0 plays in real time; N plays exactly N frames (benchmark)
-    play_frame_ms : frame times (ms) of the playback under way
+    play_frame_ms : frame times (ms) of the playback under way, one per frame that drew a pose of
+      the path (N for "Frames N")
+    posed : the frame being drawn shows a pose of the path (set by the controls, counted after the
+      swap)
     """
 
     named: dict[str, CameraPath] = field(default_factory=dict)
@@ -189,6 +192,7 @@ class PathsState:
     play_started: float = 0.0
     playback_frames: int = 0
     play_frame_ms: list[float] = field(default_factory=list)
+    posed: bool = False
 
 
 @dataclass
@@ -326,6 +330,8 @@ class Requests:
     open, export, save_solution, save_lights : a file path, or None
     screenshot : a file path, "" for the default name (F12), or None
     save_paths, day_cycle, remesh, quit : flags
+    auto_exposure : set the exposure from the view on screen at the next draw
+      (:func:`iat.color.auto_exposure`, as ``iat render`` does); set when a model is opened
     dialogs : native file dialogs in flight (portable_file_dialogs objects) by kind
     file_fields : the text of the panels' path fields ("open", "export", "solution", "lights")
     """
@@ -338,6 +344,7 @@ class Requests:
     save_lights: str | None = None
     day_cycle: bool = False
     remesh: bool = False
+    auto_exposure: bool = False
     quit: bool = False
     dialogs: dict = field(default_factory=dict)
     file_fields: dict = field(

@@ -16,7 +16,8 @@ from iat.errors import BakeError, OptionError
 
 #: cost model: one triangle's transform/setup cost, in byte-equivalents (Myszkowski-style weight)
 TRIANGLE_COST_BYTES = 64
-#: the budget search never scales below base scale x this
+#: the budget search's ladder runs down to base scale x this in quarter octaves, then on to the
+#: scale of 2-texel tiles (:func:`scale_ladder`)
 MIN_SCALE_FACTOR = 0.25
 
 
@@ -34,6 +35,17 @@ def _texture_bytes(depth, t, scale, policy: BakePolicy) -> float:
     return float(memory_report(pk, policy).texture_bytes)
 
 
+def scale_ladder(base_scale: float, deepest: int) -> list[float]:
+    """Scales the budget search tries for a textured set whose deepest tree is ``deepest``, largest
+    first: ``base_scale * 2**(-q/4)`` for ``q = 0, 1, ...`` down to base / 4
+    (:data:`MIN_SCALE_FACTOR`), then on down to the first scale at which every tile of the set is
+    2 texels a side (the smallest a tile can be: :func:`~iat.bake.flatten.scaled_side`)."""
+    out = [base_scale * 2.0 ** (-q / 4) for q in range(int(round(-4 * np.log2(MIN_SCALE_FACTOR))) + 1)]
+    while scaled_side(tile_side(int(deepest)), out[-1]) > 2:
+        out.append(out[-1] * 2.0 ** (-1 / 4))
+    return out
+
+
 def resolve_budget(depth: np.ndarray, budget_mb: float, base: BakePolicy) -> tuple[BakePolicy, dict]:
     """The search of :func:`choose_policy` on patch depths ``(P,)`` int: ``(policy, info)`` with
     ``info = dict(budget_mb=, too_small=)`` (for :func:`~iat.bake.memory.set_budget`)."""
@@ -44,10 +56,10 @@ def resolve_budget(depth: np.ndarray, budget_mb: float, base: BakePolicy) -> tup
     info = {"budget_mb": float(budget_mb), "too_small": False}
     if budget <= 0:
         return all_mesh, info
-    ladder = [base.scale * 2.0 ** (-q / 4) for q in range(int(round(-4 * np.log2(MIN_SCALE_FACTOR))) + 1)]
     for t in range(int(base.threshold), deepest + 1):
+        ladder = scale_ladder(base.scale, int(depth[depth >= t].max()))
         if _texture_bytes(depth, t, ladder[-1], base) > budget:
-            continue  # even the smallest scale does not fit: texture fewer (deeper-only) patches
+            continue  # even 2-texel tiles do not fit: texture fewer (deeper-only) patches
         if _texture_bytes(depth, t, ladder[0], base) <= budget:
             return dataclasses.replace(base, threshold=t), info
         lo, hi = 0, len(ladder) - 1  # ladder[lo] does not fit, ladder[hi] fits
@@ -69,8 +81,10 @@ def choose_policy(solution, budget_mb: float | None, base_policy: BakePolicy | N
     its vertex bytes plus a per-triangle cost, a texture its texel bytes; the saving per texture
     byte grows with tree depth, so the deepest trees are textured first (that is the threshold).
     Search: threshold ``t`` from ``base.threshold`` upwards; at each ``t`` take the largest scale
-    on the ladder ``base.scale * 2**(-q/4)``, ``q = 0..8`` (down to base.scale / 4) whose exact
-    packed texture bytes fit; if even the smallest does not fit, raise ``t``. Budget 0, or a
+    on the ladder ``base.scale * 2**(-q/4)``, ``q = 0, 1, ...`` (:func:`scale_ladder`: down to
+    base.scale / 4, then on down to 2-texel tiles) whose exact packed texture bytes fit; only if
+    even the 2-texel tiles do not fit, raise ``t`` (a smaller budget blurs the textures before it
+    gives patches back to the mesh: half the budget does not multiply the triangles). Budget 0, or a
     budget smaller than any texture, gives all mesh (threshold above the deepest tree).
     The returned policy has ``budget_mb = None`` (resolved). ``budget_mb=None`` returns the base.
     """

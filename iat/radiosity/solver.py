@@ -47,7 +47,7 @@ B. **Progressive refinement on the settled mesh.** Each vertex's unshot radiance
    interpolated from that grid; what the grids receive is kept, so the vertices that
    stage C adds get it too.
 C. **Refinement on the total radiance** (``refine_indirect``), once, after the
-   first bounces (unshot below sqrt(convergence)): the same split test on
+   first bounces (unshot below ``REFINE_UNSHOT`` x convergence): the same split test on
    direct + indirect radiance, so that surfaces lit only indirectly get elements
    too. A new vertex gets its direct light, what the coarse grids of its patch
    received (interpolated, as its old neighbours got it) and a gather of
@@ -87,7 +87,6 @@ its power).
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import replace
 
@@ -96,7 +95,7 @@ import numpy as np
 from iat.progress import Progress
 from iat.radiosity.checks import check_mesh, check_scene, validated_options, warn_if_unlit
 from iat.radiosity.context import Context
-from iat.radiosity.options import SolveOptions
+from iat.radiosity.options import REFINE_UNSHOT, SolveOptions
 from iat.radiosity.run import SolveRun
 from iat.radiosity.solution import Solution
 from iat.radiosity.visibility import Visibility
@@ -137,7 +136,7 @@ def solve(
         if mesh is None:
             run.mesh_by_direct_light()
             target = opts.convergence * run.power_ref  # of what the scene received (open scenes)
-            first_target = max(target, math.sqrt(opts.convergence) * run.power_ref)
+            first_target = max(target, REFINE_UNSHOT * opts.convergence * run.power_ref)
             plan = [("shoot", first_target, (0.2, 0.6)), ("refine", "refining", (0.6, 0.75))]
             plan += [("shoot", target, (0.75, 1.0))]
         else:

@@ -1,0 +1,132 @@
+"""``iat batch``: Dask tasks on a LocalCluster give the serial path's solutions bit for bit; a failing
+task is reported on one line while the others finish; a rerun skips what is done."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from iat.cli.commands import main
+from iat.errors import LoadError
+from iat.io.load import load_scene
+from iat.lighting.solution_set import solve_set
+from iat.radiosity import Solution, SolveOptions, solve
+from iat.tools.batch import LOG_NAME, parse_jobs, run_batch
+
+distributed = pytest.importorskip("distributed")
+
+CORNELL = Path(__file__).resolve().parent.parent / "sample_models" / "cornell_box.glb"
+DEPTH = 3
+STATES = {"full": {"emission": {"light": 1.0}}, "dim": {"emission": {"light": 0.4}}}
+
+
+@pytest.fixture(scope="module")
+def client():
+    try:
+        cluster = distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        )
+    except Exception as e:  # no processes or sockets here
+        pytest.skip(f"distributed cannot start a LocalCluster here: {e}")
+    c = distributed.Client(cluster)
+    yield c
+    c.close()
+    cluster.close()
+
+
+def _jobs(tmp_path: Path, jobs: str) -> Path:
+    (tmp_path / "empty.obj").write_text("")
+    p = tmp_path / "jobs.toml"
+    p.write_text(f'output = "out"\n[defaults]\nmax_depth = {DEPTH}\n' + jobs)
+    return p
+
+
+def _seed_jobs(seeds) -> str:
+    return "".join(
+        f'[[job]]\nname = "seed{k}"\nmodel = "{CORNELL}"\noptions = {{ seed = {k} }}\n' for k in seeds
+    )
+
+
+BAD = '[[job]]\nname = "bad"\nmodel = "empty.obj"\n'
+
+
+def _same(a, b) -> None:
+    for name in ("vert_key", "vert_radiance", "tri_vertices", "leaf_patch", "leaf_level", "leaf_i", "leaf_j"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+
+
+def test_four_variants_match_serial_and_a_bad_file_fails_alone(client, tmp_path):
+    seeds = [0, 1, 2, 3]
+    batch = parse_jobs(_jobs(tmp_path, _seed_jobs(seeds) + BAD))
+    seen = []
+    report = run_batch(batch, client=client, on_result=seen.append)
+    by = {r.name: r for r in report.results}
+    assert [r.name for r in report.results] == [f"seed{k}" for k in seeds] + ["bad"]
+    assert all(by[f"seed{k}"].status == "ok" for k in seeds)
+    assert by["bad"].status == "failed" and by["bad"].user_error
+    assert by["bad"].error.endswith("empty.obj: empty file") and "\n" not in by["bad"].error
+    assert len(seen) == 5
+    scene = load_scene(CORNELL)
+    out = tmp_path / "out"
+    for k in seeds:  # the serial path: the same options give the same solution, bit for bit
+        serial = solve(scene, SolveOptions(max_depth=DEPTH, seed=k))
+        _same(Solution.load(out / f"seed{k}.npz"), serial)
+    assert not np.array_equal(
+        Solution.load(out / "seed0.npz").vert_radiance, Solution.load(out / "seed1.npz").vert_radiance
+    )
+    log = (out / LOG_NAME).read_text().splitlines()
+    assert len(log) == 5 and sum("\tok\t" in line for line in log) == 4
+    assert any(line.split("\t")[1:3] == ["bad", "failed"] for line in log)
+    # a rerun skips what is done (and runs the failed task again)
+    again = run_batch(parse_jobs(tmp_path / "jobs.toml"), client=client)
+    assert [r.status for r in again.results] == ["skipped"] * 4 + ["failed"]
+    # an output gone: that task runs again
+    (out / "seed0.npz").unlink()
+    third = run_batch(parse_jobs(tmp_path / "jobs.toml"), client=client)
+    assert [r.status for r in third.results][:4] == ["ok", "skipped", "skipped", "skipped"]
+
+
+def test_states_job_matches_solve_set(client, tmp_path):
+    states = "".join(
+        f"{k} = {{ emission = {{ light = {v['emission']['light']} }} }}\n" for k, v in STATES.items()
+    )
+    jobs = f'[[job]]\nname = "box"\nmodel = "{CORNELL}"\nstates_mesh = "merge"\n[job.states]\n{states}'
+    report = run_batch(parse_jobs(_jobs(tmp_path, jobs)), client=client)
+    names = [r.name for r in report.results]
+    assert names == ["box.own-full", "box.own-dim", "box.mesh", "box-full", "box-dim"]
+    assert all(r.status == "ok" for r in report.results)
+    sset = solve_set(load_scene(CORNELL), STATES, SolveOptions(max_depth=DEPTH))
+    for name, serial in zip(sset.names, sset.solutions, strict=True):
+        got = Solution.load(tmp_path / "out" / f"box-{name}.npz")
+        _same(got, serial)
+        assert got.stats["lighting_state"] == name
+
+
+def test_job_file_errors_name_the_file(tmp_path):
+    p = tmp_path / "jobs.toml"
+    p.write_text('output = "out"\n[[job]]\nname = "a"\nmodel = "x.obj"\nbogus = 1\n')
+    with pytest.raises(LoadError, match=r"jobs.toml job 'a': unknown key\(s\) bogus"):
+        parse_jobs(p)
+    p.write_text('output = "out"\n[[job]]\nname = "a"\nmodel = "x.obj"\noptions = { max_depth = 99 }\n')
+    with pytest.raises(LoadError, match="max_depth"):
+        parse_jobs(p)
+    p.write_text("output = [")
+    with pytest.raises(LoadError, match="not a valid TOML job file"):
+        parse_jobs(p)
+
+
+def test_cli_reports_each_failed_task_on_one_line(client, tmp_path, capsys):
+    """Done tasks are skipped and a missing model fails before any cluster starts: exit 2."""
+    p = _jobs(tmp_path, _seed_jobs([5]) + '[[job]]\nname = "gone"\nmodel = "missing.glb"\n')
+    run_batch(parse_jobs(p), client=client)  # seed5 done, gone failed
+    capsys.readouterr()
+    assert main(["batch", str(p), "--json"]) == 2
+    cap = capsys.readouterr()
+    report = json.loads(cap.out)
+    assert [t["status"] for t in report["tasks"]] == ["skipped", "failed"]
+    assert cap.err.strip().splitlines() == [
+        f"iat batch: error: gone: {tmp_path / 'missing.glb'}: file not found"
+    ]
