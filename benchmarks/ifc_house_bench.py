@@ -105,6 +105,13 @@ def run_child(args: list[str], timeout: float | None) -> dict:
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
+def _error_row(out: list[str], name: str, f: dict) -> bool:
+    """Append a failed step's row to ``out``; True if it failed."""
+    if "error" in f:
+        out.append(f"| {name} | {f['error']} |" + " |" * 8)
+    return "error" in f
+
+
 def fmt_load(rows: dict) -> list[str]:
     out = [
         "| load | patches | quads | clipped cells (clip triangles) | panels found | slivers "
@@ -112,8 +119,7 @@ def fmt_load(rows: dict) -> list[str]:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, f in rows.items():
-        if "error" in f:
-            out.append(f"| {name} | {f['error']} |" + " |" * 8)
+        if _error_row(out, name, f):
             continue
         out.append(
             f"| {name} | {f['patches']:,} | {f['quads']:,} | {f['clipped']:,} ({f['clip_triangles']:,}) "
@@ -130,8 +136,7 @@ def fmt_solve(rows: dict) -> list[str]:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for name, f in rows.items():
-        if "error" in f:
-            out.append(f"| {name} | {f['error']} |" + " |" * 8)
+        if _error_row(out, name, f):
             continue
         out.append(
             f"| {name} | {f['lights']} | {f['max_depth']} | {f['solve_s']:.1f} | {f['elements']:,} "

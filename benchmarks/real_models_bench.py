@@ -34,7 +34,6 @@ from iat.bake.baker import bake  # noqa: E402
 from iat.bake.policy import BakePolicy  # noqa: E402
 from iat.errors import LoadError  # noqa: E402
 from iat.io.load import load_scene  # noqa: E402
-from iat.io.scene import Light, Material, Scene  # noqa: E402
 from iat.measure.metrics import luminance  # noqa: E402
 from iat.radiosity import SolveOptions, solve  # noqa: E402
 from iat.render.renderer import Renderer  # noqa: E402
@@ -66,14 +65,7 @@ def measure(name: str, path: Path, renderer: Renderer) -> dict:
     t0 = time.perf_counter()
     scene = load_scene(path)
     load_s = time.perf_counter() - t0
-    if name == "ifc":
-        rm.add_ifc_light(scene)
-    t0 = time.perf_counter()
-    sol = solve(scene, SolveOptions())
-    solve_s = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    baked = bake(sol, scene, BakePolicy())
-    bake_s = time.perf_counter() - t0
+    sol, baked, solve_s, bake_s = rm.solve_and_bake(name, scene)
     cam = rm.model_cameras()[name]
     renderer.set_solution(sol)
     renderer.set_baked(baked)
@@ -84,28 +76,14 @@ def measure(name: str, path: Path, renderer: Renderer) -> dict:
 
 
 def skewed(out: Path, renderer: Renderer) -> list[str]:
-    path, light = rm.skewed_quad_obj(out)
     lines = []
     for form in ("obj file", "one quad patch"):
-        if form == "obj file":
-            scene = load_scene(path)
-        else:
-            scene = Scene(vertices=rm.skewed_quad_corners(), patch_corners=[[0, 1, 2, 3]], patch_material=[0],
-                          materials=[Material(name="floor", albedo=[0.6, 0.6, 0.6])])
-            if scene.patch_normal[0, 1] < 0:
-                scene.patch_corners = scene.patch_corners[:, ::-1].copy()
-        scene.lights.append(Light(kind="point", position=light, intensity=1.0))
-        sol = solve(scene, SolveOptions())
-        baked = bake(sol, scene, BakePolicy())
-        centre = rm.skewed_quad_corners().mean(axis=0)
-        cam = rm.camera(centre + [0.0, 3.0, 0.0], centre, yfov=45.0, up=(0.0, 0.0, -1.0))
-        renderer.set_solution(sol)
-        renderer.set_baked(baked)
-        mesh = renderer.render(cam, size=rm.IMAGE_SIZE, mode="mesh")
-        iat = renderer.render(cam, size=rm.IMAGE_SIZE, mode="iat")
-        d = float(np.linalg.norm(rm.highlight(mesh) - rm.highlight(iat)))
-        lines.append(f"- skewed quad ({form}): {scene.n_patches} patches, highlight IAT vs mesh {d:.2f} px, "
-                     f"PSNR {rm.percentile_psnr(iat, mesh):.2f} dB")
+        r = rm.skewed_quad_renders(out, form, renderer)
+        scene, mesh, iat, d = r["scene"], r["mesh"], r["iat"], r["distance"]
+        lines.append(
+            f"- skewed quad ({form}): {scene.n_patches} patches, highlight IAT vs mesh {d:.2f} px, "
+            f"PSNR {rm.percentile_psnr(iat, mesh):.2f} dB"
+        )
     return lines
 
 
@@ -168,22 +146,34 @@ def panels_rows(name: str, path: Path, renderer: Renderer) -> list[dict]:
         if label.startswith("reference"):
             refs[label] = mesh
         ref = refs["reference (no panels)"]
-        rows.append({
-            "model": name, "variant": label, "patches": int(scene.n_patches), "solve_s": solve_s,
-            "elements": int(sol.stats["elements"]), "mesh_tris": int(len(sol.drawn_mesh().triangles)),
-            "iat_tris": int(len(baked.mesh_indices) + len(baked.tex_indices)),
-            "texture_mib": baked.memory.texture_bytes / 2**20,
-            "rel": lit_relative_error(mesh, ref), "psnr": rm.percentile_psnr(mesh, ref),
-            "rel_p": lit_relative_error(mesh, refs["reference (panels)"]) if len(refs) > 1 else float("nan"),
-            "iat_rel": lit_relative_error(iat, ref), "iat_psnr": rm.percentile_psnr(iat, mesh),
-        })
+        rows.append(
+            {
+                "model": name,
+                "variant": label,
+                "patches": int(scene.n_patches),
+                "solve_s": solve_s,
+                "elements": int(sol.stats["elements"]),
+                "mesh_tris": int(len(sol.drawn_mesh().triangles)),
+                "iat_tris": int(len(baked.mesh_indices) + len(baked.tex_indices)),
+                "texture_mib": baked.memory.texture_bytes / 2**20,
+                "rel": lit_relative_error(mesh, ref),
+                "psnr": rm.percentile_psnr(mesh, ref),
+                "rel_p": lit_relative_error(mesh, refs["reference (panels)"])
+                if len(refs) > 1
+                else float("nan"),
+                "iat_rel": lit_relative_error(iat, ref),
+                "iat_psnr": rm.percentile_psnr(iat, mesh),
+            }
+        )
         print(f"{name} {label}: {solve_s:.1f} s, {rows[-1]['elements']} elements", file=sys.stderr)
     return rows
 
 
 def panels_table(paths: dict, renderer: Renderer) -> None:
-    print("| model | solve | patches | solve s | elements | mesh tris | IAT tris | texture MiB"
-          " | mesh rel. error | mesh PSNR dB | vs panel ref. | IAT rel. error | IAT vs mesh PSNR dB |")
+    print(
+        "| model | solve | patches | solve s | elements | mesh tris | IAT tris | texture MiB"
+        " | mesh rel. error | mesh PSNR dB | vs panel ref. | IAT rel. error | IAT vs mesh PSNR dB |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, path in paths.items():
         if isinstance(path, str):
@@ -199,8 +189,10 @@ def panels_table(paths: dict, renderer: Renderer) -> None:
 
 
 def figures_table(paths: dict, renderer: Renderer, out: Path) -> None:
-    print("| model | file | load s | patches | solve s | bake s | mesh tris | IAT tris (mesh + tex) "
-          "| texture MiB | PSNR dB | dotted % |")
+    print(
+        "| model | file | load s | patches | solve s | bake s | mesh tris | IAT tris (mesh + tex) "
+        "| texture MiB | PSNR dB | dotted % |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for name, path in paths.items():
         if isinstance(path, str):
@@ -222,8 +214,10 @@ def figures_table(paths: dict, renderer: Renderer, out: Path) -> None:
         print(line)
     lights = rm.glb_point_lights(paths["glb"]) if not isinstance(paths["glb"], str) else []
     for lt in lights:
-        print(f"- Blender's GLB point light: {lt['intensity']:.3f} cd for {5.0} W "
-              f"(= W x 683 / 4 pi = {5.0 * 683 / (4 * np.pi):.3f})")
+        print(
+            f"- Blender's GLB point light: {lt['intensity']:.3f} cd for {5.0} W "
+            f"(= W x 683 / 4 pi = {5.0 * 683 / (4 * np.pi):.3f})"
+        )
 
 
 def main(argv: list[str] | None = None) -> int:

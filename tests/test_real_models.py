@@ -81,9 +81,6 @@ def load_or_skip(path):
 def solved(model_paths):
     """``name -> (scene, solution, baked, info)``: loaded, lit (IFC: a test lamp), solved with the
     default options and baked with the default policy, once per session."""
-    from iat.bake.baker import bake
-    from iat.bake.policy import BakePolicy
-    from iat.radiosity import SolveOptions, solve
 
     done: dict = {}
 
@@ -93,14 +90,7 @@ def solved(model_paths):
             t0 = time.perf_counter()
             scene = load_or_skip(path)
             load_s = time.perf_counter() - t0
-            if name == "ifc":
-                rm.add_ifc_light(scene)
-            t0 = time.perf_counter()
-            sol = solve(scene, SolveOptions())
-            solve_s = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            baked = bake(sol, scene, BakePolicy())
-            bake_s = time.perf_counter() - t0
+            sol, baked, solve_s, bake_s = rm.solve_and_bake(name, scene)
             done[name] = (scene, sol, baked, {"load_s": load_s, "solve_s": solve_s, "bake_s": bake_s})
         return done[name]
 
@@ -154,8 +144,12 @@ def test_ifc_house_loads_y_up_as_the_kernel_triangulates_it(ifc_path):
     scene = load_or_skip(ifc_path)
     lo, hi = rm.ifc_triangles(ifc_path)["bounds"]
     a, b = rm.ifc_to_yup(lo), rm.ifc_to_yup(hi)
-    np.testing.assert_allclose(scene.bounds, [np.minimum(a, b), np.maximum(a, b)], atol=1e-6,
-                               err_msg="IFC (x, y, z) is not loaded as (x, z, -y)")
+    np.testing.assert_allclose(
+        scene.bounds,
+        [np.minimum(a, b), np.maximum(a, b)],
+        atol=1e-6,
+        err_msg="IFC (x, y, z) is not loaded as (x, z, -y)",
+    )
     albedos = {tuple(np.round(m.albedo, 2)) for m in scene.materials}
     assert (0.78, 0.74, 0.66) in albedos and (0.62, 0.22, 0.16) in albedos, albedos
     assert 0 < scene.n_patches <= 5000
@@ -237,30 +231,9 @@ def test_lamp_highlight_over_a_skewed_quad_is_where_the_mesh_has_it(form, model_
     """A point light 0.5 m over one strongly skewed quad, seen from straight above: the highlight
     of IAT mode is where the mesh has it. "obj file": the quad as two triangles in an OBJ, as the
     loader makes it; "one quad patch": the quad given to the solver as one bilinear root."""
-    from iat.bake.baker import bake
-    from iat.bake.policy import BakePolicy
-    from iat.io.scene import Light, Material, Scene
-    from iat.radiosity import SolveOptions, solve
-
-    path, light = rm.skewed_quad_obj(model_dir)
-    if form == "obj file":
-        scene = load_scene(path)
-    else:
-        scene = Scene(vertices=rm.skewed_quad_corners(), patch_corners=[[0, 1, 2, 3]], patch_material=[0],
-                      materials=[Material(name="floor", albedo=[0.6, 0.6, 0.6])])
-        if scene.patch_normal[0, 1] < 0:
-            scene.patch_corners = scene.patch_corners[:, ::-1].copy()
-    scene.lights.append(Light(kind="point", position=light, intensity=1.0))
-    sol = solve(scene, SolveOptions())
-    baked = bake(sol, scene, BakePolicy())
-    centre = rm.skewed_quad_corners().mean(axis=0)
-    cam = rm.camera(centre + [0.0, 3.0, 0.0], centre, yfov=45.0, up=(0.0, 0.0, -1.0))
-    renderer.set_solution(sol)
-    renderer.set_baked(baked)
-    mesh = renderer.render(cam, size=rm.IMAGE_SIZE, mode="mesh")
-    iat = renderer.render(cam, size=rm.IMAGE_SIZE, mode="iat")
-    pm, pi = rm.highlight(mesh), rm.highlight(iat)
-    d = float(np.linalg.norm(pm - pi))
+    r = rm.skewed_quad_renders(model_dir, form, renderer)
+    scene, baked, mesh, iat, d = r["scene"], r["baked"], r["mesh"], r["iat"], r["distance"]
+    pm, pi = r["highlights"]
     what = (
         f"skewed quad ({form}): {scene.n_patches} patches ({int(scene.patch_is_quad.sum())} quads), "
         f"textured {int(baked.patch_textured.sum())}; highlight mesh {pm.round(1)} IAT {pi.round(1)}: "

@@ -113,24 +113,24 @@ def _bad(where, why):
     raise LoadError(why, where)
 
 
+def _checked(cls, table: dict, where, what: str):
+    """``cls(**table).validate()`` after naming any key that is not one of its fields."""
+    unknown = set(table) - {f.name for f in dataclasses.fields(cls)}
+    if unknown:
+        _bad(where, f"unknown {what} option(s) {', '.join(sorted(unknown))}")
+    return cls(**table).validate()
+
+
 def _solve_options(table: dict, where):
     from iat.radiosity import SolveOptions
 
-    names = {f.name for f in dataclasses.fields(SolveOptions)}
-    unknown = set(table) - names
-    if unknown:
-        _bad(where, f"unknown solve option(s) {', '.join(sorted(unknown))}")
-    return SolveOptions(**table).validate()
+    return _checked(SolveOptions, table, where, "solve")
 
 
 def _bake_policy(table: dict, where):
     from iat.bake.policy import BakePolicy
 
-    names = {f.name for f in dataclasses.fields(BakePolicy)}
-    unknown = set(table) - names
-    if unknown:
-        _bad(where, f"unknown bake option(s) {', '.join(sorted(unknown))}")
-    return BakePolicy(**table).validate()
+    return _checked(BakePolicy, table, where, "bake")
 
 
 def parse_jobs(path, data: dict | None = None) -> Batch:

@@ -16,10 +16,11 @@ points inside rooms (Z up) for the benchmark's lights.
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 import numpy as np
+
+from tests.support.ifc_builder import IfcBuilder, prism
 
 #: room side, storey height, wall height (floor to the slab above), wall thicknesses (m)
 ROOM = 4.0
@@ -33,143 +34,6 @@ DOOR_W, DOOR_H = 0.9, 2.1
 #: the skewed rooms' dividing walls lean by this much over a room's depth (m)
 SKEW = 1.2
 ROOF_RISE = 3.0
-
-
-class HouseBuilder:
-    """The ifcopenshell.api calls of the house, on one IFC4 file (storeys made on demand)."""
-
-    def __init__(self, name: str = "iat large house"):
-        import ifcopenshell
-        import ifcopenshell.api
-
-        self.run = ifcopenshell.api.run
-        self.f = ifcopenshell.file(schema="IFC4")
-        run, f = self.run, self.f
-        project = run("root.create_entity", f, ifc_class="IfcProject", name=name)
-        metre = run("unit.add_si_unit", f, unit_type="LENGTHUNIT")
-        run("unit.assign_unit", f, units=[metre])
-        model = run("context.add_context", f, context_type="Model")
-        self.body = run(
-            "context.add_context", f, context_type="Model", context_identifier="Body",
-            target_view="MODEL_VIEW", parent=model,
-        )
-        site = run("root.create_entity", f, ifc_class="IfcSite", name="site")
-        self.building = run("root.create_entity", f, ifc_class="IfcBuilding", name="house")
-        run("aggregate.assign_object", f, products=[site], relating_object=project)
-        run("aggregate.assign_object", f, products=[self.building], relating_object=site)
-        self.storeys: list = []
-        self.styles: dict[str, object] = {}
-
-    def storey(self, k: int):
-        while len(self.storeys) <= k:
-            st = self.run("root.create_entity", self.f, ifc_class="IfcBuildingStorey",
-                          name=f"storey {len(self.storeys)}")
-            self.run("aggregate.assign_object", self.f, products=[st], relating_object=self.building)
-            self.storeys.append(st)
-        return self.storeys[k]
-
-    def style(self, name: str, rgb) -> object:
-        if name not in self.styles:
-            st = self.run("style.add_style", self.f, name=name)
-            r, g, b = (float(c) for c in rgb)
-            self.run(
-                "style.add_surface_style", self.f, style=st, ifc_class="IfcSurfaceStyleShading",
-                attributes={"SurfaceColour": {"Name": None, "Red": r, "Green": g, "Blue": b}},
-            )
-            self.styles[name] = st
-        return self.styles[name]
-
-    def place(self, el, xyz, rot_deg: float = 0.0) -> None:
-        c, s = np.cos(np.radians(rot_deg)), np.sin(np.radians(rot_deg))
-        m = np.eye(4)
-        m[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
-        m[:3, 3] = xyz
-        self.run("geometry.edit_object_placement", self.f, product=el, matrix=m)
-
-    def product(self, ifc_class, name, rep, xyz, rot_deg=0.0, style=None, predefined=None, storey=None):
-        kw = {"predefined_type": predefined} if predefined else {}
-        el = self.run("root.create_entity", self.f, ifc_class=ifc_class, name=name, **kw)
-        if storey is not None:
-            self.run("spatial.assign_container", self.f, products=[el],
-                     relating_structure=self.storey(storey))
-        self.place(el, xyz, rot_deg)
-        self.run("geometry.assign_representation", self.f, product=el, representation=rep)
-        if style is not None:
-            self.run("style.assign_representation_styles", self.f, shape_representation=rep, styles=[style])
-        return el
-
-    def box_rep(self, length: float, height: float, thickness: float):
-        """A box: ``length`` along local x, ``thickness`` along local +y, ``height`` up."""
-        return self.run(
-            "geometry.add_wall_representation", self.f, context=self.body,
-            length=float(length), height=float(height), thickness=float(thickness),
-        )
-
-    def void(self, element, name, xyz, rot_deg, length, height, thickness) -> None:
-        op = self.product("IfcOpeningElement", name, self.box_rep(length, height, thickness), xyz, rot_deg)
-        self.run("feature.add_feature", self.f, feature=op, element=element)
-
-    def wall(self, name, storey, start, end, z, height, thickness, style, openings=()):
-        """A wall from ``start`` to ``end`` (x, y) at height ``z``, its thickness to the left of that
-        axis (as the kernel extrudes it); ``openings`` are ``(u0, u1, z0, z1)``
-        along it, voided with IfcOpeningElements."""
-        start, end = np.asarray(start, float), np.asarray(end, float)
-        d = end - start
-        length = float(np.hypot(*d))
-        rot = float(np.degrees(np.arctan2(d[1], d[0])))
-        wall = self.product("IfcWall", name, self.box_rep(length, height, thickness),
-                            (start[0], start[1], z), rot, style, storey=storey)
-        t = d / length
-        nrm = np.array([t[1], -t[0]])  # to the right of the axis, 0.1 m out
-        for k, (u0, u1, z0, z1) in enumerate(openings):
-            at = start + t * u0 + nrm * 0.1
-            self.void(wall, f"{name} opening {k}", (at[0], at[1], z + z0), rot, u1 - u0, z1 - z0,
-                      thickness + 0.2)
-        return wall
-
-    def slab(self, name, storey, polyline, z, depth, style, ifc_class="IfcSlab", predefined=None):
-        rep = self.run(
-            "geometry.add_slab_representation", self.f, context=self.body, depth=float(depth),
-            polyline=[tuple(map(float, p)) for p in polyline],
-        )
-        return self.product(ifc_class, name, rep, (0.0, 0.0, z), 0.0, style, predefined, storey=storey)
-
-    def mesh(self, name, verts, faces, style, ifc_class="IfcSlab", predefined=None, storey=None):
-        rep = self.run(
-            "geometry.add_mesh_representation", self.f, context=self.body,
-            vertices=[[tuple(map(float, v)) for v in verts]], faces=[[list(fc) for fc in faces]],
-        )
-        return self.product(ifc_class, name, rep, (0.0, 0.0, 0.0), 0.0, style, predefined, storey=storey)
-
-    def write(self, path: Path, tag: str) -> None:
-        import ifcopenshell.guid
-
-        # the API keeps some relationships' members in sets: write them in entity order
-        for rel in self.f.by_type("IfcRelContainedInSpatialStructure"):
-            rel.RelatedElements = sorted(rel.RelatedElements, key=lambda e: e.id())
-        for rel in self.f.by_type("IfcRelAggregates"):
-            rel.RelatedObjects = sorted(rel.RelatedObjects, key=lambda e: e.id())
-        for k, el in enumerate(sorted(self.f.by_type("IfcRoot"), key=lambda e: e.id())):
-            el.GlobalId = ifcopenshell.guid.compress(hashlib.md5(f"{tag}-{k}".encode()).hexdigest())
-        self.f.header.file_name.time_stamp = "2026-01-01T00:00:00"
-        self.f.write(str(path))
-
-
-def prism(profile_yz, x0: float, x1: float) -> tuple[list, list]:
-    """A prism along x over a convex polygon in the (y, z) plane: vertices and faces, each wound so
-    that its normal points out of the prism."""
-    n = len(profile_yz)
-    verts = [(x0, y, z) for y, z in profile_yz] + [(x1, y, z) for y, z in profile_yz]
-    faces = [list(range(n)), list(range(n, 2 * n))]
-    faces += [[i, (i + 1) % n, n + (i + 1) % n, n + i] for i in range(n)]
-    v = np.array(verts)
-    centre = v.mean(axis=0)
-    for k, fc in enumerate(faces):
-        p = v[fc]
-        normal = np.cross(p[1] - p[0], p[2] - p[0])
-        if np.dot(normal, p.mean(axis=0) - centre) < 0:
-            faces[k] = fc[::-1]
-    return verts, faces
 
 
 def _windows(length: float, per_room: int, rooms: int, door_at: int | None = None) -> list:
@@ -200,7 +64,7 @@ def large_ifc_house(path, storeys: int = 5, rooms_per_side: int = 9, windows_per
         path = path / "large_house.ifc"
     n = int(rooms_per_side)
     side = n * ROOM
-    b = HouseBuilder()
+    b = IfcBuilder("iat large house")
     wall_s = b.style("wall", (0.78, 0.74, 0.66))
     inner_s = b.style("inner wall", (0.70, 0.76, 0.80))
     floor_s = b.style("floor", (0.50, 0.38, 0.26))
@@ -213,20 +77,40 @@ def large_ifc_house(path, storeys: int = 5, rooms_per_side: int = 9, windows_per
     for k in range(storeys):
         z = k * STOREY
         # floor slab (the ground floor's below z = 0), a stair hole on the upper floors
-        slab = b.slab(f"floor {k}", k, [(lo, t), (lo, -side - t), (hi, -side - t), (hi, t)], z - SLAB_T,
-                      SLAB_T, floor_s, predefined="FLOOR")
+        slab = b.slab(
+            f"floor {k}",
+            k,
+            [(lo, t), (lo, -side - t), (hi, -side - t), (hi, t)],
+            z - SLAB_T,
+            SLAB_T,
+            floor_s,
+            predefined="FLOOR",
+        )
         if k > 0:
             x, y, w, d = stair
             b.void(slab, f"stair hole {k}", (x, y, z - SLAB_T - 0.1), 0.0, w, SLAB_T + 0.2, d)
         # exterior walls
         door = n // 2 if k == 0 else None
         length = side + 2 * t
-        ring = (("south", (lo, 0.0), (hi, 0.0)), ("east", (side, t), (side, -side - t)),
-                ("north", (hi, -side), (lo, -side)), ("west", (0.0, -side - t), (0.0, t)))
+        ring = (
+            ("south", (lo, 0.0), (hi, 0.0)),
+            ("east", (side, t), (side, -side - t)),
+            ("north", (hi, -side), (lo, -side)),
+            ("west", (0.0, -side - t), (0.0, t)),
+        )
         for name, a, e in ring:
             # the axis on the inner face, clockwise seen from above: the thickness lies outside
-            b.wall(f"{name} wall {k}", k, a, e, z, WALL_H, t, wall_s,
-                   _windows(length, windows_per_room, n, door if name == "south" else None))
+            b.wall(
+                f"{name} wall {k}",
+                k,
+                a,
+                e,
+                z,
+                WALL_H,
+                t,
+                wall_s,
+                _windows(length, windows_per_room, n, door if name == "south" else None),
+            )
         # interior walls along y (constant x) per room segment, a door in each; the skewed row leans
         for i in range(1, n):
             for j in range(n):
@@ -235,23 +119,46 @@ def large_ifc_house(path, storeys: int = 5, rooms_per_side: int = 9, windows_per
                 x0, x1 = i * ROOM - lean / 2, i * ROOM + lean / 2
                 seg = float(np.hypot(x1 - x0, ROOM))
                 door_c = seg * (0.3 if (i + j) % 2 else 0.7)
-                b.wall(f"wall x{i} y{j} s{k}", k, (x0 - INNER_T / 2, y0), (x1 - INNER_T / 2, y1), z, WALL_H,
-                       INNER_T, inner_s, [(door_c - DOOR_W / 2, door_c + DOOR_W / 2, 0.0, DOOR_H)])
+                b.wall(
+                    f"wall x{i} y{j} s{k}",
+                    k,
+                    (x0 - INNER_T / 2, y0),
+                    (x1 - INNER_T / 2, y1),
+                    z,
+                    WALL_H,
+                    INNER_T,
+                    inner_s,
+                    [(door_c - DOOR_W / 2, door_c + DOOR_W / 2, 0.0, DOOR_H)],
+                )
         # interior walls along x (constant y), one per room segment, each with a door
         for j in range(1, n):
             for i in range(n):
                 x0, x1 = i * ROOM, (i + 1) * ROOM
                 door_c = ROOM * (0.35 if (i + j + k) % 2 else 0.65)
                 y = -j * ROOM - INNER_T / 2
-                b.wall(f"wall y{j} x{i} s{k}", k, (x0, y), (x1, y), z, WALL_H, INNER_T, inner_s,
-                       [(door_c - DOOR_W / 2, door_c + DOOR_W / 2, 0.0, DOOR_H)])
+                b.wall(
+                    f"wall y{j} x{i} s{k}",
+                    k,
+                    (x0, y),
+                    (x1, y),
+                    z,
+                    WALL_H,
+                    INNER_T,
+                    inner_s,
+                    [(door_c - DOOR_W / 2, door_c + DOOR_W / 2, 0.0, DOOR_H)],
+                )
         # a skewed lowered ceiling in a room of the skewed row
         cx = ROOM * (k % max(n - 1, 1))
         cy = -srow * ROOM
-        outline = [(cx + 0.3, cy - 0.3), (cx + 0.3, cy - ROOM + 0.3), (cx + ROOM - 0.3, cy - ROOM * 0.55),
-                   (cx + ROOM - 0.6, cy - 0.4)]
-        b.slab(f"lowered ceiling {k}", k, outline, z + WALL_H - 0.35, 0.08, ceiling_s,
-               predefined="USERDEFINED")
+        outline = [
+            (cx + 0.3, cy - 0.3),
+            (cx + 0.3, cy - ROOM + 0.3),
+            (cx + ROOM - 0.3, cy - ROOM * 0.55),
+            (cx + ROOM - 0.6, cy - 0.4),
+        ]
+        b.slab(
+            f"lowered ceiling {k}", k, outline, z + WALL_H - 0.35, 0.08, ceiling_s, predefined="USERDEFINED"
+        )
     # the roof: gables over the west and east walls, two sloped slabs meeting at the ridge
     z_top = storeys * STOREY - SLAB_T
     ridge_y, ridge_z = -side / 2, z_top + ROOF_RISE
@@ -271,8 +178,15 @@ def large_ifc_house(path, storeys: int = 5, rooms_per_side: int = 9, windows_per
         halves.append(b.mesh(f"roof {side_name}", v, fc, roof_s, predefined="ROOF"))
     b.run("aggregate.assign_object", b.f, products=halves, relating_object=roof)
     # a ceiling under the roof (the top storey's upper slab)
-    b.slab("attic floor", top, [(lo, t), (lo, -side - t), (hi, -side - t), (hi, t)], z_top, SLAB_T * 0.5,
-           ceiling_s, predefined="FLOOR")
+    b.slab(
+        "attic floor",
+        top,
+        [(lo, t), (lo, -side - t), (hi, -side - t), (hi, t)],
+        z_top,
+        SLAB_T * 0.5,
+        ceiling_s,
+        predefined="FLOOR",
+    )
     b.write(path, "iat-large-house")
     return path
 

@@ -24,12 +24,13 @@ Model coordinates are metres. Z-up IFC coordinates become Y-up as ``(x, y, z) ->
 
 from __future__ import annotations
 
-import hashlib
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+
+from tests.support.ifc_builder import IfcBuilder, prism
 
 BLENDER_SCRIPT = Path(__file__).with_name("blender_room.py")
 BLENDER_TIMEOUT_S = 120
@@ -70,131 +71,18 @@ def ifc_to_yup(p) -> np.ndarray:
 # -- IFC ---------------------------------------------------------------------------------------
 
 
-class _Ifc:
-    """The ifcopenshell.api calls the house needs, on one file."""
-
-    def __init__(self):
-        import ifcopenshell
-        import ifcopenshell.api
-
-        self.run = ifcopenshell.api.run
-        self.f = ifcopenshell.file(schema="IFC4")
-        run, f = self.run, self.f
-        self.project = run("root.create_entity", f, ifc_class="IfcProject", name="iat house")
-        metre = run("unit.add_si_unit", f, unit_type="LENGTHUNIT")
-        run("unit.assign_unit", f, units=[metre])
-        model = run("context.add_context", f, context_type="Model")
-        self.body = run(
-            "context.add_context", f, context_type="Model", context_identifier="Body",
-            target_view="MODEL_VIEW", parent=model,
-        )
-        site = run("root.create_entity", f, ifc_class="IfcSite", name="site")
-        building = run("root.create_entity", f, ifc_class="IfcBuilding", name="house")
-        self.storey = run("root.create_entity", f, ifc_class="IfcBuildingStorey", name="ground floor")
-        run("aggregate.assign_object", f, products=[site], relating_object=self.project)
-        run("aggregate.assign_object", f, products=[building], relating_object=site)
-        run("aggregate.assign_object", f, products=[self.storey], relating_object=building)
-        self.styles: dict[str, object] = {}
-
-    def style(self, name: str, rgb) -> object:
-        if name not in self.styles:
-            st = self.run("style.add_style", self.f, name=name)
-            r, g, b = (float(c) for c in rgb)
-            self.run(
-                "style.add_surface_style", self.f, style=st, ifc_class="IfcSurfaceStyleShading",
-                attributes={"SurfaceColour": {"Name": None, "Red": r, "Green": g, "Blue": b}},
-            )
-            self.styles[name] = st
-        return self.styles[name]
-
-    def place(self, el, xyz, rot_deg: float = 0.0) -> None:
-        c, s = np.cos(np.radians(rot_deg)), np.sin(np.radians(rot_deg))
-        m = np.eye(4)
-        m[:3, :3] = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
-        m[:3, 3] = xyz
-        self.run("geometry.edit_object_placement", self.f, product=el, matrix=m)
-
-    def product(self, ifc_class: str, name: str, rep, xyz, rot_deg=0.0, style=None, predefined=None,
-                contained: bool = True):
-        kw = {"predefined_type": predefined} if predefined else {}
-        el = self.run("root.create_entity", self.f, ifc_class=ifc_class, name=name, **kw)
-        if contained:
-            self.run("spatial.assign_container", self.f, products=[el], relating_structure=self.storey)
-        self.place(el, xyz, rot_deg)
-        self.run("geometry.assign_representation", self.f, product=el, representation=rep)
-        if style is not None:
-            self.run("style.assign_representation_styles", self.f, shape_representation=rep, styles=[style])
-        return el
-
-    def wall(self, name, xyz, rot_deg, length, height, thickness, style, openings=()):
-        """A wall from ``xyz`` along its local x (rotated by ``rot_deg`` about z); ``openings`` are
-        ``(u0, u1, z0, z1)`` along the wall, voided with IfcOpeningElements."""
-        rep = self.run(
-            "geometry.add_wall_representation", self.f, context=self.body,
-            length=length, height=height, thickness=thickness,
-        )
-        wall = self.product("IfcWall", name, rep, xyz, rot_deg, style)
-        c, s = np.cos(np.radians(rot_deg)), np.sin(np.radians(rot_deg))
-        for k, (u0, u1, z0, z1) in enumerate(openings):
-            orep = self.run(
-                "geometry.add_wall_representation", self.f, context=self.body,
-                length=u1 - u0, height=z1 - z0, thickness=thickness + 0.2,
-            )
-            # local (u0, -0.1, z0) in world coordinates
-            at = np.array([xyz[0] + c * u0 + s * 0.1, xyz[1] + s * u0 - c * 0.1, xyz[2] + z0])
-            op = self.product("IfcOpeningElement", f"{name} opening {k}", orep, at, rot_deg, contained=False)
-            self.run("feature.add_feature", self.f, feature=op, element=wall)
-        return wall
-
-    def slab(self, name, polyline, z, depth, style, ifc_class="IfcSlab", predefined=None):
-        rep = self.run(
-            "geometry.add_slab_representation", self.f, context=self.body, depth=depth,
-            polyline=[tuple(map(float, p)) for p in polyline],
-        )
-        return self.product(ifc_class, name, rep, (0.0, 0.0, z), 0.0, style, predefined)
-
-    def mesh(self, name, verts, faces, style, ifc_class="IfcSlab", predefined=None, contained=True):
-        rep = self.run(
-            "geometry.add_mesh_representation", self.f, context=self.body,
-            vertices=[[tuple(map(float, v)) for v in verts]], faces=[[list(fc) for fc in faces]],
-        )
-        return self.product(ifc_class, name, rep, (0.0, 0.0, 0.0), 0.0, style, predefined, contained)
-
-    def write(self, path: Path) -> None:
-        import ifcopenshell.guid
-
-        # the API keeps some relationships' members in sets: write them in entity order
-        for rel in self.f.by_type("IfcRelContainedInSpatialStructure"):
-            rel.RelatedElements = sorted(rel.RelatedElements, key=lambda e: e.id())
-        for rel in self.f.by_type("IfcRelAggregates"):
-            rel.RelatedObjects = sorted(rel.RelatedObjects, key=lambda e: e.id())
-        for k, el in enumerate(sorted(self.f.by_type("IfcRoot"), key=lambda e: e.id())):
-            el.GlobalId = ifcopenshell.guid.compress(hashlib.md5(f"iat-house-{k}".encode()).hexdigest())
-        self.f.header.file_name.time_stamp = "2026-01-01T00:00:00"
-        self.f.write(str(path))
-
-
-def _prism(profile_yz, x0: float, x1: float) -> tuple[list, list]:
-    """A prism along x over a convex polygon in the (y, z) plane: vertices and its faces, each
-    wound so that its normal points out of the prism."""
-    n = len(profile_yz)
-    verts = [(x0, y, z) for y, z in profile_yz] + [(x1, y, z) for y, z in profile_yz]
-    faces = [list(range(n)), list(range(n, 2 * n))]
-    faces += [[i, (i + 1) % n, n + (i + 1) % n, n + i] for i in range(n)]
-    v = np.array(verts)
-    centre = v.mean(axis=0)
-    for k, fc in enumerate(faces):
-        p = v[fc]
-        normal = np.cross(p[1] - p[0], p[2] - p[0])
-        if np.dot(normal, p.mean(axis=0) - centre) < 0:
-            faces[k] = fc[::-1]
-    return verts, faces
+def _wall(b, name, xyz, rot_deg, length, height, thickness, style, openings=()):
+    """A ground-floor wall from ``xyz`` along its local x, rotated ``rot_deg`` about z."""
+    a = np.radians(rot_deg)
+    start = np.asarray(xyz[:2], float)
+    end = start + length * np.array([np.cos(a), np.sin(a)])
+    return b.wall(name, 0, start, end, xyz[2], height, thickness, style, openings)
 
 
 def ifc_house(out_dir) -> Path:
     """Write ``house.ifc`` (about 6.4 x 5.4 m, walls 2.6 m, ridge 3.5 m) into ``out_dir``."""
     out = Path(out_dir) / "house.ifc"
-    b = _Ifc()
+    b = IfcBuilder("iat house")
     wall_s = b.style("wall", (0.78, 0.74, 0.66))
     inner_s = b.style("inner wall", (0.70, 0.76, 0.80))
     floor_s = b.style("floor", (0.50, 0.38, 0.26))
@@ -203,36 +91,61 @@ def ifc_house(out_dir) -> Path:
     rug_s = b.style("rug", (0.25, 0.35, 0.60))
     h = 2.6
     # interior x in [0, 6], y in [-5, 0]; exterior walls 0.2 m outside it
-    b.wall("south wall", (-0.2, 0.0, 0.0), 0.0, 6.4, h, 0.2, wall_s,
-           openings=[(1.0, 2.2, 0.9, 2.0), (4.4, 5.6, 0.9, 2.0)])
-    b.wall("north wall", (-0.2, -5.2, 0.0), 0.0, 6.4, h, 0.2, wall_s,
-           openings=[(1.4, 2.6, 0.9, 2.0), (4.7, 5.6, 0.0, 2.1)])
-    b.wall("west wall", (0.0, -5.0, 0.0), 90.0, 5.0, h, 0.2, wall_s, openings=[(1.8, 3.2, 1.0, 2.0)])
-    b.wall("east wall", (6.2, -5.0, 0.0), 90.0, 5.0, h, 0.2, wall_s, openings=[(2.0, 3.0, 1.0, 2.0)])
-    b.wall("interior wall", (3.9, -5.0, 0.0), 90.0, 5.0, h, 0.1, inner_s, openings=[(3.5, 4.4, 0.0, 2.1)])
-    b.slab("floor slab", [(-0.2, 0.2), (-0.2, -5.2), (6.2, -5.2), (6.2, 0.2)], -0.2, 0.2, floor_s,
-           predefined="FLOOR")
-    b.slab("lowered ceiling", SKEW_OUTLINE, 2.3, 0.1, ceiling_s, predefined="USERDEFINED")
-    b.slab("rug", SKEW_OUTLINE, 0.0, 0.02, rug_s, ifc_class="IfcCovering", predefined="FLOORING")
+    _wall(
+        b,
+        "south wall",
+        (-0.2, 0.0, 0.0),
+        0.0,
+        6.4,
+        h,
+        0.2,
+        wall_s,
+        openings=[(1.0, 2.2, 0.9, 2.0), (4.4, 5.6, 0.9, 2.0)],
+    )
+    _wall(
+        b,
+        "north wall",
+        (-0.2, -5.2, 0.0),
+        0.0,
+        6.4,
+        h,
+        0.2,
+        wall_s,
+        openings=[(1.4, 2.6, 0.9, 2.0), (4.7, 5.6, 0.0, 2.1)],
+    )
+    _wall(b, "west wall", (0.0, -5.0, 0.0), 90.0, 5.0, h, 0.2, wall_s, openings=[(1.8, 3.2, 1.0, 2.0)])
+    _wall(b, "east wall", (6.2, -5.0, 0.0), 90.0, 5.0, h, 0.2, wall_s, openings=[(2.0, 3.0, 1.0, 2.0)])
+    _wall(b, "interior wall", (3.9, -5.0, 0.0), 90.0, 5.0, h, 0.1, inner_s, openings=[(3.5, 4.4, 0.0, 2.1)])
+    b.slab(
+        "floor slab",
+        0,
+        [(-0.2, 0.2), (-0.2, -5.2), (6.2, -5.2), (6.2, 0.2)],
+        -0.2,
+        0.2,
+        floor_s,
+        predefined="FLOOR",
+    )
+    b.slab("lowered ceiling", 0, SKEW_OUTLINE, 2.3, 0.1, ceiling_s, predefined="USERDEFINED")
+    b.slab("rug", 0, SKEW_OUTLINE, 0.0, 0.02, rug_s, ifc_class="IfcCovering", predefined="FLOORING")
     # gables: triangles over the west and east walls up to the ridge
     ridge_y, ridge_z = -2.5, 3.5
     gable = [(-5.2, h), (0.2, h), (ridge_y, ridge_z)]
     for name, x0 in (("west gable", -0.2), ("east gable", 6.0)):
-        v, fc = _prism(gable, x0, x0 + 0.2)
-        b.mesh(name, v, fc, wall_s, ifc_class="IfcWall")
+        v, fc = prism(gable, x0, x0 + 0.2)
+        b.mesh(name, v, fc, wall_s, ifc_class="IfcWall", storey=0)
     # roof: two sloped slabs 0.15 m thick, lower faces through the wall tops and the ridge
     roof = b.run("root.create_entity", b.f, ifc_class="IfcRoof", name="roof", predefined_type="GABLE_ROOF")
-    b.run("spatial.assign_container", b.f, products=[roof], relating_structure=b.storey)
+    b.run("spatial.assign_container", b.f, products=[roof], relating_structure=b.storey(0))
     slope = (ridge_z - h) / (ridge_y - 0.2)  # dz/dy on the south side (negative y goes up)
     halves = []
     for side, (y_eave, y_ridge) in (("south", (0.5, ridge_y)), ("north", (-5.5, ridge_y))):
         s = slope if side == "south" else -slope
         z_eave = h + s * (y_eave - 0.2 if side == "south" else y_eave + 5.2)
         prof = [(y_eave, z_eave), (y_ridge, ridge_z), (y_ridge, ridge_z + 0.15), (y_eave, z_eave + 0.15)]
-        v, fc = _prism(prof, -0.4, 6.4)
-        halves.append(b.mesh(f"roof {side}", v, fc, roof_s, predefined="ROOF", contained=False))
+        v, fc = prism(prof, -0.4, 6.4)
+        halves.append(b.mesh(f"roof {side}", v, fc, roof_s, predefined="ROOF"))
     b.run("aggregate.assign_object", b.f, products=halves, relating_object=roof)
-    b.write(out)
+    b.write(out, "iat-house")
     return out
 
 
@@ -260,8 +173,12 @@ def ifc_triangles(path) -> dict:
             if not it.next():
                 break
     v = np.concatenate(verts) if verts else np.zeros((0, 3))
-    return {"per_class": per_class, "triangles": sum(per_class.values()), "colours": colours,
-            "bounds": (v.min(axis=0), v.max(axis=0)) if len(v) else None}
+    return {
+        "per_class": per_class,
+        "triangles": sum(per_class.values()),
+        "colours": colours,
+        "bounds": (v.min(axis=0), v.max(axis=0)) if len(v) else None,
+    }
 
 
 # -- Blender -----------------------------------------------------------------------------------
@@ -282,7 +199,9 @@ def blender_room(out_dir) -> dict:
     try:
         r = subprocess.run(
             [sys.executable, str(BLENDER_SCRIPT), str(out)],
-            capture_output=True, text=True, timeout=BLENDER_TIMEOUT_S,
+            capture_output=True,
+            text=True,
+            timeout=BLENDER_TIMEOUT_S,
         )
     except subprocess.TimeoutExpired as e:
         raise RuntimeError(f"Blender did not finish in {BLENDER_TIMEOUT_S} s") from e
@@ -364,9 +283,14 @@ def collada_room(out_dir) -> Path:
         inputs.addInput(0, "VERTEX", f"#{name}-verts")
         geom.primitives.append(geom.createTriangleSet(tris.ravel(), inputs, f"{name}-ref"))
         mesh.geometries.append(geom)
-        nodes.append(scene.Node(name, children=[
-            scene.GeometryNode(geom, [scene.MaterialNode(f"{name}-ref", mats[name], inputs=[])])
-        ]))
+        nodes.append(
+            scene.Node(
+                name,
+                children=[
+                    scene.GeometryNode(geom, [scene.MaterialNode(f"{name}-ref", mats[name], inputs=[])])
+                ],
+            )
+        )
     mesh.scenes.append(scene.Scene("room", nodes))
     mesh.scene = mesh.scenes[0]
     mesh.assetInfo.created = mesh.assetInfo.modified = _fixed_time()
@@ -488,8 +412,14 @@ def highlight(img, top: float = 0.01) -> np.ndarray:
 def camera(eye, target, yfov: float = 70.0, up=(0.0, 1.0, 0.0)):
     from iat.camera import Camera
 
-    return Camera(eye=np.asarray(eye, float), target=np.asarray(target, float), up=np.asarray(up, float),
-                  yfov=yfov, znear=0.02, zfar=100.0)
+    return Camera(
+        eye=np.asarray(eye, float),
+        target=np.asarray(target, float),
+        up=np.asarray(up, float),
+        yfov=yfov,
+        znear=0.02,
+        zfar=100.0,
+    )
 
 
 def model_cameras() -> dict:
@@ -506,8 +436,9 @@ def add_ifc_light(scene) -> None:
     """Append the IFC house's point light (IFC files have none) to ``scene``, in place."""
     from iat.io.scene import Light
 
-    scene.lights.append(Light(kind="point", position=ifc_to_yup(IFC_LIGHT), intensity=IFC_LIGHT_INTENSITY,
-                              name="test lamp"))
+    scene.lights.append(
+        Light(kind="point", position=ifc_to_yup(IFC_LIGHT), intensity=IFC_LIGHT_INTENSITY, name="test lamp")
+    )
 
 
 def figures(scene, solution, baked, mesh_img, iat_img) -> dict:
@@ -543,3 +474,67 @@ def describe(name: str, f: dict) -> str:
         f"PSNR {f['psnr_db']:.2f} dB, dotted {100 * f['dotted']:.3f} % of lit pixels "
         f"(lit {100 * f['lit_fraction']:.1f} % of the image), solve {f.get('solve_s', float('nan')):.1f} s"
     )
+
+
+def skewed_quad_renders(out_dir, form: str, renderer) -> dict:
+    """The skewed-quad lamp test: a point light 0.5 m over the quad, seen from straight above.
+
+    form : "obj file" (the quad as two triangles in an OBJ, as the loader makes it) or "one quad
+    patch" (given to the solver as one bilinear root). Returns scene, baked, mesh and iat images,
+    the highlights (px) and their distance.
+    """
+    from iat.bake.baker import bake
+    from iat.bake.policy import BakePolicy
+    from iat.io.load import load_scene
+    from iat.io.scene import Light, Material, Scene
+    from iat.radiosity import SolveOptions, solve
+
+    path, light = skewed_quad_obj(out_dir)
+    if form == "obj file":
+        scene = load_scene(path)
+    else:
+        scene = Scene(
+            vertices=skewed_quad_corners(),
+            patch_corners=[[0, 1, 2, 3]],
+            patch_material=[0],
+            materials=[Material(name="floor", albedo=[0.6, 0.6, 0.6])],
+        )
+        if scene.patch_normal[0, 1] < 0:
+            scene.patch_corners = scene.patch_corners[:, ::-1].copy()
+    scene.lights.append(Light(kind="point", position=light, intensity=1.0))
+    sol = solve(scene, SolveOptions())
+    baked = bake(sol, scene, BakePolicy())
+    centre = skewed_quad_corners().mean(axis=0)
+    cam = camera(centre + [0.0, 3.0, 0.0], centre, yfov=45.0, up=(0.0, 0.0, -1.0))
+    renderer.set_solution(sol)
+    renderer.set_baked(baked)
+    mesh = renderer.render(cam, size=IMAGE_SIZE, mode="mesh")
+    iat = renderer.render(cam, size=IMAGE_SIZE, mode="iat")
+    pm, pi = highlight(mesh), highlight(iat)
+    return {
+        "scene": scene,
+        "baked": baked,
+        "mesh": mesh,
+        "iat": iat,
+        "highlights": (pm, pi),
+        "distance": float(np.linalg.norm(pm - pi)),
+    }
+
+
+def solve_and_bake(name: str, scene) -> tuple:
+    """``(solution, baked, solve_s, bake_s)`` of a real-tool model at the defaults (the IFC house
+    gets its lamp first: IFC carries no lights)."""
+    import time
+
+    from iat.bake.baker import bake
+    from iat.bake.policy import BakePolicy
+    from iat.radiosity import SolveOptions, solve
+
+    if name == "ifc":
+        add_ifc_light(scene)
+    t0 = time.perf_counter()
+    sol = solve(scene, SolveOptions())
+    solve_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    baked = bake(sol, scene, BakePolicy())
+    return sol, baked, solve_s, time.perf_counter() - t0
