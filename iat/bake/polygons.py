@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from iat.bake import atlas
-from iat.geometry.mesh import QUAD_SKEW_TOL
+from iat.geometry.mesh import QUAD_SKEW_TOL, quad_twist
+from iat.geometry.quadtree import bilinear
 
 #: a quad root further than QUAD_SKEW_TOL from a parallelogram is drawn as this many cells a side
 SKEW_GRID = 16
@@ -86,9 +87,7 @@ def textured_polygons(
     if clip_start is not None and len(clip_uv):
         cut = np.diff(clip_start)[ps] > 0
     c = np.asarray(corners, dtype=np.float64)[ps]
-    twist = np.linalg.norm(c[:, 0] - c[:, 1] + c[:, 2] - c[:, 3], axis=1)
-    diag = 0.5 * (np.linalg.norm(c[:, 2] - c[:, 0], axis=1) + np.linalg.norm(c[:, 3] - c[:, 1], axis=1))
-    skewed = is_quad[ps] & ~cut & (twist > QUAD_SKEW_TOL * np.maximum(diag, 1e-300))
+    skewed = is_quad[ps] & ~cut & (quad_twist(c[:, 0], c[:, 1], c[:, 2], c[:, 3]) > QUAD_SKEW_TOL)
     out = _whole_polygons(is_quad, corners, patch_uv, material, detail, ps, sides, packing, ~cut & ~skewed)
     if not (cut.any() or skewed.any()):
         return out
@@ -124,12 +123,6 @@ def _grid_triangles(n: int) -> np.ndarray:
     return np.concatenate([t1, t2]).astype(np.float64) / n
 
 
-def _bilinear(c: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """(n, d) bilinear blend of corner values c (n, 4, d) at lattice (u, v) (n,)."""
-    u, v = u[:, None], v[:, None]
-    return (1 - u) * (1 - v) * c[:, 0] + u * (1 - v) * c[:, 1] + u * v * c[:, 2] + (1 - u) * v * c[:, 3]
-
-
 def _piece_polygons(corners, patch_uv, material, detail, ps, sides, packing, r, tri_uv):
     """Triangles ``tri_uv`` (n, 3, 2) in the lattices of patches ``ps[r]``, in
     :func:`textured_polygons`' layout (positions and detail uvs blended bilinearly)."""
@@ -143,10 +136,10 @@ def _piece_polygons(corners, patch_uv, material, detail, ps, sides, packing, r, 
     auv = np.stack([(pl[rr, 1] + u * m1 + 0.5) / W, (pl[rr, 2] + v * m1 + 0.5) / H], axis=1)
     n = len(u)
     return (
-        _bilinear(np.asarray(corners, np.float64)[pp], u, v).astype(np.float32),
+        bilinear(np.asarray(corners, np.float64)[pp], u, v).astype(np.float32),
         auv.astype(np.float32),
         pl[rr, 0].astype(np.float32),
-        _bilinear(np.asarray(patch_uv, np.float64)[pp], u, v).astype(np.float32),
+        bilinear(np.asarray(patch_uv, np.float64)[pp], u, v).astype(np.float32),
         material[pp].astype(np.int32),
         detail[pp].astype(np.float32),
         pp.astype(np.int32),

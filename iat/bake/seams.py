@@ -60,6 +60,7 @@ from __future__ import annotations
 import numpy as np
 
 from iat.bake.flatten import TileCache, extend_triangle, scaled_side, tile_side
+from iat.geometry.mesh import patch_normals
 
 __all__ = [
     "MAX_ANGLE_DEG",
@@ -69,7 +70,6 @@ __all__ = [
     "edge_pairs",
     "harmonise_rings",
     "involved_patches",
-    "patch_normals",
     "ring_index",
     "ring_sides",
     "solution_pairs",
@@ -148,14 +148,6 @@ def _corner_groups(pairs, is_quad):
     g = coo_matrix((np.ones(len(inv)), (inv[:, 0], inv[:, 1])), shape=(len(nodes), len(nodes)))
     _, label = connected_components(g, directed=False)
     return nodes.astype(np.int64), label.astype(np.int64)
-
-
-def patch_normals(corners: np.ndarray, is_quad: np.ndarray) -> np.ndarray:
-    """(P, 3) unit normals of patches with corners (P, 4, 3) (triangles: slots 0-2), is_quad (P,)."""
-    n = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
-    tri = ~is_quad
-    n[tri] = np.cross(corners[tri, 1] - corners[tri, 0], corners[tri, 2] - corners[tri, 0])
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
 
 def edge_pairs(

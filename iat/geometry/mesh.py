@@ -37,6 +37,39 @@ def _norm(a: np.ndarray) -> np.ndarray:
     return np.sqrt((a * a).sum(axis=-1))
 
 
+def corner_positions(vertices: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """(p, 4, 3) float64 corner positions of patches ``corners`` (p, 4) int64 (-1 in column 3 for
+    triangles, whose 4th corner then repeats their 3rd)."""
+    c = np.asarray(corners, dtype=np.int64).copy()
+    tri = c[:, 3] < 0
+    c[tri, 3] = c[tri, 2]
+    return np.asarray(vertices, dtype=np.float64)[c]
+
+
+def patch_normals(corners: np.ndarray, is_quad: np.ndarray) -> np.ndarray:
+    """(P, 3) unit normals of patches with corners (P, 4, 3) (triangles: slots 0-2), is_quad (P,)."""
+    n = np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1])
+    tri = ~np.asarray(is_quad, dtype=bool)
+    n[tri] = np.cross(corners[tri, 1] - corners[tri, 0], corners[tri, 2] - corners[tri, 0])
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+
+def patch_areas(corners: np.ndarray, is_quad: np.ndarray) -> np.ndarray:
+    """(P,) areas of patches with corners (P, 4, 3): a quad as its two triangles (0, 1, 2), (0, 2, 3)."""
+    a = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    q = np.asarray(is_quad, dtype=bool)
+    a[q] += 0.5 * np.linalg.norm(
+        np.cross(corners[q, 2] - corners[q, 0], corners[q, 3] - corners[q, 0]), axis=1
+    )
+    return a
+
+
+def quad_twist(c0: np.ndarray, c1: np.ndarray, c2: np.ndarray, c3: np.ndarray) -> np.ndarray:
+    """(n,) how far quads (corners (n, 3) each, in order) are from parallelograms:
+    ``|c0 - c1 + c2 - c3|`` (the bilinear twist) over the mean diagonal (:data:`QUAD_SKEW_TOL`)."""
+    return _norm(c0 - c1 + c2 - c3) / np.maximum(0.5 * (_norm(c2 - c0) + _norm(c3 - c1)), 1e-300)
+
+
 def _group_rows(key: np.ndarray):
     """Group equal rows of an (n, 3) int64 array.
 
@@ -227,8 +260,7 @@ def merge_quads(
     s2 = (_cross(e12, e23) * n).sum(1) / np.maximum(l12 * l23, 1e-300)
     s3 = (_cross(e23, e30) * n).sum(1) / np.maximum(l23 * l30, 1e-300)
     score = np.minimum(np.minimum(s0, s1), np.minimum(s2, s3))
-    twist = _norm(p0 - p1 + p2 - p3) / np.maximum(0.5 * (_norm(p2 - p0) + _norm(p3 - p1)), 1e-300)
-    ok = (s0 > 1e-6) & (s2 > 1e-6) & (twist <= skew_tol)
+    ok = (s0 > 1e-6) & (s2 > 1e-6) & (quad_twist(p0, p1, p2, p3) <= skew_tol)
     ha, hb, fa, fb, ha1, ha2, hb2, score = (x[ok] for x in (ha, hb, fa, fb, ha1, ha2, hb2, score))
 
     # greedy matching: a candidate wins when it ranks best at both of its faces

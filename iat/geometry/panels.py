@@ -14,6 +14,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import ConvexHull, QhullError
 
+from iat.geometry.mesh import corner_positions, patch_areas, patch_normals
+
 #: patches are coplanar when their normals are within this (radians) ...
 PANEL_ANGLE_TOL = 1e-3
 #: ... and each one's centre lies within this times the scene's diagonal of the other's plane
@@ -97,15 +99,11 @@ def min_area_rectangle(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.n
 
 def patch_geometry(vertices: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(p, 4, 3) corner positions (a triangle's 4th repeats its 3rd), (p, 3) unit normals and
-    (p,) areas of root patches ``corners`` (p, 4) int64 (-1 in column 3 for triangles)."""
-    c = np.asarray(corners, dtype=np.int64).copy()
-    tri = c[:, 3] < 0
-    c[tri, 3] = c[tri, 2]
-    pos = np.asarray(vertices, dtype=np.float64)[c]
-    n = np.cross(pos[:, 2] - pos[:, 0], pos[:, 3] - pos[:, 1])
-    n[tri] = np.cross(pos[tri, 1] - pos[tri, 0], pos[tri, 2] - pos[tri, 0])
-    area = 0.5 * np.linalg.norm(n, axis=1)
-    return pos, n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300), area
+    (p,) areas of root patches ``corners`` (p, 4) int64 (-1 in column 3 for triangles), as a
+    :class:`~iat.io.scene.Scene` of them has them."""
+    pos = corner_positions(vertices, corners)
+    is_quad = np.asarray(corners)[:, 3] >= 0
+    return pos, patch_normals(pos, is_quad), patch_areas(pos, is_quad)
 
 
 def group_panels(vertices: np.ndarray, corners: np.ndarray, material: np.ndarray, fit: str = "all") -> Panels:
@@ -255,7 +253,7 @@ def make_panels(
     material = np.asarray(material, dtype=np.int64)
     uv = np.asarray(uv, dtype=np.float64)
     empty = PanelRoots(V, corners, material, uv, np.zeros((0, 3, 2)), np.zeros(0, dtype=np.int64), 0)
-    if len(corners) == 0:
+    if not (corners[:, 3] < 0).any():  # no triangle: no group can become a panel
         return empty
     pan = group_panels(V, corners, material, fit="triangles")
     is_tri = corners[:, 3] < 0

@@ -284,18 +284,34 @@ def triangulate(forest: Forest, keys: np.ndarray) -> np.ndarray:
     return np.concatenate(out).astype(np.int32) if out else np.zeros((0, 3), dtype=np.int32)
 
 
+def bilinear(c: np.ndarray, u, v) -> np.ndarray:
+    """(k, d) the bilinear blend of corner values c (k, 4, d) at parameters u, v (k,): the
+    quad parametrisation of :mod:`iat.io.scene`, for positions, detail uvs or anything else."""
+    u = np.asarray(u, dtype=np.float64)[:, None]
+    v = np.asarray(v, dtype=np.float64)[:, None]
+    return (1 - u) * (1 - v) * c[:, 0] + u * (1 - v) * c[:, 1] + u * v * c[:, 2] + (1 - u) * v * c[:, 3]
+
+
+def patch_point(patch_corners: np.ndarray, patch_is_quad: np.ndarray, patch, u, v) -> np.ndarray:
+    """(k, 3) float64 world points at parameters (u, v) (k,) of patches ``patch`` (k,): bilinear on
+    quads, barycentric on triangles."""
+    patch = np.asarray(patch, dtype=np.int64)
+    c = patch_corners[patch]
+    quad = bilinear(c, u, v)
+    u = np.asarray(u, dtype=np.float64)[:, None]
+    v = np.asarray(v, dtype=np.float64)[:, None]
+    tri = c[:, 0] + u * (c[:, 1] - c[:, 0]) + v * (c[:, 2] - c[:, 0])
+    return np.where(np.asarray(patch_is_quad, dtype=bool)[patch][:, None], quad, tri)
+
+
 def lattice_to_world(patch_corners: np.ndarray, patch_is_quad: np.ndarray, patch, i, j, n: int) -> np.ndarray:
     """(k, 3) float64 world positions of lattice points.
 
     patch_corners : (P, 4, 3) float64; patch_is_quad : (P,) bool; patch, i, j : (k,) ints
     """
-    patch = np.asarray(patch, dtype=np.int64)
-    u = (np.asarray(i, dtype=np.float64) / n)[:, None]
-    v = (np.asarray(j, dtype=np.float64) / n)[:, None]
-    c = patch_corners[patch]
-    quad = (1 - u) * (1 - v) * c[:, 0] + u * (1 - v) * c[:, 1] + u * v * c[:, 2] + (1 - u) * v * c[:, 3]
-    tri = c[:, 0] + u * (c[:, 1] - c[:, 0]) + v * (c[:, 2] - c[:, 0])
-    return np.where(np.asarray(patch_is_quad, dtype=bool)[patch][:, None], quad, tri)
+    u = np.asarray(i, dtype=np.float64) / n
+    v = np.asarray(j, dtype=np.float64) / n
+    return patch_point(patch_corners, patch_is_quad, patch, u, v)
 
 
 def keys_to_world(

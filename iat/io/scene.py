@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from iat.camera import Camera
+from iat.geometry.mesh import corner_positions, patch_areas, patch_normals
+from iat.geometry.quadtree import bilinear
 
 
 @dataclass
@@ -168,19 +170,12 @@ class Scene:
     @property
     def corner_positions(self) -> np.ndarray:
         """(p, 4, 3) float64 corner positions; a triangle's 4th corner repeats its 3rd."""
-        c = self.patch_corners.copy()
-        tri = c[:, 3] < 0
-        c[tri, 3] = c[tri, 2]
-        return self.vertices[c]
+        return corner_positions(self.vertices, self.patch_corners)
 
     @property
     def patch_normal(self) -> np.ndarray:
         """(p, 3) float64 unit normals (right-handed winding of the corners)."""
-        c = self.corner_positions
-        n = np.cross(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1])
-        tri = ~self.patch_is_quad
-        n[tri] = np.cross(c[tri, 1] - c[tri, 0], c[tri, 2] - c[tri, 0])
-        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        return patch_normals(self.corner_positions, self.patch_is_quad)
 
     @property
     def clip_start(self) -> np.ndarray:
@@ -195,11 +190,7 @@ class Scene:
     @property
     def lattice_area(self) -> np.ndarray:
         """(p,) float64 area of each root's whole lattice (its rectangle for a clipped cell)."""
-        c = self.corner_positions
-        a = 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
-        q = self.patch_is_quad
-        a[q] += 0.5 * np.linalg.norm(np.cross(c[q, 2] - c[q, 0], c[q, 3] - c[q, 0]), axis=1)
-        return a
+        return patch_areas(self.corner_positions, self.patch_is_quad)
 
     @property
     def patch_area(self) -> np.ndarray:
@@ -222,16 +213,9 @@ class Scene:
         whole = ~self.patch_clipped
         q = self.patch_is_quad
         parts = [c[whole][:, [0, 1, 2]], c[whole & q][:, [0, 2, 3]]]
-        if len(self.clip_patch):
-            u = self.clip_uv[..., 0:1]
-            v = self.clip_uv[..., 1:2]
-            cc = c[self.clip_patch][:, None]  # (C, 1, 4, 3): rectangles, so bilinear is affine
-            w = (
-                (1 - u) * (1 - v) * cc[:, :, 0]
-                + u * (1 - v) * cc[:, :, 1]
-                + u * v * cc[:, :, 2]
-                + (1 - u) * v * cc[:, :, 3]
-            )
+        if len(self.clip_patch):  # cells are rectangles: the bilinear map is affine over a triangle
+            uv = self.clip_uv.reshape(-1, 2)
+            w = bilinear(c[np.repeat(self.clip_patch, 3)], uv[:, 0], uv[:, 1]).reshape(-1, 3, 3)
             parts.append(w)
         return np.concatenate(parts)
 

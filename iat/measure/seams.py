@@ -14,7 +14,8 @@ import numpy as np
 from iat.bake.baker import Baker
 from iat.bake.flatten import flatten, sample_tile
 from iat.bake.policy import BakePolicy
-from iat.bake.seams import EdgePairs, patch_normals, solution_pairs
+from iat.bake.seams import EdgePairs, solution_pairs
+from iat.geometry.mesh import patch_normals
 from iat.radiosity.solution import Solution
 
 __all__ = ["sample_pages", "seam_error", "seam_measure"]

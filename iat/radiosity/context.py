@@ -36,10 +36,10 @@ from iat.radiosity.sampling import (
     GAUSS_QUAD,
     GAUSS_TRI,
     Shooter,
-    concentric_disk,
     hash_uniform,
     luminance_of,
     pattern_side,
+    rotated_disk,
     sample_lattice,
     weighted_lattice_sums,
 )
@@ -154,7 +154,7 @@ class Context:
         keys = np.asarray(keys, dtype=np.int64)
         p, i, j = qt.decode_key(keys, self.n)
         if self.clipped.any() and self.clipped[p].any():
-            pos = self.world_at(p, *self.clamped_uv(p, i / self.n, j / self.n))
+            pos = qt.patch_point(self.corners, self.is_quad, p, *self.clamped_uv(p, i / self.n, j / self.n))
         else:
             pos = qt.lattice_to_world(self.corners, self.is_quad, p, i, j, self.n)
         nrm = self.normal[p]
@@ -182,14 +182,6 @@ class Context:
         out = clamp_into(np.stack([u[sel], v[sel]], axis=1), p[sel], self.clip_uv, self.clip_start, margin)
         u[sel], v[sel] = out[:, 0], out[:, 1]
         return u, v
-
-    def world_at(self, p: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """(n, 3) world points at lattice (u, v) of patches ``p``."""
-        c = self.corners[p]
-        u, v = u[:, None], v[:, None]
-        quad = (1 - u) * (1 - v) * c[:, 0] + u * (1 - v) * c[:, 1] + u * v * c[:, 2] + (1 - u) * v * c[:, 3]
-        tri = c[:, 0] + u * (c[:, 1] - c[:, 0]) + v * (c[:, 2] - c[:, 0])
-        return np.where(self.is_quad[p][:, None], quad, tri)
 
     def coverage(self, p: int, res: int) -> np.ndarray:
         """(res, res) bool surface coverage of clipped patch p at cell centres (``grid[v, u]``)."""
@@ -485,7 +477,7 @@ class Context:
         """MIS weights (k, S) and lattice parameters of the cosine-direction samples of the
         receivers ``sub`` (rows of the block) that hit the shooter (weight 0 elsewhere)."""
         r = rot if correlated else rot[sub]
-        dx, dy = concentric_disk((pat[None, :, 0] + r[:, 2:3]) % 1.0, (pat[None, :, 1] + r[:, 3:4]) % 1.0)
+        dx, dy = rotated_disk(pat, r[:, 2:3], r[:, 3:4])
         dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
         t1, t2 = self.tangent[rpatch[sub], 0], self.tangent[rpatch[sub], 1]
         xs, ns = x[sub], nr[sub]
@@ -649,9 +641,7 @@ class Context:
         for a in range(0, len(lit), GATHER_BLOCK // 4):
             idx = lit[a : a + GATHER_BLOCK // 4]
             rot = hash_uniform(geo.key[idx], int(self.opts.seed) * 7919 + 17, 2)
-            dx, dy = concentric_disk(
-                (pat[None, :, 0] + rot[:, :1]) % 1.0, (pat[None, :, 1] + rot[:, 1:2]) % 1.0
-            )
+            dx, dy = rotated_disk(pat, rot[:, :1], rot[:, 1:2])
             d = to_sun + half * (dx[..., None] * t1 + dy[..., None] * t2)
             d /= np.linalg.norm(d, axis=-1, keepdims=True)
             frac[a : a + len(idx)] = self._escape(geo, idx, d).mean(axis=1)
@@ -670,9 +660,7 @@ class Context:
         for a in range(0, len(geo.key), block):
             idx = np.arange(a, min(a + block, len(geo.key)))
             rot = hash_uniform(geo.key[idx], int(self.opts.seed) * 7919 + 29, 2)
-            dx, dy = concentric_disk(
-                (pat[None, :, 0] + rot[:, :1]) % 1.0, (pat[None, :, 1] + rot[:, 1:2]) % 1.0
-            )
+            dx, dy = rotated_disk(pat, rot[:, :1], rot[:, 1:2])
             dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
             t1, t2 = self.tangent[geo.patch[idx], 0], self.tangent[geo.patch[idx], 1]
             w = (

@@ -56,6 +56,12 @@ GAUSS_TRI = (
 )
 
 
+def rotated_disk(pattern: np.ndarray, ru: np.ndarray, rv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`concentric_disk` of a stratified pattern (S, 2) in [0, 1)^2 shifted by ``ru``, ``rv``
+    (k, 1) per row (Cranley-Patterson rotation, modulo 1): (k, S) disc points each."""
+    return concentric_disk((pattern[None, :, 0] + ru) % 1.0, (pattern[None, :, 1] + rv) % 1.0)
+
+
 def _cross2(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     return p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0]
 
