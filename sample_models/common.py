@@ -97,16 +97,18 @@ class ModelBuilder:
         emissive=(0.0, 0.0, 0.0),
         texture: bytes | None = None,
         period: float | None = None,
+        transmission: float = 0.0,
     ) -> str:
         """Add a material; returns its name (used to pick it in :meth:`face` and friends).
 
         texture : PNG bytes of a detail texture (baseColorTexture) repeated every ``period``
             metres along both in-plane axes of every face that uses the material.
+        transmission : thin glass passing that fraction of the light (0: opaque).
         """
         if texture is not None and not (period and period > 0):
             raise ValueError(f"material {name!r}: a texture needs a period > 0")
         self._mat_index[name] = self.glb.add_material(
-            name, base_color, emissive=emissive, base_color_png=texture
+            name, base_color, emissive=emissive, base_color_png=texture, transmission=transmission
         )
         self._mat_period[name] = float(period) if texture is not None else None
         return name

@@ -26,6 +26,15 @@ neutral, everything else off) and ``evening`` (a dim orange dusk, every lamp on)
 at key times 0, 0.5 and 1. The file's own lighting (what :func:`iat.io.load.load_scene`
 gives) is everything on at once.
 
+The daylight variant (``python sample_models/house.py --daylight``, ``house_day.glb``) glazes
+the two windows (``KHR_materials_transmission`` 0.85) and lights the house by a real sun and sky
+instead: the house stands in Paris (48.85 N, 2.35 E) with north at +Z (so the living room's
+window faces south), and its day cycle is an equinox day, 2026-09-22, at 08:00, 11:00, 14:00,
+17:00 and 20:00 local time: each state places the sun by :func:`iat.lighting.sun.sun_states`
+(clear-sky direct light, warm when low) under a Preetham sky of the same sun; at 20:00 the sun
+has set, a dim blue sky is left and every lamp is on. The file's own lighting is the 14:00 sun
+and sky (the sky as root ``extras["iat_sky"]``) with every lamp on.
+
 Output is deterministic: the same script gives the same bytes.
 """
 
@@ -43,6 +52,7 @@ if __package__ in (None, ""):  # run as a script: make `sample_models` and `iat`
 from sample_models.common import Camera, ModelBuilder, assemble, script_main, walk_path  # noqa: E402
 
 DEFAULT_PATH = _HERE / "house.glb"
+DAYLIGHT_PATH = _HERE / "house_day.glb"
 
 # plan (metres)
 W, D, H = 12.0, 9.0, 2.7  # inside extents x, z, height
@@ -111,6 +121,42 @@ LIGHTING_STATES = {
         "emission": {"window_south": [1.4, 0.7, 0.3], "window_north": [0.3, 0.35, 0.5], "lamp_panel": 1.0},
     },
 }
+
+
+#: the daylight variant: where and when (see the module docstring)
+PLACE = {"latitude": 48.85, "longitude": 2.35, "tz": "Europe/Paris", "north": (0.0, 0.0, 1.0)}
+DAY = "2026-09-22"
+DAY_TIMES = ["08:00", "11:00", "14:00", "17:00", "20:00"]
+GLASS_TRANSMISSION = 0.85
+#: the clear sky's diffuse light on the ground as a fraction of the sun's direct normal light
+#: (a clear day: about 100 W/m² of diffuse light with the sun high)
+SKY_FRACTION = 0.12
+#: after sunset: a uniform blue sky, W/(m² sr)
+DUSK_SKY = (0.25, 0.35, 0.6)
+LAMPS_ON = {"living_lamp": 10.0, "bedroom_lamp": 8.0, "study_lamp": 8.0, "desk_lamp": 12.0}
+
+
+def daylight_states() -> dict[str, dict]:
+    """The daylight variant's day cycle: {'HH:MM': state} (sun, sky, lamps, kitchen panel)."""
+    from iat.io.scene import Sky
+    from iat.lighting.sun import sun_states
+    from iat.radiosity.sky import sky_irradiance
+
+    states = sun_states(
+        PLACE["latitude"], PLACE["longitude"], DAY, DAY_TIMES, PLACE["tz"], north=PLACE["north"], warm=True
+    )
+    for st in states.values():
+        sun = st["sun"]
+        if sun["intensity"] > 0:
+            to_sun = [-c for c in sun["direction"]]
+            unit = sky_irradiance(Sky(kind="preetham", sun_direction=to_sun))[1]  # zenith radiance 1
+            diffuse = SKY_FRACTION * sun["intensity"]
+            st["sky"] = {"kind": "preetham", "sun_direction": to_sun, "radiance": round(diffuse / unit, 4)}
+            st["lights"], st["emission"] = LAMPS_OFF, {"lamp_panel": 0.0}
+        else:
+            st["sky"] = {"kind": "uniform", "radiance": list(DUSK_SKY)}
+            st["lights"], st["emission"] = LAMPS_ON, {"lamp_panel": 1.0}
+    return states
 
 
 def _door_box(kind: str, c: float) -> tuple[tuple, tuple]:
@@ -228,8 +274,8 @@ def _shelf(
             n += 1
 
 
-def build_geometry(mb: ModelBuilder) -> None:
-    """Rooms, door openings, windows and furniture."""
+def build_geometry(mb: ModelBuilder, daylight: bool = False) -> None:
+    """Rooms, door openings, windows (emissive panes, or glass when ``daylight``) and furniture."""
     mb.material("plaster", PLASTER)
     mb.material("ceiling", CEILING)
     mb.material("wood_floor", WOOD_FLOOR)
@@ -241,8 +287,11 @@ def build_geometry(mb: ModelBuilder) -> None:
     mb.material("fabric_red", FABRIC_RED)
     mb.material("linen", LINEN)
     mb.material("lacquer", WHITE_LACQUER)
-    mb.material("window_south", (0.8, 0.8, 0.8), emissive=WINDOW_RADIANCE)
-    mb.material("window_north", (0.8, 0.8, 0.8), emissive=WINDOW_RADIANCE)
+    for name in ("window_south", "window_north"):
+        if daylight:
+            mb.material(name, (0.8, 0.85, 0.85), transmission=GLASS_TRANSMISSION)
+        else:
+            mb.material(name, (0.8, 0.8, 0.8), emissive=WINDOW_RADIANCE)
     mb.material("lamp_panel", (0.8, 0.8, 0.8), emissive=PANEL_RADIANCE)
     for k, c in enumerate(BOOKS):
         mb.material(f"books_{k}", c)
@@ -273,7 +322,7 @@ def build_geometry(mb: ModelBuilder) -> None:
         mb.face("door_jambs", "plaster", (lo[0], DOOR_H, lo[2]), (hi[0], DOOR_H, hi[2]), -1)
         mb.face("door_thresholds", "wood", (lo[0], 0.0, lo[2]), (hi[0], 0.0, hi[2]), +1)
 
-    # windows: emissive panes filling the holes, facing into the room
+    # windows: emissive panes (or glass) filling the holes, facing into the room
     for _, fname, (lo, hi) in WINDOWS:
         sign = +1 if fname.startswith("-") else -1
         mat = "window_south" if fname == "-z" else "window_north"
@@ -363,19 +412,49 @@ def cameras() -> list[Camera]:
     ]
 
 
-def build(path: str | Path = DEFAULT_PATH) -> Path:
-    """Write the house GLB to ``path`` (atomically); returns the path."""
+def build(path: str | Path = DEFAULT_PATH, daylight: bool = False) -> Path:
+    """Write the house GLB to ``path`` (atomically); returns the path. ``daylight``: the glazed,
+    sun-and-sky-lit variant (the module docstring)."""
+    if not daylight:
+        return assemble(
+            build_geometry,
+            lights,
+            cameras(),
+            camera_path(),
+            panel=1.25,
+            extras={"iat_lighting_states": LIGHTING_STATES},
+        ).glb.write(path)
+    states = daylight_states()
+    own = states["14:00"]
+
+    def day_lights(mb: ModelBuilder) -> None:
+        lights(mb)
+        sun = own["sun"]
+        mb.glb.add_directional_light("sun", sun["color"], sun["intensity"], sun["direction"])
+
     return assemble(
-        build_geometry,
-        lights,
+        lambda mb: build_geometry(mb, daylight=True),
+        day_lights,
         cameras(),
         camera_path(),
         panel=1.25,
-        extras={"iat_lighting_states": LIGHTING_STATES},
+        extras={"iat_lighting_states": states, "iat_sky": own["sky"]},
     ).glb.write(path)
 
 
-if __name__ == "__main__":
-    sys.exit(
-        script_main(build, DEFAULT_PATH, "Write the house sample scene (after the report's maus) as a GLB.")
+def _main(argv: list[str] | None = None) -> int:
+    args = list(sys.argv[1:] if argv is None else argv)
+    daylight = "--daylight" in args
+    if daylight:
+        args.remove("--daylight")
+    return script_main(
+        lambda p: build(p, daylight=daylight),
+        DAYLIGHT_PATH if daylight else DEFAULT_PATH,
+        "Write the house sample scene (after the report's maus) as a GLB; --daylight: the glazed, "
+        "sun-and-sky-lit variant.",
+        args,
     )
+
+
+if __name__ == "__main__":
+    sys.exit(_main())

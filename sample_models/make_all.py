@@ -1,9 +1,10 @@
 """Regenerate every sample model: ``python sample_models/make_all.py [-o DIR] [--check]``.
 
 Runs each model script's ``build(path)`` (Cornell box, house, cave, lava pit,
-pool) and writes ``NAME.glb`` into ``DIR`` (default: this folder, replacing the
-kept files). ``--check`` builds into a temporary folder instead and exits 1 when
-a kept file differs from what its script makes now (a stale model).
+pool, and the house's daylight variant) and writes ``NAME.glb`` into ``DIR``
+(default: this folder, replacing the kept files). ``--check`` builds into a
+temporary folder instead and exits 1 when a kept file differs from what its
+script makes now (a stale model).
 """
 
 from __future__ import annotations
@@ -19,14 +20,22 @@ if str(_HERE.parent) not in sys.path:  # run as a script: make `sample_models` a
     sys.path.insert(0, str(_HERE.parent))
 
 #: the sample models, in the order they are built
-MODELS = ("cornell_box", "house", "cave", "lavapit", "pool")
+MODELS = ("cornell_box", "house", "cave", "lavapit", "pool", "house_day")
+#: models made by another model's script: name -> (script, build keywords)
+VARIANTS = {"house_day": ("house", {"daylight": True})}
+
+
+def build_one(name: str, path: str | Path) -> Path:
+    """Build the model ``name`` into ``path``; returns the path."""
+    script, kw = VARIANTS.get(name, (name, {}))
+    return importlib.import_module(f"sample_models.{script}").build(path, **kw)
 
 
 def build_all(out_dir: str | Path = _HERE, names=MODELS) -> list[Path]:
     """Build the named models into ``out_dir`` as ``NAME.glb``; returns the paths written."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    return [importlib.import_module(f"sample_models.{n}").build(out_dir / f"{n}.glb") for n in names]
+    return [build_one(n, out_dir / f"{n}.glb") for n in names]
 
 
 def stale(names=MODELS) -> list[str]:

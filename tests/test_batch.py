@@ -130,3 +130,52 @@ def test_cli_reports_each_failed_task_on_one_line(client, tmp_path, capsys):
     assert cap.err.strip().splitlines() == [
         f"iat batch: error: gone: {tmp_path / 'missing.glb'}: file not found"
     ]
+
+
+def test_worker_warnings_reach_the_report_log_and_cli(client, tmp_path, capsys):
+    """A model's load warning (albedo clamped) and its solve warning (no light source) raised on a
+    worker come back as one line each, once, in the report, the log and on stderr."""
+    (tmp_path / "bright.mtl").write_text("newmtl bright\nKd 1.5 0.5 0.25\n")
+    obj = tmp_path / "bright.obj"
+    obj.write_text("mtllib bright.mtl\nv 0 0 0\nv 1 0 0\nv 1 0 -1\nv 0 0 -1\nusemtl bright\nf 1 2 3 4\n")
+    jobs = "".join(
+        f'[[job]]\nname = "dark{k}"\nmodel = "bright.obj"\noptions = {{ seed = {k} }}\n' for k in (1, 2)
+    )
+    p = _jobs(tmp_path, jobs)
+    report = run_batch(parse_jobs(p), client=client)
+    assert [r.status for r in report.results] == ["ok", "ok"]
+    clamp = f"{obj}: albedo outside [0, 1] clamped in 1 material: 'bright' (1.5, 0.5, 0.25)"
+    dark = f"{obj}: no light sources (no lights, no sky, no emissive materials): the solution is black"
+    said = [w for r in report.results for w in r.warnings]
+    assert sorted(said) == sorted([clamp, dark])  # each once over the batch
+    log = (tmp_path / "out" / LOG_NAME).read_text()
+    assert log.count("\twarning\t") == 2 and clamp in log
+    for f in (tmp_path / "out").glob("*.npz"):
+        f.unlink()
+    assert main(["batch", str(p), "--workers", "1"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert [line.split(": ", 2)[1] for line in err] == ["warning", "warning"]
+    assert {line.split(": ", 3)[3] for line in err} == {clamp, dark}
+
+
+def test_solve_states_on_the_engine_matches_the_serial_cli(tmp_path, capsys):
+    """``iat solve --states --workers 2`` writes the same OUT-<state>.npz as ``iat solve --states``."""
+    from iat.lighting.save import save_gltf
+
+    model = save_gltf(load_scene(CORNELL), CORNELL, tmp_path / "box.glb", lighting_states=STATES)
+    flags = ["--max-depth", str(DEPTH), "--json"]
+    assert main(["solve", str(model), "--states", "-o", str(tmp_path / "serial.npz"), *flags]) == 0
+    capsys.readouterr()
+    assert (
+        main(["solve", str(model), "--states", "--workers", "2", "-o", str(tmp_path / "dask.npz"), *flags])
+        == 0
+    )
+    out = json.loads(capsys.readouterr().out)
+    assert [s["state"] for s in out["states"]] == list(STATES) and out["workers"] == 2
+    for name in STATES:
+        _same(Solution.load(tmp_path / f"dask-{name}.npz"), Solution.load(tmp_path / f"serial-{name}.npz"))
+    assert (tmp_path / ".dask.batch" / LOG_NAME).is_file()
+    assert main(["solve", str(model), "--workers", "2", "-o", str(tmp_path / "x.npz")]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "iat solve: error: --workers and --scheduler go with --states (one solve runs in this process)"
+    )

@@ -172,7 +172,7 @@ def test_no_light_source_warns_and_still_writes_the_solution(tmp_path):
     r = iat("solve", obj, "-o", out)
     assert r.returncode == 0 and out.is_file()
     assert r.stderr.splitlines() == [
-        f"iat solve: warning: {obj}: no light sources (no lights, no emissive materials):"
+        f"iat solve: warning: {obj}: no light sources (no lights, no sky, no emissive materials):"
         " the solution is black"
     ]
 

@@ -56,6 +56,7 @@ _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 EXT_EMISSIVE_STRENGTH = "KHR_materials_emissive_strength"
 EXT_UNLIT = "KHR_materials_unlit"
+EXT_TRANSMISSION = "KHR_materials_transmission"
 EXT_LIGHTS = "KHR_lights_punctual"
 
 
@@ -211,6 +212,7 @@ class GlbBuilder:
         unlit: bool = False,
         double_sided: bool = False,
         base_color_texcoord: int = 0,
+        transmission: float = 0.0,
     ) -> int:
         """Add a diffuse material (metallic 0, roughness 1); returns its index.
 
@@ -221,6 +223,8 @@ class GlbBuilder:
             mipmap filtering), read with ``TEXCOORD_<base_color_texcoord>`` (0 or 1).
         unlit : add ``KHR_materials_unlit`` (viewers show the base colour as is).
         double_sided : glTF ``doubleSided``.
+        transmission : in [0, 1]; above 0 the material is thin glass passing that fraction of the
+            light (``KHR_materials_transmission`` ``transmissionFactor``).
         """
         bc = _floats(base_color, what=f"material {name!r} base_color")
         if len(bc) == 3:
@@ -234,6 +238,8 @@ class GlbBuilder:
             raise ValueError(f"material {name!r} emissive: negative radiance")
         if base_color_texcoord not in (0, 1):
             raise ValueError(f"material {name!r}: base_color_texcoord must be 0 or 1")
+        if not 0.0 <= float(transmission) <= 1.0:
+            raise ValueError(f"material {name!r}: transmission must be in [0, 1]")
 
         pbr: dict = {"baseColorFactor": bc, "metallicFactor": 0.0, "roughnessFactor": 1.0}
         mat: dict = {"name": str(name), "pbrMetallicRoughness": pbr}
@@ -248,6 +254,9 @@ class GlbBuilder:
         if unlit:
             extensions[EXT_UNLIT] = {}
             self._extensions_used.add(EXT_UNLIT)
+        if transmission > 0.0:
+            extensions[EXT_TRANSMISSION] = {"transmissionFactor": float(transmission)}
+            self._extensions_used.add(EXT_TRANSMISSION)
         if base_color_png is not None:
             tex = self._add_png_texture(bytes(base_color_png), name)
             info = {"index": tex}
@@ -504,6 +513,21 @@ class GlbBuilder:
         light = self.add_light(name, "spot", color, intensity, inner=inner, outer=outer)
         rot = quat_from_matrix(look_rotation(direction))
         return self.add_node(name, light=light, translation=position, rotation=rot)
+
+    def add_directional_light(
+        self, name: str, color, intensity: float, direction, angular_diameter_deg: float | None = None
+    ) -> int:
+        """Add a directional light (a sun) and its node; returns the node index.
+
+        intensity : lux, read as W/m² per unit colour; direction : (3,) world vector the light
+        travels along; angular_diameter_deg : the disc's diameter, degrees (``extras``; None: the
+        reader's default)
+        """
+        light = self.add_light(name, "directional", color, intensity)
+        if angular_diameter_deg is not None:
+            self._lights[light]["extras"] = {"angular_diameter": float(angular_diameter_deg)}
+        rot = quat_from_matrix(look_rotation(direction))
+        return self.add_node(name, light=light, rotation=rot)
 
     # -- output -------------------------------------------------------------------------------------
     def to_json(self) -> dict:

@@ -20,12 +20,15 @@ from pathlib import Path
 import numpy as np
 
 from iat.camera import Camera
-from iat.errors import LoadError
+from iat.errors import LoadError, OptionError
 from iat.io.glb import quat_to_matrix
 from iat.io.gltf_primitives import check_primitives, check_version, convert_primitives
 from iat.io.images import decode_texture
 from iat.io.messages import one_line
-from iat.io.scene import Light, Material, Scene
+from iat.io.scene import Light, Material, Scene, Sky
+
+#: root extras key of a model's sky (the daylight it is lit by with no lighting state chosen)
+SKY_KEY = "iat_sky"
 
 log = logging.getLogger(__name__)
 
@@ -362,6 +365,15 @@ class GltfDocument:
             yfov = float(np.degrees(p.yfov)) if p.yfov else 60.0
             out.append(Camera(eye=eye, target=eye + fwd, up=up, yfov=yfov, znear=znear, zfar=zfar, name=name))
         return out
+
+    def sky(self) -> Sky | None:
+        """The root ``extras["iat_sky"]`` (:meth:`iat.io.scene.Sky.from_spec`), or None; a malformed
+        one is a LoadError naming the file."""
+        extras = self.doc.extras if isinstance(self.doc.extras, dict) else {}
+        try:
+            return Sky.from_spec(extras.get(SKY_KEY))
+        except OptionError as e:
+            raise LoadError(f"{SKY_KEY}: {e}", self.path) from None
 
     def camera_paths(self) -> dict[str, list[Camera]]:
         sources = [self.doc.extras]

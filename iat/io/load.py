@@ -20,8 +20,8 @@
 - ``Scene.patch_uv`` is TEXCOORD_0 in the glTF convention (``(0, 0)`` is the
   top-left of the image, ``v`` grows downwards): texel ``detail[int(v h), int(u w)]``.
   OBJ ``vt`` is converted (``v -> 1 - v``).
-- Lights (KHR_lights_punctual point and spot), perspective cameras and the
-  ``iat_camera_paths`` root extras are read with pygltflib.
+- Lights (KHR_lights_punctual point, spot and directional), perspective cameras and the
+  ``iat_camera_paths`` and ``iat_sky`` root extras are read with pygltflib.
 - OBJ files are checked first for missing texture files and, after a failed parse,
   for face indices out of range, so the error names the cause.
 """
@@ -416,6 +416,7 @@ def load_scene(
         scene.lights = gl.lights(world)
         scene.cameras = gl.cameras(world, scene)
         scene.camera_paths = gl.camera_paths()
+        scene.sky = gl.sky()
     report(1.0, "loaded")
     log.info(
         "%s: %d triangles -> %d patches (%d quads), %d materials, %d lights, %d cameras",

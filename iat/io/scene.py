@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from iat.camera import Camera
+from iat.errors import OptionError
 from iat.geometry.mesh import corner_positions, patch_areas, patch_normals
 from iat.geometry.quadtree import bilinear
 
@@ -114,6 +115,32 @@ class Sky:
         self.radiance = np.asarray(self.radiance, dtype=np.float64).reshape(3)
         self.sun_direction = np.asarray(self.sun_direction, dtype=np.float64).reshape(3)
         self.ground = np.asarray(self.ground, dtype=np.float64).reshape(3)
+
+    @classmethod
+    def from_spec(cls, spec) -> Sky | None:
+        """The sky of a JSON spec ``{"kind", "radiance", "sun_direction", "turbidity", "ground"}``
+        (a lighting state's ``sky``, a file's root ``extras["iat_sky"]``); ``radiance`` may be one
+        number; None gives None (no sky). OptionError (one line) for a malformed spec."""
+        if spec is None:
+            return None
+        if not isinstance(spec, dict):
+            raise OptionError("sky must be an object or null")
+        if set(spec) - set(SKY_SPEC_KEYS):
+            raise OptionError(f"unknown sky key(s) {', '.join(sorted(set(spec) - set(SKY_SPEC_KEYS)))}")
+        kw = {k: spec[k] for k in SKY_SPEC_KEYS if k in spec}
+        if isinstance(kw.get("radiance"), int | float):
+            kw["radiance"] = [float(kw["radiance"])] * 3
+        try:
+            sky = cls(**kw)
+        except (TypeError, ValueError) as e:
+            raise OptionError(f"sky: {e}") from None
+        if not (np.isfinite(sky.radiance).all() and (sky.radiance >= 0).all()):
+            raise OptionError(f"sky radiance must be finite and >= 0, got {sky.radiance.tolist()}")
+        return sky
+
+
+#: the keys of a sky's JSON spec (:meth:`Sky.from_spec`)
+SKY_SPEC_KEYS = ("kind", "radiance", "sun_direction", "turbidity", "ground")
 
 
 @dataclass
@@ -242,9 +269,13 @@ class Scene:
 
     @property
     def has_light_sources(self) -> bool:
-        """True when a light or a used material emits (a scene without is black whatever the solve)."""
+        """True when a light, the sky or a used material emits (a scene without is black whatever
+        the solve)."""
         if any(float(np.max(lt.radiant_intensity)) > 0 for lt in self.lights):
             return True
+        sky = self.sky
+        if sky is not None and float(np.max(sky.radiance)) > 0:
+            return sky.kind != "hdr" or sky.image is not None
         used = np.unique(self.patch_material)
         return any(float(self.materials[k].emission.max()) > 0 for k in used if 0 <= k < len(self.materials))
 

@@ -129,7 +129,7 @@ def apply_lighting_state(scene: Scene, state: dict, base: Scene | None = None) -
     if "sun" in state:
         out.lights = _with_sun(out.lights, state["sun"])
     if "sky" in state:
-        out.sky = _sky_of(state["sky"])
+        out.sky = Sky.from_spec(state["sky"])
     return out
 
 
@@ -156,21 +156,6 @@ def _with_sun(lights: list[Light], spec) -> list[Light]:
         **kw,
     )
     return [*rest, sun]
-
-
-def _sky_of(spec) -> Sky | None:
-    """The :class:`Sky` of a state's ``sky`` entry (None: no sky)."""
-    if spec is None:
-        return None
-    if not isinstance(spec, dict):
-        raise OptionError("lighting state: sky must be an object or null")
-    known = {"kind", "radiance", "sun_direction", "turbidity", "ground"}
-    if set(spec) - known:
-        raise OptionError(f"lighting state: unknown sky key(s) {', '.join(sorted(set(spec) - known))}")
-    kw = {k: spec[k] for k in known if k in spec}
-    if "radiance" in kw and isinstance(kw["radiance"], int | float):
-        kw["radiance"] = [float(kw["radiance"])] * 3
-    return Sky(**kw)
 
 
 def state_scenes(scene: Scene, states: dict[str, dict] | None = None) -> dict[str, Scene]:

@@ -56,7 +56,7 @@ def warn_if_unlit(scene) -> None:
     if not scene.has_light_sources:
         where = f"{scene.path}: " if getattr(scene, "path", "") else ""
         warnings.warn(
-            f"{where}no light sources (no lights, no emissive materials): the solution is black",
+            f"{where}no light sources (no lights, no sky, no emissive materials): the solution is black",
             IATWarning,
             stacklevel=3,
         )

@@ -46,6 +46,7 @@ against 0.85 s to load it again: ``benchmarks/batch_bench.py``).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -56,6 +57,7 @@ import sys
 import tempfile
 import time
 import tomllib
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -322,10 +324,27 @@ def _state_tasks(job: Job, states: dict[str, dict]) -> list[Task]:
 
 # -- work done on the workers ----------------------------------------------------
 def load_model(model: str, load_kwargs: dict):
-    """The Scene of ``model`` (a task: its result stays on the cluster for the tasks that need it)."""
+    """``(Scene of model, [one-line warnings])`` (a task: its result stays on the cluster for the
+    tasks that need it; the warnings reach the client through the first of them)."""
     from iat.io.load import load_scene
 
-    return load_scene(model, **load_kwargs)
+    with _warnings_caught() as caught:
+        scene = load_scene(model, **load_kwargs)
+    return scene, caught
+
+
+@contextlib.contextmanager
+def _warnings_caught():
+    """Collect the warnings raised inside as one-line strings (a worker's warnings are not seen by
+    the client otherwise); a repeated message is kept once."""
+    out: list[str] = []
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        yield out
+    for w in rec:
+        text = " ".join(str(w.message).split())
+        if text not in out:
+            out.append(text)
 
 
 def _solution(x):
@@ -340,9 +359,19 @@ def _state_scene(scene, states: dict, state: str | None):
     return union_lighting([apply_lighting_state(scene, st) for st in states.values()])
 
 
-def run_task(kind: str, scene, options, states, state, bake, render, *deps) -> dict:
+def run_task(kind: str, loaded, options, states, state, bake, render, *deps) -> dict:
     """One task's work (on a worker): ``{"solution", "glb" (bytes or None), "image" (linear (h, w, 3)
-    or None), "seconds"}``. ``deps`` are the results (or Solutions) of its inputs' tasks."""
+    or None), "seconds", "warnings"}``. ``loaded`` is :func:`load_model`'s result (None for a merge);
+    ``deps`` are the results (or Solutions) of its inputs' tasks. ``warnings``: the one-line warnings
+    of its model's loading and of its own work."""
+    scene, load_warnings = loaded if loaded is not None else (None, [])
+    with _warnings_caught() as caught:
+        out = _run_task(kind, scene, options, states, state, bake, render, *deps)
+    out["warnings"] = [*load_warnings, *(w for w in caught if w not in load_warnings)]
+    return out
+
+
+def _run_task(kind: str, scene, options, states, state, bake, render, *deps) -> dict:
     from iat.radiosity import solve
 
     t0 = time.perf_counter()
@@ -394,6 +423,7 @@ def _bake_and_render(sol, scene, bake, render) -> dict:
         r = Renderer()
         try:
             r.set_scene(scene)
+            r.set_sky(scene.sky)
             if render["mode"] != "preview":
                 r.set_solution(sol)
             if render["mode"] == "iat":
@@ -415,6 +445,7 @@ class TaskResult:
     error: str = ""
     outputs: list[str] = field(default_factory=list)
     user_error: bool = False  # the failure is an IATError (a bad file or option), not a bug
+    warnings: list[str] = field(default_factory=list)  # raised on the worker, one line each
 
 
 def _failed(name: str, e: BaseException) -> TaskResult:
@@ -576,7 +607,9 @@ def run_batch(
 
     def report(r: TaskResult) -> None:
         results[r.name] = r
-        line = f"{time.strftime('%Y-%m-%dT%H:%M:%S')}\t{r.name}\t{r.status}\t{r.seconds:.2f}\t{r.error}\n"
+        stamp = time.strftime("%Y-%m-%dT%H:%M:%S")
+        line = f"{stamp}\t{r.name}\t{r.status}\t{r.seconds:.2f}\t{r.error}\n"
+        line += "".join(f"{stamp}\t{r.name}\twarning\t\t{w}\n" for w in r.warnings)
         with open(log_file, "a", encoding="utf-8") as f:
             f.write(line)
         if on_result is not None:
@@ -620,6 +653,7 @@ def _run_on(client, folder, tasks, todo, report, progress, n_workers, n_total, n
     scenes: dict[tuple, object] = {}
     states_of: dict[str, dict] = {}
     users: dict[str, set] = {t.name: set() for t in todo}  # the unfinished tasks that need a result
+    warned: set[str] = set()  # each warning reported once (a model's load warnings come with each task)
     for t in todo:
         job = t.job
         if job.states is not None and job.name not in states_of:
@@ -672,6 +706,8 @@ def _run_on(client, folder, tasks, todo, report, progress, n_workers, n_total, n
             try:
                 res = fut.result()
                 r = TaskResult(name, "ok", res["seconds"], outputs=_write_outputs(folder, task, res))
+                r.warnings = [w for w in res.get("warnings", []) if w not in warned]
+                warned.update(r.warnings)
                 del res
             except Exception as e:  # a result that cannot be written is that task's failure
                 r = _failed(name, e)
@@ -691,6 +727,10 @@ def _run_on(client, folder, tasks, todo, report, progress, n_workers, n_total, n
 
 
 def print_errors(report: BatchReport, prog: str = "iat batch", file=None) -> None:
-    """``iat batch: error: <task>: <cause>`` for every failed task, on stderr."""
+    """``iat batch: warning: <task>: <message>`` for every worker warning, then ``iat batch: error:
+    <task>: <cause>`` for every failed task, on stderr."""
+    for r in report.results:
+        for w in r.warnings:
+            print(f"{prog}: warning: {r.name}: {w}", file=file or sys.stderr)
     for r in report.failed:
         print(f"{prog}: error: {r.name}: {r.error}", file=file or sys.stderr)
