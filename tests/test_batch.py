@@ -179,3 +179,20 @@ def test_solve_states_on_the_engine_matches_the_serial_cli(tmp_path, capsys):
     assert capsys.readouterr().err.strip() == (
         "iat solve: error: --workers and --scheduler go with --states (one solve runs in this process)"
     )
+
+
+def test_presolve_fills_the_solution_cache(client, tmp_path):
+    """``iat chart --workers``'s first step: the sweep's solves as tasks, written where cached_solve
+    finds them, equal to the serial solves; a second call has nothing to do."""
+    from iat.radiosity.cache import cached_solve
+    from iat.tools.batch import presolve
+
+    cache = tmp_path / "cache"
+    pairs = [(CORNELL, SolveOptions(max_depth=DEPTH, tolerance=t)) for t in (0.2, 0.4)]
+    report = presolve(pairs + pairs[:1], cache, client=client)
+    assert [r.status for r in report.results] == ["ok", "ok"]
+    for model, opts in pairs:
+        scene, sol, info = cached_solve(model, opts, cache)
+        assert info["cached"]
+        _same(sol, solve(scene, opts))
+    assert presolve(pairs, cache, client=client) is None

@@ -81,6 +81,7 @@ __all__ = [
     "one_line",
     "parse_jobs",
     "plan",
+    "presolve",
     "run_batch",
     "start_client",
 ]
@@ -724,6 +725,31 @@ def _run_on(client, folder, tasks, todo, report, progress, n_workers, n_total, n
         report(r)
         if progress is not None:
             progress(done / n_total, f"{done}/{n_total} eta {_fmt_s(eta.remaining_s())} {name}")
+
+
+def presolve(pairs, directory, *, workers=None, scheduler=None, client=None, progress=None):
+    """Solve the ``(model path, SolveOptions)`` pairs that the solution cache ``directory`` lacks, as
+    parallel tasks, each written where :func:`iat.radiosity.cache.cached_solve` then finds it
+    (``<model stem>-<key>.npz``; the batch's records and log go into that folder too). Used by
+    ``iat chart --workers``. Returns the :class:`BatchReport`, or None when every pair is cached;
+    OptionError for a model whose file name cannot name a task."""
+    from iat.radiosity.cache import solution_cache_path
+
+    jobs, seen = [], set()
+    for model, options in pairs:
+        path = solution_cache_path(model, options, directory)
+        if path.is_file() or path.stem in seen:
+            continue
+        if not _NAME.fullmatch(path.stem):
+            raise OptionError(
+                f"{model}: this file name cannot name a batch task (letters, digits, '-', '_', '.')"
+            )
+        seen.add(path.stem)
+        jobs.append(Job(path.stem, Path(model).resolve(), options))
+    if not jobs:
+        return None
+    batch = Batch(Path(directory), jobs)
+    return run_batch(batch, workers=workers, scheduler=scheduler, client=client, progress=progress)
 
 
 def print_errors(report: BatchReport, prog: str = "iat batch", file=None) -> None:

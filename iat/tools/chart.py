@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from iat.errors import OptionError
 from iat.progress import Progress
 from iat.radiosity.cache import cached_solve
 from iat.tools.bench import (
@@ -69,6 +70,11 @@ INDEX_BYTES = 3 * 4
 #: error measures and cost axes of the Pareto fronts
 ERRORS = ("flip_vs_finest", "flip_vs_reference")
 COSTS = ("gpu_mb", "frame_ms", "triangles")
+
+
+def sweep_tolerances(tolerances, base) -> list[float]:
+    """The sweep's solver tolerances, tightest first (``base.tolerance`` alone when none)."""
+    return sorted({float(t) for t in tolerances}) or [float(base.tolerance)]
 
 
 def pareto_mask(cost, error) -> np.ndarray:
@@ -153,7 +159,7 @@ def chart_model(
     model = resolve_model(model)
     limit_flip_threads()
     base = bench_solve_options() if solve_options is None else solve_options
-    tols = sorted({float(t) for t in tolerances}) or [float(base.tolerance)]
+    tols = sweep_tolerances(tolerances, base)
     if thresholds is None:
         thresholds = default_thresholds(base.max_depth)
     full = [(int(t), float(s), str(m)) for t in thresholds for s in scales for m in methods]
@@ -330,8 +336,14 @@ def run_chart(
     reference_models=REFERENCE_MODELS,
     tolerance_methods=DEFAULT_TOLERANCE_METHODS,
     progress: Progress | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
 ) -> dict:
     """Sweep every model, write ``out`` (PNG, one row of panels per model) and ``out`` with ``.json``.
+
+    workers, scheduler : solve the sweep's solutions first as parallel Dask tasks
+      (:func:`iat.tools.batch.presolve`) on that many local workers or on that cluster; the
+      measuring (frame times above all) stays in this process, one model after another.
 
     models : names or paths (empty: the sample models that exist). Returns the JSON dict:
     ``{"settings", "machine", "models": [{"model", "points": [{kind, tolerance, threshold,
@@ -347,6 +359,14 @@ def run_chart(
     else:
         paths, skipped = default_models()
     out = Path(out)
+    if workers is not None or scheduler:
+        from iat.tools.batch import presolve, print_errors
+
+        pairs = [(p, replace(base, tolerance=t)) for p in paths for t in sweep_tolerances(tolerances, base)]
+        report = presolve(pairs, cache_dir, workers=workers, scheduler=scheduler, progress=progress)
+        if report is not None and report.failed:
+            print_errors(report, prog="iat chart")
+            raise OptionError(f"{len(report.failed)} of the sweep's solves failed (see above)")
     rows = []
     n = max(len(paths), 1)
     for k, p in enumerate(paths):
