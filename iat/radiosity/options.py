@@ -203,7 +203,27 @@ class SolveOptions:
         return {"max_edge": d.get("max_edge"), "panels": bool(d.get("panels", False))}
 
     @classmethod
+    def preset(cls, quality: str = "default", **overrides) -> SolveOptions:
+        """The options of a :data:`QUALITY_PRESETS` level ("draft", "default", "fine", "final"),
+        with ``overrides`` (other fields) on top; OptionError naming the levels for another name."""
+        if quality not in QUALITY_PRESETS:
+            raise OptionError(f"unknown quality {quality!r} (choose from {', '.join(QUALITY_PRESETS)})")
+        return cls(**{**QUALITY_PRESETS[quality], **overrides}).validate()
+
+    @classmethod
     def from_dict(cls, d: dict) -> SolveOptions:
         """Options from :meth:`to_dict` output (unknown keys, e.g. from a newer version, ignored)."""
         names = {f.name for f in fields(cls)}
         return cls(**{k: v for k, v in dict(d).items() if k in names})
+
+
+#: quality levels of :meth:`SolveOptions.preset` (``--quality``), each spending time where it
+#: lowered the Cornell box's error against a 4096-spp Mitsuba reference the most (docs/benchmarks.md,
+#: "Quality presets"): the mesh (depth, tolerance) buys little past the defaults; the unshot
+#: remainder (convergence) and the samples do
+QUALITY_PRESETS: dict[str, dict] = {
+    "draft": {"max_depth": 4, "samples": 8},
+    "default": {},
+    "fine": {"convergence": 0.01},
+    "final": {"convergence": 0.005, "tolerance": 0.05, "samples": 32},
+}
