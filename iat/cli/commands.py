@@ -80,7 +80,7 @@ def _solve_options(args):
             kw[name] = v
     if getattr(args, "no_panels", False):
         kw["panels"] = False
-    return SolveOptions(**kw)
+    return SolveOptions.preset(getattr(args, "quality", None) or "default", **kw)
 
 
 def _bake_policy(args):
@@ -155,10 +155,49 @@ def _set_output(out: Path, name: str) -> Path:
     return out.with_name(f"{out.stem}-{name}{out.suffix or '.npz'}")
 
 
+def _solve_states_on_engine(args, opts) -> int:
+    """``solve --states --workers N`` / ``--scheduler ADDR``: the states job of :mod:`iat.tools.batch`
+    (the states' own solves and then every state on the shared mesh as parallel Dask tasks), run in
+    the hidden folder ``.<OUT>.batch`` beside the output (a rerun skips what is done there); each
+    state's solution is then copied to ``OUT-<state>.npz``."""
+    import shutil
+
+    from iat.tools.batch import Batch, Job, print_errors, run_batch
+
+    if args.sun or args.sky:
+        raise OptionError(
+            "--workers/--scheduler cannot take --sun or --sky yet: put the sun and sky in "
+            "the model's lighting states, or solve the states without --workers"
+        )
+    out = Path(args.output)
+    folder = out.with_name(f".{out.stem}.batch")
+    job = Job(out.stem, Path(args.input).resolve(), opts, states=True, states_mesh=args.states_mesh)
+    with _progress_bar(args, f"solve states of {Path(args.input).name} on Dask") as bar:
+        report = run_batch(Batch(folder, [job]), workers=args.workers, scheduler=args.scheduler, progress=bar)
+    print_errors(report, prog="iat solve")
+    if report.failed:
+        return 1
+    written = []
+    for r in report.results:
+        src = folder / f"{r.name}.npz"
+        state = r.name[len(out.stem) + 1 :]
+        if not r.name.startswith(f"{out.stem}-"):
+            continue  # a state's own solve or the shared mesh
+        p = _set_output(out, state)
+        shutil.copyfile(src, p)
+        written.append({"state": state, "output": str(p), "status": r.status, "time_s": r.seconds})
+    _emit(args, {"states": written, "workers": report.workers, "wall_s": report.wall_s})
+    return 0
+
+
 def cmd_solve(args) -> int:
     from iat.radiosity import solve
 
     opts = _solve_options(args)
+    if args.workers is not None or args.scheduler:
+        if not args.states:
+            raise OptionError("--workers and --scheduler go with --states (one solve runs in this process)")
+        return _solve_states_on_engine(args, opts)
     scene = _load(args, args.input, max_edge=opts.max_edge)
     _daylight(args, scene)
     if getattr(args, "states", False):
@@ -315,6 +354,7 @@ def _render_solution(args, scene, sol, sset, cam, size, mode) -> np.ndarray:
     r = Renderer()
     try:
         r.set_scene(scene)
+        r.set_sky(scene.sky)  # the model's own sky behind it (not a state's)
         if sset is not None:  # one moment of a solution set, blended on the GPU
             r.set_solution_set(sset.solutions)
             if mode in ("iat", "split", "diff"):
@@ -367,14 +407,21 @@ def cmd_bench(args) -> int:
 
 
 def cmd_chart(args) -> int:
-    """``iat chart [MODEL…] -o CHART.png [--size WxH] [--frames N]``: writes CHART.png and CHART.json."""
+    """``iat chart [MODEL…] -o CHART.png [--size WxH] [--frames N] [--workers N | --scheduler ADDRESS]``:
+    writes CHART.png and CHART.json."""
     from iat.tools.chart import run_chart
 
     size, frames = _size_and_frames(args, "160x120", 10)
     bar = ProgressBar("chart")
     try:
         result = run_chart(
-            list(getattr(args, "models", []) or []), args.output, size=size, frames=frames, progress=bar
+            list(getattr(args, "models", []) or []),
+            args.output,
+            size=size,
+            frames=frames,
+            progress=bar,
+            workers=args.workers,
+            scheduler=args.scheduler,
         )
     finally:
         bar.close()
@@ -465,6 +512,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     def solve_flags(sp):
+        sp.add_argument(
+            "--quality",
+            choices=["draft", "default", "fine", "final"],
+            help="a preset of the options below (SolveOptions.preset); flags given override it",
+        )
         sp.add_argument("--max-depth", type=int, dest="max_depth", help="deepest quad-tree level (default 6)")
         sp.add_argument("--tolerance", type=float, help="relative radiance change that splits an element")
         sp.add_argument("--max-edge", type=float, dest="max_edge", help="pre-split patches longer than this")
@@ -524,6 +576,16 @@ def build_parser() -> argparse.ArgumentParser:
         "SOL-<state>.npz each",
     )
     s.add_argument(
+        "--workers",
+        type=int,
+        help="with --states: solve them as Dask tasks on N local worker processes (iat batch's engine)",
+    )
+    s.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="with --states: on an existing Dask scheduler (tcp://host:8786)",
+    )
+    s.add_argument(
         "--states-mesh",
         dest="states_mesh",
         choices=["merge", "union", "first"],
@@ -572,6 +634,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", required=True, metavar="CHART.png")
     s.add_argument("--size", default="320x240")
     s.add_argument("--frames", type=int, default=10)
+    s.add_argument("--workers", type=int, help="solve the sweep first as Dask tasks on N local workers")
+    s.add_argument("--scheduler", metavar="ADDRESS", help="... or on an existing Dask scheduler")
     s.set_defaults(func=cmd_chart)
 
     s = sub.add_parser("batch", help="solves, bakes and renders of a job file as Dask tasks")

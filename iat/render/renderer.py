@@ -12,6 +12,11 @@ Modes
 ``split``    mesh left of ``split x width``, IAT right of it (scissor)
 ``diff``     ``|mesh - iat| x diff_gain`` (both drawn to float targets, combined in a fullscreen pass)
 
+In mesh, IAT and split modes glass (a solution's ``patch_transmission``) is drawn over the
+opaque surfaces, multiplying what lies behind by its transmittance, and the sky given to
+:meth:`Renderer.set_sky` fills the background (off by default: images compared with references
+mask the sky out).
+
 Solution sets (lighting states, e.g. times of day; :mod:`iat.lighting.solution_set`)
 ---------------------------------------------------------------------------
 :meth:`Renderer.set_solution_set` (mesh mode) and :meth:`Renderer.set_baked_set`
@@ -61,6 +66,8 @@ from iat.render.pages import PageTexture, gpu_pages
 MODES = ("preview", "mesh", "iat", "split", "diff")
 #: constant standing in for lighting in preview mode: colour = emission + PREVIEW_AMBIENT x albedo
 PREVIEW_AMBIENT = 0.5
+#: columns of the sky's equirectangular image drawn behind the model (0.7 degrees a texel)
+SKY_WIDTH = 512
 
 
 @dataclass
@@ -112,7 +119,7 @@ class Renderer:
         self._home = ctx.fbo if ctx.fbo is not None else ctx.detect_framebuffer()
         self._reg = Registry()
         self._programs: dict[str, Any] = {}
-        for name in ("mesh", "iat", "preview", "composite"):
+        for name in ("mesh", "iat", "preview", "composite", "glass", "sky"):
             self._programs[name] = self._reg.add(gl.program(ctx, name))
         self._fullscreen = self._reg.add(ctx.vertex_array(self._programs["composite"], []))
         # bound to the detail unit when a draw has no detail texture, so that unit never holds a
@@ -125,6 +132,9 @@ class Renderer:
             iat, [("position", 3), ("uv", 2), ("layer", 1), ("detail_uv", 2), ("detail", 1)]
         )
         self._preview = Geometry(preview, [("position", 3), ("emission", 3), ("albedo", 3), ("uv", 2)])
+        self._glass = Geometry(self._programs["glass"], [("position", 3), ("transmission", 3)])
+        self._sky_quad = self._reg.add(ctx.vertex_array(self._programs["sky"], []))
+        self._sky = None  # the sky's equirectangular texture, or None: a black background
         self._has = {"preview": False, "mesh": False, "iat": False}
         self._page_tex = PageTexture(ctx, self._reg)
         self._page_scale = 1.0
@@ -305,6 +315,44 @@ class Renderer:
         )
         self._colors_pair["mesh"] = (a, b)
         self._has["mesh"] = True
+        self._set_glass(solution)
+
+    def _set_glass(self, solution) -> None:
+        """The glass patches of ``solution`` (``patch_transmission > 0``) as triangles."""
+        tau = np.asarray(getattr(solution, "patch_transmission", np.zeros(0)), dtype=np.float32).reshape(-1)
+        corners = np.asarray(solution.patch_corners, dtype=np.float32).reshape(-1, 4, 3)
+        glass = np.nonzero(tau > 0)[0] if len(tau) == len(corners) else np.zeros(0, np.int64)
+        is_quad = np.asarray(solution.patch_is_quad, dtype=bool).reshape(-1)[glass]
+        base = 4 * np.arange(len(glass), dtype=np.uint32)
+        tris = np.concatenate(
+            [np.stack([base, base + 1, base + 2], 1), np.stack([base, base + 2, base + 3], 1)[is_quad]]
+        )
+        self._glass.upload(
+            self.ctx,
+            self._reg,
+            {
+                "position": corners[glass].reshape(-1, 3),
+                "transmission": np.repeat(np.repeat(tau[glass], 4)[:, None], 3, axis=1),
+            },
+            tris.reshape(-1, 3),
+        )
+
+    def set_sky(self, sky) -> None:
+        """Draw ``sky`` (an :class:`iat.io.scene.Sky`, or None for black) behind the model in
+        mesh, IAT and split modes; its radiance from :func:`iat.radiosity.sky.sky_equirect`."""
+        from iat.radiosity.sky import sky_equirect
+
+        self._alive()
+        if self._sky is not None:
+            self._reg.release(self._sky)
+            self._sky = None
+        if sky is None:
+            return
+        img = np.ascontiguousarray(sky_equirect(sky, SKY_WIDTH))
+        tex = self.ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes(), dtype="f4")
+        tex.repeat_x, tex.repeat_y = True, False
+        tex.filter = (self._moderngl.LINEAR, self._moderngl.LINEAR)
+        self._sky = self._reg.add(tex)
 
     # -- blending -----------------------------------------------------------------------------
     def set_blend(self, a: int, b: int | None = None, w: float = 0.0) -> None:
@@ -533,6 +581,32 @@ class Renderer:
         s["triangles"] += tris
         s["draw_calls"] += calls
 
+    def _draw_sky_and_glass(self, camera, aspect: float, clip: bytes, exposure: float, tonemap: bool) -> None:
+        """The sky where nothing was drawn (depth still 1), then glass over everything."""
+        ctx, mgl = self.ctx, self._moderngl
+        if self._sky is not None:
+            m = np.asarray(camera.clip_from_world(aspect), dtype=np.float64)
+            inv = np.linalg.inv(m).T.astype("f4").tobytes()
+            self._sky.use(0)
+            prog = self._programs["sky"]
+            prog["world_from_clip"].write(inv)
+            self._uniforms(prog, {"sky": 0, "exposure": float(exposure), "tonemap": bool(tonemap)})
+            ctx.depth_func = "<="
+            self._sky_quad.render(mgl.TRIANGLES, vertices=3)
+            ctx.depth_func = "<"
+        if self._glass.n_triangles:
+            ctx.enable(mgl.BLEND)
+            ctx.blend_func = (mgl.ZERO, mgl.SRC_COLOR)
+            ctx.depth_mask = False
+            try:
+                self._uniforms(self._glass.program, {"clip_from_world": clip, "tonemap": bool(tonemap)})
+                for _, first, count in self._glass.calls():
+                    self._glass.render_range(first, count)
+            finally:
+                ctx.depth_mask = True
+                ctx.disable(mgl.BLEND)
+                ctx.blend_func = mgl.DEFAULT_BLENDING
+
     def _frame(self, target, viewport, camera, mode, exposure, tonemap, split, diff_gain, clear) -> None:
         if mode not in MODES:
             raise RenderError(f"unknown render mode {mode!r} (known: {', '.join(MODES)})")
@@ -585,6 +659,8 @@ class Renderer:
                     ctx.scissor = None
                 else:
                     self._draw_mode(mode, clip, exposure, tonemap, stats)
+                if mode != "preview":
+                    self._draw_sky_and_glass(camera, w / h, clip, exposure, tonemap)
         finally:
             ctx.disable(mgl.DEPTH_TEST)
         self._last = {
