@@ -40,6 +40,8 @@ class Baked:
     patch_emissive : (P,) bool, patches whose material emits (empty when baked without a scene)
     patch_textured : (P,) bool; memory : MemoryReport; policy : the policy baked (budget resolved)
     timings : seconds per stage
+    lod : the :class:`~iat.bake.lod.LodChain` of every textured tile's levels (None unless the
+      policy asked for LOD); the renderer then draws the textured part from its pages
     """
 
     mesh_positions: np.ndarray
@@ -66,6 +68,7 @@ class Baked:
     gpu_pages: np.ndarray | None = field(default=None, repr=False, compare=False)
     gpu_format: str | None = field(default=None, repr=False, compare=False)
     pages_source: Any = field(default=None, repr=False, compare=False)
+    lod: Any = field(default=None, repr=False, compare=False)
 
     @property
     def n_pages(self) -> int:

@@ -36,7 +36,9 @@ policy (budget resolved, :func:`~iat.bake.budget.resolve_budget`) -> textured se
 sides -> packing (:meth:`Baker.pack`) -> scaled tiles (:class:`~iat.bake.flatten.TileCache`)
 -> harmonised rings (:mod:`iat.bake.seams`, :class:`SeamCache`) -> boxes
 (:func:`~iat.bake.boxes.build_boxes`) -> pages (:class:`~iat.bake.boxes.PageEntry`) ->
-:class:`~iat.bake.baked.Baked` (mesh prefix, textured polygons, memory report).
+:class:`~iat.bake.baked.Baked` (mesh prefix, textured polygons, memory report); with
+``policy.lod`` / ``lod_stream``, the pages' finest tiles -> their level-of-detail chain
+(:func:`~iat.bake.lod.build_chain`, cached per pages entry) in ``Baked.lod``.
 """
 
 from __future__ import annotations
@@ -54,7 +56,8 @@ from iat.bake.boxes import PageEntry, build_boxes
 from iat.bake.budget import resolve_budget
 from iat.bake.flatten import SolutionIndex, TileCache, scaled_side, tile_side
 from iat.bake.formats import GPU_DTYPES, rgba8_page_scale
-from iat.bake.memory import MIB, check_host_memory, memory_report, set_budget, states_report
+from iat.bake.lod import LodChain, build_chain, finest_tiles
+from iat.bake.memory import MIB, check_host_memory, lod_report, memory_report, set_budget, states_report
 from iat.bake.policy import BakePolicy
 from iat.bake.polygons import depth_sorted_mesh, mesh_prefix, textured_polygons
 from iat.errors import BakeError, Cancelled
@@ -181,6 +184,7 @@ class Baker:
         self._free_pages: list = []  # page arrays of evicted entries, reused once nothing else holds them
         self._pages = _LRU(16, CACHE_BYTES, lambda e: e.gpu.nbytes, self._recycle)
         self._mesh_sorted: tuple | None = None  # polygons.depth_sorted_mesh, made on first use
+        self._lods = _LRU(4)  # (id(pages entry), page_size) -> (entry, LodChain)
         self._seam_cache: SeamCache | None = None
         self._set_bakers = _LRU(16)  # (id(solution), rgba8 shared) -> Baker of a set member
         self.stats = {"bakes": 0, "pack_hits": 0, "pages_hits": 0, "mesh_hits": 0}
@@ -413,6 +417,27 @@ class Baker:
         tm["blit"] = time.perf_counter() - t1
         return entry
 
+    def _lod_chain(self, entry: PageEntry, ps: np.ndarray, sides: np.ndarray, packing, policy) -> LodChain:
+        """The :class:`~iat.bake.lod.LodChain` of a pages entry (its finest tiles as stored),
+        cached per entry (the entry is held with it, so its id is not reused)."""
+        key = (id(entry), policy.page_size)
+        hit = self._lods.hit(key)
+        if hit is not None and hit[0] is entry:
+            return hit[1]
+        tiles = finest_tiles(entry.float32(), packing.placements, sides) if len(ps) else []
+        chain = build_chain(
+            tiles,
+            ps,
+            self._corners,
+            self.index.is_quad,
+            policy.pixel_format,
+            self.page_scale(policy),
+            policy.page_size,
+            packing,
+        )
+        self._lods.put(key, (entry, chain))
+        return chain
+
     def _mesh_part(self, threshold: int) -> tuple:
         """Mesh part of the patches of depth < threshold (:func:`~iat.bake.polygons.mesh_prefix`)."""
         self.stats["mesh_hits"] += self._mesh_sorted is not None
@@ -450,7 +475,7 @@ class Baker:
 
         step(0.0, "policy")
         budget_info = None
-        if policy.budget_mb is not None:
+        if policy.budget_mb is not None and not policy.lod_stream:  # streaming: caps the resident
             t0 = time.perf_counter()
             policy, budget_info = resolve_budget(self.index.depth, policy.budget_mb, policy)
             tm["choose"] = time.perf_counter() - t0
@@ -496,6 +521,13 @@ class Baker:
             detail_textures=detail_textures,
         )
         set_budget(mem, budget_info)
+        lod = None
+        if policy.uses_lod:
+            t0 = time.perf_counter()
+            lod = self._lod_chain(entry, ps, sides, packing, policy)
+            full = lod.pages().bytes if len(ps) else 0
+            mem = lod_report(mem, lod.max_levels, full, full, policy.budget_mb if policy.lod_stream else None)
+            tm["lod"] = time.perf_counter() - t0
         self.stats["bakes"] += 1
         tm["total"] = time.perf_counter() - t_start
         step(1.0, "done")
@@ -524,6 +556,7 @@ class Baker:
             gpu_pages=entry.gpu,
             gpu_format=policy.pixel_format,
             pages_source=entry.float32,
+            lod=lod,
         )
 
     def _member(self, solution, shared: bool) -> Baker:

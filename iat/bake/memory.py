@@ -41,6 +41,12 @@ class MemoryReport:
     solutions : lighting states baked together (:class:`BakedSet`): the texture bytes hold one
       page layer per state and page (``solutions`` x one state's bytes), the mesh part two
       colour attributes (the neighbouring states the renderer mixes); 1 for a single bake
+    lod_levels : the longest level chain of a tile (:mod:`iat.bake.lod`; 0: baked without LOD,
+      and then the three ``lod_*`` fields are left out of :meth:`to_dict`)
+    lod_total_bytes : texture bytes of every level of every tile packed (all resident);
+      ``texture_bytes`` is then this (the renderer uploads these pages instead of the finest ones)
+    lod_resident_bytes : texture bytes resident for the current view (:func:`lod_report`; the
+      total until a view streams); with ``lod_stream`` the budget applies to these
     """
 
     texture_bytes: int = 0
@@ -65,6 +71,9 @@ class MemoryReport:
     budget_fits: bool | None = None
     budget_too_small: bool = False
     solutions: int = 1
+    lod_levels: int = 0
+    lod_total_bytes: int = 0
+    lod_resident_bytes: int = 0
 
     @property
     def total_bytes(self) -> int:
@@ -79,6 +88,9 @@ class MemoryReport:
         d = dataclasses.asdict(self)
         d["total_bytes"] = self.total_bytes
         d["triangles"] = self.triangles
+        if not self.lod_levels:
+            for name in ("lod_levels", "lod_total_bytes", "lod_resident_bytes"):
+                del d[name]
         return d
 
 
@@ -159,6 +171,23 @@ def set_budget(mem: MemoryReport, budget_info: dict | None) -> MemoryReport:
         mem.budget_fits = bool(mem.texture_bytes <= budget_info["budget_mb"] * MIB)
         mem.budget_too_small = bool(budget_info["too_small"])
     return mem
+
+
+def lod_report(
+    mem: MemoryReport, levels: int, total_bytes: int, resident_bytes: int, budget_mb: float | None = None
+) -> MemoryReport:
+    """A copy of ``mem`` for a bake with level-of-detail chains: ``levels`` the longest chain,
+    ``total_bytes`` every level packed, ``resident_bytes`` what the view keeps on the GPU
+    (``texture_bytes`` becomes it); ``budget_mb`` (streaming) is checked against the resident bytes."""
+    out = dataclasses.replace(mem)
+    out.lod_levels, out.lod_total_bytes = int(levels), int(total_bytes)
+    out.lod_resident_bytes = out.texture_bytes = int(resident_bytes)
+    out.mip_levels, out.mip_factor = 1, 1.0
+    if budget_mb is not None:
+        out.budget_mb = float(budget_mb)
+    if out.budget_mb is not None:  # the budget holds against what the GPU holds
+        out.budget_fits = bool(resident_bytes <= out.budget_mb * MIB)
+    return out
 
 
 # ---------------------------------------------------------------------------

@@ -43,6 +43,13 @@ class BakePolicy:
         away; costs 25 % more texture memory with gutter 2).
     detail : bool, typical True. Store incoming light on patches with a detail texture so the
         shader combines both in one pass (§3.7); False stores radiance everywhere.
+    lod : bool, typical False. Also bake each textured patch's chain of coarser levels from its
+        quad-tree (:mod:`iat.bake.lod`, report §6.2.2): the renderer blends two levels per
+        fragment by screen-space texel density. Costs the chain (about 1/3 more texels, packed
+        in pages of their own); False bakes, renders and reports exactly as before.
+    lod_stream : bool, typical False (implies ``lod``). Keep resident on the GPU only the levels
+        the current view needs (streaming by distance); ``budget_mb`` then caps what is resident
+        instead of choosing the threshold and scale (the bake keeps every level on the host).
     """
 
     threshold: int = 2
@@ -55,6 +62,8 @@ class BakePolicy:
     pixel_format: str = "rgba16f"
     mipmaps: bool = True
     detail: bool = True
+    lod: bool = False
+    lod_stream: bool = False
 
     def validate(self) -> BakePolicy:
         """Raise OptionError naming the bad field; returns self."""
@@ -81,11 +90,25 @@ class BakePolicy:
             raise OptionError(
                 f"pixel_format must be one of {', '.join(BYTES_PER_TEXEL)}, got {self.pixel_format!r}"
             )
+        for name in ("lod", "lod_stream"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise OptionError(f"{name} must be True or False, got {getattr(self, name)!r}")
         return self
+
+    @property
+    def uses_lod(self) -> bool:
+        """Whether the bake makes the level-of-detail chain (``lod`` or ``lod_stream``)."""
+        return bool(self.lod or self.lod_stream)
 
     @property
     def mip_levels(self) -> int:
         return atlas.mip_levels(self.gutter, self.mipmaps)
 
     def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        """The fields as a dict; ``lod`` and ``lod_stream`` only when set (so a bake without LOD
+        writes the same records as before they existed)."""
+        d = dataclasses.asdict(self)
+        for name in ("lod", "lod_stream"):
+            if not d[name]:
+                del d[name]
+        return d

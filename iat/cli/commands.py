@@ -91,6 +91,9 @@ def _bake_policy(args):
         v = getattr(args, name, None)
         if v is not None:
             kw[name] = v
+    for name in ("lod", "lod_stream"):  # levels of detail (iat.bake.lod)
+        if getattr(args, name, False):
+            kw[name] = True
     return BakePolicy(**kw)
 
 
@@ -551,6 +554,15 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--method", choices=["bilinear", "scan", "bicubic"])
         sp.add_argument(
             "--budget-mb", type=float, dest="budget_mb", help="texture budget; chooses threshold/scale"
+        )
+        sp.add_argument(
+            "--lod", action="store_true", help="levels of detail: coarser levels of each quad-tree, blended"
+        )
+        sp.add_argument(
+            "--lod-stream",
+            action="store_true",
+            dest="lod_stream",
+            help="levels of detail, only the levels the view needs resident (the budget caps them)",
         )
 
     s = sub.add_parser("info", help="counts: triangles, patches, materials, lights, cameras")

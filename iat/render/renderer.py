@@ -44,6 +44,9 @@ its corner, texture coordinates scaled exactly; :meth:`iat.render.pages.PageText
 so it may be larger than the bake's :class:`~iat.bake.memory.MemoryReport` counts:
 :attr:`Renderer.page_texture` gives both.
 
+Levels of detail (a Baked of ``BakePolicy(lod=True)``): :mod:`iat.render.lod` draws it (two quad-tree
+levels blended per fragment, streaming); :meth:`Renderer.set_lod` switches, :meth:`Renderer.lod_info` reads.
+
 Modules: :mod:`iat.render.gl` (shaders, programs, the GL object registry),
 :mod:`iat.render.buffers` (buffers written in place, indexed geometry),
 :mod:`iat.render.pages` (the page texture array); this one draws.
@@ -61,6 +64,7 @@ from iat.radiosity.solution import drawn_mesh
 from iat.render import gl
 from iat.render.buffers import Geometry, upload_buffer
 from iat.render.gl import Registry
+from iat.render.lod import LodDrawer
 from iat.render.pages import PageTexture, gpu_pages
 
 MODES = ("preview", "mesh", "iat", "split", "diff")
@@ -138,6 +142,9 @@ class Renderer:
         self._has = {"preview": False, "mesh": False, "iat": False}
         self._page_tex = PageTexture(ctx, self._reg)
         self._page_scale = 1.0
+        self._lod = LodDrawer(ctx, self._reg)  # a Baked with a LOD chain (iat.render.lod)
+        self._lod_on = True
+        self._baked_args: tuple | None = None
         # solution sets: per-state vertex colours (CPU) of the solution mesh and of the baked mesh
         # part, the (a, b) pair uploaded as color / color_b, the states and pages per state in IAT mode
         self._colors: dict[str, list[np.ndarray]] = {"mesh": [], "iat": []}
@@ -427,6 +434,8 @@ class Renderer:
         """all_pages : (n_states x n_pages, H, W, 3) float pages, or None: ``baked``'s own (its
         GPU form when it has one)."""
         self._alive()
+        self._baked_args = (baked, mesh_colors, all_pages, n_states)
+        lod = getattr(baked, "lod", None) is not None and n_states == 1 and self._lod_on
         policy = getattr(baked, "policy", None)
         pixel_format = str(getattr(policy, "pixel_format", "rgba16f") or "rgba16f")
         mipmaps = bool(getattr(policy, "mipmaps", False))
@@ -472,7 +481,11 @@ class Renderer:
             tri_key[use] = tmat[v0][use]
 
         per_state = 0
-        if len(tidx):
+        self._lod.clear()
+        if len(tidx) and lod:  # levels of detail: the chain's pages and its own textured geometry
+            self._lod.set(baked, self._page_tex, self.reuse_pages, tpos, tduv, tdetail, tidx, tri_key)
+            self._page_scale, per_state = float(getattr(baked, "page_scale", 1.0) or 1.0), 1
+        elif len(tidx):
             # rgba8: GPU texel = sRGB8(page / scale); the shader multiplies back
             pages, scale = gpu_pages(baked, all_pages, pixel_format)
             per_state = pages.shape[0] // max(n_states, 1)
@@ -501,6 +514,25 @@ class Renderer:
             tri_key,
         )
         self._has["iat"] = True
+
+    # -- levels of detail ---------------------------------------------------------------------
+    def set_lod(self, enabled=None, from_bake: bool = False, **options) -> None:
+        """Level-of-detail switches for a Baked baked with ``BakePolicy(lod=True)`` (or ``lod_stream``):
+        ``enabled`` False draws the finest textures as without LOD; ``options``: ``bias``, ``stream``,
+        ``budget_mb``, ``cull``, ``show``, ``snap`` (:meth:`iat.render.lod.LodDrawer.configure`), and
+        ``from_bake`` drops earlier ``stream`` / ``budget_mb`` settings. A change of ``enabled``,
+        ``stream`` or ``budget_mb`` re-sets the last Baked."""
+        again = self._lod.configure(from_bake=from_bake, **options)
+        if enabled is not None and bool(enabled) != self._lod_on:
+            self._lod_on, again = bool(enabled), True
+        if again and self._baked_args is not None:
+            self._set_baked(*self._baked_args)
+
+    def lod_info(self) -> dict:
+        """The levels in use (:meth:`iat.render.lod.LodDrawer.info`): tiles per finest resident
+        (and needed) tree level, resident against total texture bytes, page uploads, the memory
+        report of now; empty when the Baked shown has no LOD chain or LOD is off."""
+        return self._lod.info() if self._lod.active else {}
 
     # -- drawing ----------------------------------------------------------------------------
     def _target(self, name: str, size: tuple[int, int], sampled: bool) -> _Target:
@@ -551,7 +583,11 @@ class Renderer:
                 for _, first, count in g.calls():
                     g.render_range(first, count)
                     tris, calls = tris + count // 3, calls + 1
-        if mode == "iat" and self._baked_tex.n_triangles:
+        if mode == "iat" and self._lod.active:
+            self._uniforms(self._lod.program, {**common, "layer_a": 0.0, "page_scale": self._page_scale})
+            t, c = self._lod.draw(self._uniforms, self._page_tex, self._detail["iat"], self._white)
+            tris, calls = tris + t, calls + c
+        elif mode == "iat" and self._baked_tex.n_triangles:
             g = self._baked_tex
             self._page_tex.texture.use(0)
             pa, pb = self._pair("iat")
@@ -616,7 +652,10 @@ class Renderer:
         x, y, w, h = (int(v) for v in viewport)
         if w <= 0 or h <= 0:
             raise RenderError(f"empty viewport {tuple(viewport)}")
-        clip = np.asarray(camera.clip_from_world(w / h), dtype=np.float64).T.astype("f4").tobytes()
+        clip_m = np.asarray(camera.clip_from_world(w / h), dtype=np.float64)
+        clip = clip_m.T.astype("f4").tobytes()
+        if mode in ("iat", "split", "diff") and self._lod.active:  # streaming: this view's levels
+            self._lod.update(clip_m, (w, h), self._page_tex, self.reuse_pages, getattr(camera, "znear", 1e-3))
         stats: dict[str, dict] = {}
         ctx.enable(mgl.DEPTH_TEST)
         ctx.disable(mgl.CULL_FACE | mgl.BLEND)

@@ -39,7 +39,9 @@ def jsonable(o):
 
 
 def policy_dict(policy) -> dict:
-    """The fields of a bake policy (a dataclass, or any object with attributes) as a dict."""
+    """The fields of a bake policy (its ``to_dict``, a dataclass, or any object with attributes) as a dict."""
+    if hasattr(policy, "to_dict"):
+        return policy.to_dict()
     try:
         return asdict(policy)
     except TypeError:
