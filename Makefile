@@ -15,10 +15,14 @@ setup: .stamp-venv
 	  echo "installing Debian packages (xvfb, Mesa EGL/GL)"; \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq xvfb xauth libegl1 libgl1 libegl-mesa0 >/dev/null; \
 	fi
+	@if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && ! command -v chromium >/dev/null; then \
+	  echo "installing Debian packages (chromium, for the three.js client tests)"; \
+	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
+	fi
 	@touch $@
 
 .stamp-node:
-	@if command -v npm >/dev/null; then npm install --prefix .node --no-save --no-audit --no-fund --loglevel=error gltf-validator >/dev/null && echo "installed gltf-validator (npm)"; fi
+	@if command -v npm >/dev/null; then PUPPETEER_SKIP_DOWNLOAD=1 npm install --prefix .node --no-save --no-audit --no-fund --loglevel=error gltf-validator three@0.187 puppeteer-core >/dev/null && echo "installed gltf-validator, three, puppeteer-core (npm)"; fi
 	@touch $@
 
 .stamp-venv: .stamp-apt .stamp-node pyproject.toml

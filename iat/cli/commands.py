@@ -260,6 +260,14 @@ def _check_set_args(args) -> None:
         args.at = 0.0
 
 
+def _export_options(args) -> dict:
+    """export_glb's keywords from ``iat bake``'s flags (watertight and match_clip unless turned off)."""
+    if args.hdr and not args.layered:
+        raise OptionError("--hdr goes with --layered (the lightmaps are what it stores above white)")
+    keys = ("layered", "watertight", "match_clip", "hdr")
+    return {k: getattr(args, k) for k in keys}
+
+
 def cmd_bake(args) -> int:
     from iat.bake.baker import Baker
     from iat.export.gltf import export_glb
@@ -270,7 +278,7 @@ def cmd_bake(args) -> int:
         bset = Baker(sset.first, scene).bake_set(sset, _bake_policy(args))
         a, b, w = sset.weights(args.at)
         baked = bset.blend(a, b, w)
-        export_glb(baked, args.output, scene=scene, layered=args.layered)
+        export_glb(baked, args.output, scene=scene, **_export_options(args))
         report = {"output": str(args.output), "policy": policy_dict(bset.policy), **bset.memory.to_dict()}
         report["set"] = {
             "states": sset.names,
@@ -284,7 +292,7 @@ def cmd_bake(args) -> int:
         return 0
     scene, sol = _open(args, "bake")
     baked = Baker(sol, scene).bake(_bake_policy(args))
-    export_glb(baked, args.output, scene=scene, layered=args.layered)
+    export_glb(baked, args.output, scene=scene, **_export_options(args))
     report = {"output": str(args.output), "policy": policy_dict(baked.policy), **baked.memory.to_dict()}
     report["timings"] = getattr(baked, "timings", {})
     _emit(args, report)
@@ -615,6 +623,25 @@ def build_parser() -> argparse.ArgumentParser:
     bake_flags(s)
     solve_flags(s)
     s.add_argument("--layered", action="store_true", help="albedo on TEXCOORD_0, illumination on TEXCOORD_1")
+    s.add_argument(
+        "--no-watertight",
+        dest="watertight",
+        action="store_false",
+        help="keep the T-junctions between patches (clients show see-through pixels along them)",
+    )
+    s.add_argument(
+        "--hdr",
+        action="store_true",
+        help="with --layered: lightmaps as RGBM PNGs (up to 16x white), for the shipped three.js plugin "
+        "and Blender script (docs/export.md)",
+    )
+    s.add_argument(
+        "--no-match-clip",
+        dest="match_clip",
+        action="store_false",
+        help="write colours clipped at the vertices and texels only (clients then clip before "
+        "interpolating, darker than IAT mode by the lights)",
+    )
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_bake)
 

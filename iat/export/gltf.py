@@ -1,6 +1,14 @@
 """Baked → GLB that opens in any glTF viewer.
 
-What is written (``export_glb(baked, path, scene=None, layered=False)``):
+What is written (``export_glb(baked, path, scene=None, layered=False, watertight=False,
+match_clip=False, hdr=False)``; ``iat bake`` passes ``watertight=True, match_clip=True``; how
+clients use the files: docs/export.md):
+
+- **Watertight** (``watertight=True``): every triangle edge of either part is split at the
+  vertices of either part lying inside it (:func:`watertight_parts`,
+  :mod:`iat.geometry.tjunctions`), so that no client shows see-through pixels along the
+  T-junctions between patches of different depth; new vertices take the colour and uvs
+  interpolated along the edge they split, so the picture is unchanged.
 
 - **Exposure.** glTF colours are at most 1 and base-colour textures are sRGB 8-bit,
   so every colour is ``radiance / radiance_scale`` (clamped to [0, 1]);
@@ -21,13 +29,27 @@ What is written (``export_glb(baked, path, scene=None, layered=False)``):
   base colour = texture x COLOR_0 = radiance (the detail pattern itself is not shown).
 - **Textured part**, ``layered=True``: patches with a detail texture go to node
   ``iat_page<k>_mat<m>`` with TEXCOORD_0 = the scene's detail uv and TEXCOORD_1 =
-  atlas uv; material ``iat_page<k>_mat<m>`` has baseColorTexture = the detail
-  texture (albedo, texCoord 0, repeat + mipmaps) and, in its ``extras``,
-  ``{"iat_illumination": {"index": <texture of page k>, "texCoord": 1,
+  atlas uv; material ``iat_page<k>_mat<m>`` (lit: metallic 0, roughness 1) has
+  baseColorTexture = the detail texture (albedo, texCoord 0, repeat + mipmaps), the
+  page's illumination as ``extensions.MOZ_lightmap = {index, texCoord: 1, intensity: pi}``
+  (Mozilla Hubs' form; three.js multiplies a lightmap by intensity / pi) and as its
+  ``occlusionTexture`` (texCoord 1: core glTF's use of the second set, so validators
+  see TEXCOORD_1 used; IBL viewers darken their ambient light with it), and, in its
+  ``extras``, ``{"iat_illumination": {"index": <that texture>, "texCoord": 1,
   "radiance_scale": s, "combine": "multiply"}}``: colour = albedo(TEXCOORD_0) x
-  illumination(TEXCOORD_1) x radiance_scale. A plain viewer shows the detail
-  texture unlit. Patches without a detail texture are written as in the default.
-- Root ``extras.iat``: radiance_scale, layered, policy, memory report.
+  illumination(TEXCOORD_1) x radiance_scale. The lightmap is a PNG of its own when
+  plain patches use the page too (Blender's importer would make the shared image
+  Non-Color). Not unlit: the validator warns of ``KHR_materials_unlit`` beside another
+  extension. three.js draws it with ``iat/export/clients/three/iat_lightmap.js``, Blender
+  with ``iat/export/clients/blender/iat_import.py``. Patches without a detail texture
+  are written as in the default. ``hdr=True``: the lightmap is an RGBM PNG (alpha = multiplier,
+  up to ``RGBM_RANGE`` x white; ``iat_illumination.encoding = "rgbm"``, ``rgbm_range``).
+- ``match_clip=True`` (``iat bake``): mesh-part triangles cut where a channel crosses white,
+  page texels placed by least squares around values above white, and tiles holding incoming
+  light stored x k (the brightest albedo channel; k comes back out of COLOR_0 or the lightmap
+  intensity pi / k and ``iat_illumination.radiance_scale`` s / k): clients, which clip before
+  interpolating, then show what our renderer shows.
+- Root ``extras.iat``: radiance_scale, layered, watertight, policy, memory report.
 
 The file is written atomically (``GlbBuilder.write``: temp file + fsync + os.replace).
 """
@@ -35,16 +57,35 @@ The file is written atomically (``GlbBuilder.write``: temp file + fsync + os.rep
 from __future__ import annotations
 
 import io
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
 from iat.color import srgb_encode
-from iat.errors import BakeError
+from iat.errors import BakeError, OptionError
+from iat.export.texels import RGBM_RANGE, place_texels, rgbm_encode, scale_tiles, tile_boxes
 from iat.io.glb import GlbBuilder
 
-__all__ = ["export_glb", "radiance_scale"]
+__all__ = [
+    "BLENDER_SCRIPT",
+    "LIGHTMAP_EXTENSION",
+    "LIGHTMAP_INTENSITY",
+    "THREE_PLUGIN",
+    "export_glb",
+    "radiance_scale",
+    "watertight_parts",
+]
+
+#: the vendor extension the layered export writes its illumination through (docs/export.md)
+LIGHTMAP_EXTENSION = "MOZ_lightmap"
+#: its ``intensity``: three.js multiplies a lightmap by intensity / pi, so pi shows it as stored
+LIGHTMAP_INTENSITY = float(np.pi)
+#: the client code shipped in the package (docs/export.md): a three.js GLTFLoader plugin and a
+#: Blender import script for the layered export's lightmaps
+THREE_PLUGIN = Path(__file__).resolve().parent / "clients" / "three" / "iat_lightmap.js"
+BLENDER_SCRIPT = Path(__file__).resolve().parent / "clients" / "blender" / "iat_import.py"
 
 _LINEAR = 9729
 _CLAMP = 33071
@@ -59,6 +100,7 @@ class _IatGlb(GlbBuilder):
         self._iat_base: dict[int, tuple[int, int]] = {}
         self._iat_clamped: set[int] = set()
         self._iat_material_extras: dict[int, dict] = {}
+        self._iat_lightmap: dict[int, tuple[int, int, float]] = {}
 
     def add_texture(self, png: bytes, name: str, clamp: bool = False) -> int:
         t = self._add_png_texture(png, name)
@@ -71,6 +113,11 @@ class _IatGlb(GlbBuilder):
 
     def set_material_extras(self, material: int, extras: dict) -> None:
         self._iat_material_extras[material] = extras
+
+    def set_lightmap(self, material: int, texture: int, texcoord: int, intensity: float) -> None:
+        """``MOZ_lightmap`` on the material, and the same texture as its ``occlusionTexture`` (core
+        glTF's one use of a second texture coordinate set on a lit material)."""
+        self._iat_lightmap[material] = (texture, texcoord, float(intensity))
 
     def to_json(self) -> dict:
         doc = super().to_json()
@@ -93,15 +140,25 @@ class _IatGlb(GlbBuilder):
             doc["materials"][m]["pbrMetallicRoughness"]["baseColorTexture"] = info
         for m, ex in self._iat_material_extras.items():
             doc["materials"][m]["extras"] = ex
+        for m, (t, c, k) in self._iat_lightmap.items():
+            mat = doc["materials"][m]
+            mat.setdefault("extensions", {})[LIGHTMAP_EXTENSION] = {"index": t, "texCoord": c, "intensity": k}
+            mat["occlusionTexture"] = {"index": t, "texCoord": c}
+        if self._iat_lightmap:
+            doc["extensionsUsed"] = sorted(set(doc.get("extensionsUsed", [])) | {LIGHTMAP_EXTENSION})
         return doc
 
 
 def _png(rgb_linear01: np.ndarray) -> bytes:
     """sRGB 8-bit PNG of linear values in [0, 1], (h, w, 3)."""
     x = srgb_encode(np.clip(np.asarray(rgb_linear01, dtype=np.float64), 0.0, 1.0))
-    img = Image.fromarray(np.round(x * 255.0).astype(np.uint8))
+    return _png_bytes(np.round(x * 255.0).astype(np.uint8))
+
+
+def _png_bytes(pixels: np.ndarray) -> bytes:
+    """PNG file of (h, w, 3 or 4) uint8 pixels."""
     buf = io.BytesIO()
-    img.save(buf, format="PNG")
+    Image.fromarray(pixels).save(buf, format="PNG")
     return buf.getvalue()
 
 
@@ -128,26 +185,18 @@ def _tile_values(baked, drop: np.ndarray | None) -> tuple[np.ndarray, np.ndarray
     if not len(tp):  # no layout to read: every texel, equal weights
         v = pages.max(axis=-1).ravel()
         return v, np.ones(len(v))
-    _, H, W, _ = pages.shape
-    ps, first, nv = np.unique(tp, return_index=True, return_counts=True)
+    tb = tile_boxes(baked)
+    ps = tb["patch"]
+    ok = np.ones(len(ps), bool)
     if drop is not None:
         ok = (ps < len(drop)) & ~drop[np.minimum(ps, len(drop) - 1)]
-        first, nv = first[ok], nv[ok]
-    uv = np.asarray(baked.tex_uv, dtype=np.float64)
-    pos = np.asarray(baked.tex_positions, dtype=np.float64)
-    layer = np.asarray(baked.tex_layer, dtype=np.int64)
-    # a patch's vertices are consecutive from `first`; slots 0, 1, 2 span the tile's first row and column
-    span = np.stack([uv[first + k] for k in range(3)], axis=1)  # (k, 3, 2)
-    x0 = np.rint(span[:, :, 0].min(axis=1) * W - 0.5).astype(np.int64)
-    y0 = np.rint(span[:, :, 1].min(axis=1) * H - 0.5).astype(np.int64)
-    side = np.rint(np.ptp(span[:, :, 0], axis=1) * W).astype(np.int64) + 1
-    e = np.cross(pos[first + 1] - pos[first], pos[first + 2] - pos[first])
-    area = np.linalg.norm(e, axis=1) * np.where(nv == 3, 0.5, 1.0)  # parallelogram / triangle
+    x0, y0, side, area = tb["x0"][ok], tb["y0"][ok], tb["side"][ok], tb["area"][ok]
+    lay_t, nv = tb["layer"][ok], tb["vertices"][ok]
     vals_out, area_out = [], []
     for m in np.unique(side).tolist():  # a few distinct tile sides: one gather each
         sel = side == m
         a = np.arange(m)
-        lay = layer[first[sel]][:, None, None]
+        lay = lay_t[sel][:, None, None]
         vals = pages[lay, y0[sel][:, None, None] + a[None, :, None], x0[sel][:, None, None] + a].max(axis=-1)
         tri = (nv[sel] == 3)[:, None, None]  # (k, m, m), row b, column a: triangles keep a + b <= m - 1
         inside = ~tri | ((a[:, None] + a[None, :]) <= m - 1)[None]
@@ -216,20 +265,114 @@ def radiance_scale(baked, scene=None) -> float:
     return s if s > 0 else 1.0
 
 
+@dataclass
+class Parts:
+    """The arrays export writes (names and shapes as in :class:`iat.bake.baked.Baked`)."""
+
+    mesh_positions: np.ndarray
+    mesh_radiance: np.ndarray
+    mesh_indices: np.ndarray
+    tex_positions: np.ndarray
+    tex_uv: np.ndarray
+    tex_layer: np.ndarray
+    tex_detail_uv: np.ndarray
+    tex_material: np.ndarray
+    tex_indices: np.ndarray
+    tex_detail: np.ndarray
+    split_edges: int = 0
+
+
+def watertight_parts(baked, watertight: bool = True, clip_scale: float | None = None) -> Parts:
+    """The mesh part and the textured part of ``baked``, with (``watertight``) every triangle edge
+    split at the vertices of either part lying inside it (:func:`iat.geometry.tjunctions.split_tjunctions`):
+    colours and uvs of the new vertices are interpolated along the edge they split, so the image is
+    the same, without the see-through pixels a client shows at T-junctions. ``split_edges`` counts the
+    triangle edges that had a T-junction. With ``clip_scale`` the mesh part's triangles are first cut
+    where a channel of ``radiance / clip_scale`` crosses 1 (:func:`iat.export.isoclip.slice_at_one`),
+    so that a client's clipping at the vertices gives our renderer's clipping of the pixels."""
+    from iat.geometry.tjunctions import split_tjunctions, tjunction_edges, weld_tolerance
+
+    k = len(baked.tex_positions)
+    det = np.asarray(baked.tex_detail, np.float32) if len(baked.tex_detail) else np.zeros(k, np.float32)
+    parts = Parts(
+        np.asarray(baked.mesh_positions, np.float32).reshape(-1, 3),
+        np.asarray(baked.mesh_radiance, np.float32).reshape(-1, 3),
+        np.asarray(baked.mesh_indices, np.int64).reshape(-1, 3),
+        np.asarray(baked.tex_positions, np.float32).reshape(-1, 3),
+        np.asarray(baked.tex_uv, np.float32).reshape(-1, 2),
+        np.asarray(baked.tex_layer, np.float32),
+        np.asarray(baked.tex_detail_uv, np.float32).reshape(-1, 2),
+        np.asarray(baked.tex_material, np.int64),
+        np.asarray(baked.tex_indices, np.int64).reshape(-1, 3),
+        det,
+    )
+    if clip_scale is not None and len(parts.mesh_indices):
+        from iat.export.isoclip import slice_at_one
+
+        rel = parts.mesh_radiance / clip_scale
+        pos, val, tri = slice_at_one(parts.mesh_positions, rel, parts.mesh_indices)
+        parts.mesh_positions, parts.mesh_indices = pos.astype(np.float32), tri
+        parts.mesh_radiance = (val * clip_scale).astype(np.float32)
+    if not watertight:
+        return parts
+    points = np.concatenate([parts.mesh_positions, parts.tex_positions]).astype(np.float64)
+    tol = weld_tolerance(points)
+    edges = 0
+    if len(parts.mesh_indices):
+        edges += tjunction_edges(parts.mesh_positions, parts.mesh_indices, points, tol)
+        m = split_tjunctions(parts.mesh_positions, parts.mesh_indices, points, tol)
+        parts.mesh_positions = m.positions.astype(np.float32)
+        parts.mesh_radiance = m.interpolate(parts.mesh_radiance)
+        parts.mesh_indices = m.triangles
+    if len(parts.tex_indices):
+        edges += tjunction_edges(parts.tex_positions, parts.tex_indices, points, tol)
+        t = split_tjunctions(parts.tex_positions, parts.tex_indices, points, tol)
+        parts.tex_positions = t.positions.astype(np.float32)
+        parts.tex_uv = t.interpolate(parts.tex_uv)
+        parts.tex_detail_uv = (
+            t.interpolate(parts.tex_detail_uv) if len(parts.tex_detail_uv) else parts.tex_detail_uv
+        )
+        parts.tex_layer = t.pick(parts.tex_layer)
+        parts.tex_material = t.pick(parts.tex_material)
+        parts.tex_detail = t.pick(parts.tex_detail)
+        parts.tex_indices = t.triangles
+    parts.split_edges = edges
+    return parts
+
+
 def _sub_mesh(positions, tri, *attrs):
     """Compact the vertices used by ``tri`` (t, 3): returns (positions, indices, *attrs)."""
     used, inv = np.unique(tri.reshape(-1), return_inverse=True)
     return (positions[used], inv.reshape(-1, 3).astype(np.uint32)) + tuple(a[used] for a in attrs)
 
 
-def export_glb(baked, path, scene=None, layered: bool = False) -> Path:
+def export_glb(
+    baked,
+    path,
+    scene=None,
+    layered: bool = False,
+    watertight: bool = False,
+    match_clip: bool = False,
+    hdr: bool = False,
+) -> Path:
     """Write ``baked`` as a GLB at ``path`` (atomically); returns the path. See the module docstring.
 
     scene : the Scene (albedo of detail materials, names); optional
     layered : write detail (albedo) on TEXCOORD_0 and illumination on TEXCOORD_1 (see above)
+    watertight : split triangle edges at T-junctions (:func:`watertight_parts`; ``iat bake`` does)
+    match_clip : clients clip vertex colours and texels to 1 before interpolating, our renderer after:
+        cut mesh-part triangles where a colour channel crosses 1 (:mod:`iat.export.isoclip`) and place
+        the 8-bit texels around values above 1 by least squares (:mod:`iat.export.texels`), so that
+        clients show what our renderer shows (``iat bake`` does)
+    hdr : with ``layered``, the lightmaps as RGBM PNGs (alpha = multiplier, up to
+        :data:`iat.export.texels.RGBM_RANGE` x white), decoded by the shipped three.js plugin and
+        Blender script; ``extras.iat_illumination.encoding = "rgbm"``
     """
+    if hdr and not layered:
+        raise OptionError("HDR lightmaps go with the layered export (layered=True, iat bake --layered --hdr)")
     path = Path(path)
     s = radiance_scale(baked, scene)
+    parts = watertight_parts(baked, watertight, s if match_clip else None)
     g = _IatGlb()
     common = {"radiance_scale": s}
     g.extras = {
@@ -237,6 +380,9 @@ def export_glb(baked, path, scene=None, layered: bool = False) -> Path:
             "radiance_scale": s,
             "encoding": "colour (linear, after sRGB decode) x radiance_scale = radiance",
             "layered": bool(layered),
+            "watertight": bool(watertight),
+            "match_clip": bool(match_clip),
+            "hdr": bool(hdr),
             "policy": baked.policy.to_dict(),
             "memory": baked.memory.to_dict(),
         }
@@ -249,46 +395,75 @@ def export_glb(baked, path, scene=None, layered: bool = False) -> Path:
                 k: [c.to_dict() for c in v] for k, v in scene.camera_paths.items()
             }
     wrote = False
-    if len(baked.mesh_indices):
+    if len(parts.mesh_indices):
         mat = g.add_material("iat_mesh", unlit=True)
         g.set_material_extras(mat, common)
-        col = np.clip(np.asarray(baked.mesh_radiance, np.float64) / s, 0.0, 1.0).astype(np.float32)
-        mesh = g.add_mesh("iat_mesh", baked.mesh_positions, baked.mesh_indices, material=mat, colors=col)
+        col = np.clip(np.asarray(parts.mesh_radiance, np.float64) / s, 0.0, 1.0).astype(np.float32)
+        mesh = g.add_mesh("iat_mesh", parts.mesh_positions, parts.mesh_indices, material=mat, colors=col)
         g.add_node("iat_mesh", mesh=mesh)
         wrote = True
 
-    if len(baked.tex_indices):
-        tri = np.asarray(baked.tex_indices, dtype=np.int64)
-        layer = np.asarray(baked.tex_layer, dtype=np.int64)
+    if len(parts.tex_indices):
+        tri = parts.tex_indices
+        layer = np.asarray(parts.tex_layer, dtype=np.int64)
         tri_page = layer[tri[:, 0]]
-        det = (
-            np.asarray(baked.tex_detail, dtype=np.float32) > 0
-            if len(baked.tex_detail)
-            else np.zeros(len(layer), bool)
-        )
+        det = parts.tex_detail > 0
         tri_det = det[tri[:, 0]]
-        tri_mat = np.asarray(baked.tex_material, dtype=np.int64)[tri[:, 0]]
-        page_tex = {}
+        tri_mat = parts.tex_material[tri[:, 0]]
+        page_tex, page_png, page_hdr = {}, {}, {}
+        boxes = tile_boxes(baked) if match_clip and len(baked.tex_patch) else None
+        headroom = _detail_headroom(baked, scene, layered) if boxes is not None else {}
         for p in np.unique(tri_page).tolist():
-            page_tex[p] = g.add_texture(_png(baked.pages[p] / s), f"iat_page{p}", clamp=True)
+            texels = baked.pages[p] / s
+            if boxes is not None:
+                on = boxes["layer"] == p
+                texels = _with_headroom(texels, baked, {k: v[on] for k, v in boxes.items()}, headroom)
+            page_hdr[p] = texels
+            if boxes is not None:
+                texels, _ = place_texels(
+                    texels,
+                    {k: v[on] for k, v in boxes.items()},
+                    baked.policy.gutter,
+                    1 << (baked.mip_levels - 1),
+                )
+            page_png[p] = _png(texels)
+
+        def page_texture(p: int) -> int:
+            """The 8-bit page's texture, added when a material first uses it."""
+            if p not in page_tex:
+                page_tex[p] = g.add_texture(page_png[p], f"iat_page{p}", clamp=True)
+            return page_tex[p]
+
         detail_tex = {}
         for p in np.unique(tri_page).tolist():
             # plain textured patches (radiance)
             sel = (tri_page == p) & ~tri_det
+            light_tex = None
             if sel.any():
-                pos, idx, uv = _sub_mesh(baked.tex_positions, tri[sel], baked.tex_uv)
+                pos, idx, uv = _sub_mesh(parts.tex_positions, tri[sel], parts.tex_uv)
                 mat = g.add_material(f"iat_page{p}", unlit=True)
-                g.set_base_texture(mat, page_tex[p], 0)
+                g.set_base_texture(mat, page_texture(p), 0)
                 g.set_material_extras(mat, common)
                 g.add_node(f"iat_page{p}", mesh=g.add_mesh(f"iat_page{p}", pos, idx, material=mat, uv0=uv))
+                if layered and not hdr and ((tri_page == p) & tri_det).any():
+                    # the lightmap as an image of its own: Blender's importer gives an image one colour
+                    # space, and makes an occlusion texture's Non-Color (the base colour's would go too)
+                    light_tex = g.add_texture(page_png[p], f"iat_page{p}_lightmap", clamp=True)
             if not (tri_page == p).any() or not ((tri_page == p) & tri_det).any():
                 continue
+            if layered and hdr:
+                rgbm = _png_bytes(rgbm_encode(page_hdr[p]))
+                light_tex = g.add_texture(rgbm, f"iat_page{p}_lightmap_rgbm", clamp=True)
+            elif light_tex is None:
+                light_tex = page_texture(p)
             if not layered:
                 sel = (tri_page == p) & tri_det
-                albedo = _albedo_per_vertex(baked, scene)
-                pos, idx, uv, col = _sub_mesh(baked.tex_positions, tri[sel], baked.tex_uv, albedo)
+                albedo = _albedo_per_vertex(baked, parts.tex_material, scene)
+                for m, k in headroom.items():  # the page holds incoming light x k (see _detail_headroom)
+                    albedo[parts.tex_material == m] /= k
+                pos, idx, uv, col = _sub_mesh(parts.tex_positions, tri[sel], parts.tex_uv, albedo)
                 mat = g.add_material(f"iat_page{p}_detail", unlit=True)
-                g.set_base_texture(mat, page_tex[p], 0)
+                g.set_base_texture(mat, page_texture(p), 0)
                 g.set_material_extras(mat, dict(common, contains="incoming light; COLOR_0 = albedo"))
                 mesh = g.add_mesh(f"iat_page{p}_detail", pos, idx, material=mat, uv0=uv, colors=col)
                 g.add_node(f"iat_page{p}_detail", mesh=mesh)
@@ -303,21 +478,24 @@ def export_glb(baked, path, scene=None, layered: bool = False) -> Path:
                         )
                     detail_tex[m] = g.add_texture(_png(d), f"iat_detail_mat{m}")
                 pos, idx, uv0, uv1 = _sub_mesh(
-                    baked.tex_positions, tri[sel], baked.tex_detail_uv, baked.tex_uv
+                    parts.tex_positions, tri[sel], parts.tex_detail_uv, parts.tex_uv
                 )
                 name = f"iat_page{p}_mat{m}"
-                mat = g.add_material(name, unlit=True)
+                mat = g.add_material(name)  # lit: KHR_materials_unlit beside MOZ_lightmap is a warning
                 g.set_base_texture(mat, detail_tex[m], 0)
+                k = headroom.get(m, 1.0)
+                g.set_lightmap(mat, light_tex, 1, LIGHTMAP_INTENSITY / k)
                 g.set_material_extras(
                     mat,
                     dict(
                         common,
                         iat_illumination={
-                            "index": page_tex[p],
+                            "index": light_tex,
                             "texCoord": 1,
-                            "radiance_scale": s,
+                            "radiance_scale": s / k,
                             "contains": "incoming light (radiance / albedo)",
                             "combine": "multiply",
+                            **({"encoding": "rgbm", "rgbm_range": RGBM_RANGE} if hdr else {}),
                         },
                     ),
                 )
@@ -328,9 +506,42 @@ def export_glb(baked, path, scene=None, layered: bool = False) -> Path:
     return g.write(path)
 
 
-def _albedo_per_vertex(baked, scene) -> np.ndarray:
+def _detail_headroom(baked, scene, layered: bool) -> dict[int, float]:
+    """{material: k} for the materials whose textured patches store incoming light: their tiles are
+    written as incoming light x k / radiance_scale, and k comes back out of COLOR_0 (albedo / k) or
+    the lightmap's intensity (pi / k). k = the brightest albedo channel (of the detail texture in
+    the layered export): incoming light then clips in the file where radiance does, not before."""
+    out = {}
+    det = np.asarray(baked.tex_detail, np.float32) > 0 if len(baked.tex_detail) else None
+    if det is None or not det.any():
+        return out
+    mats = np.asarray(baked.tex_material, np.int64)
+    for m in np.unique(mats[det]).tolist():
+        d = baked.detail_textures.get(m)
+        if layered and d is not None:
+            a = float(np.asarray(d).max())
+        else:
+            a = float(_albedo_per_vertex(baked, np.array([m]), scene).max())
+        out[m] = float(np.clip(a, 1e-3, 1.0))
+    return out
+
+
+def _with_headroom(texels: np.ndarray, baked, boxes: dict, headroom: dict) -> np.ndarray:
+    """The page's detail tiles multiplied by their material's headroom ``k``."""
+    if not headroom or not len(boxes["first"]):
+        return texels
+    mat = np.asarray(baked.tex_material, np.int64)[boxes["first"]]
+    det = np.asarray(baked.tex_detail, np.float32)[boxes["first"]] > 0
+    k = np.array([headroom.get(m, 1.0) for m in mat.tolist()])
+    k = np.where(det, k, 1.0)
+    if (k == 1.0).all():
+        return texels
+    return scale_tiles(texels, boxes, k, baked.policy.gutter, 1 << (baked.mip_levels - 1))
+
+
+def _albedo_per_vertex(baked, tex_material: np.ndarray, scene) -> np.ndarray:
     """(K, 3) float32 albedo of each textured vertex's material (for COLOR_0 on detail patches)."""
-    mats = np.asarray(baked.tex_material, dtype=np.int64)
+    mats = np.asarray(tex_material, dtype=np.int64)
     out = np.ones((len(mats), 3), dtype=np.float32)
     for m in np.unique(mats).tolist():
         if scene is not None and m < len(scene.materials):
