@@ -126,6 +126,27 @@ def test_layered_export_multiplies_detail_and_illumination(egl_ctx, tmp_path):
     assert np.median(rel) < 0.01 and np.percentile(rel, 99) < 0.05
 
 
+def test_hdr_layered_export_draws_like_the_plain_one(egl_ctx, tmp_path):
+    """``--hdr`` (RGBM lightmaps): the drawer decodes rgb x alpha x range, so where nothing clips the
+    image is the plain layered one's (within the two 8-bit encodings)."""
+    sol, sc, _ = detail_scene()
+    bk = Baker(sol, sc).bake(BakePolicy(threshold=0, mipmaps=False))
+    cam = Camera(
+        eye=np.array([3.5, 0.5, 2.0]), target=np.array([3.5, 0.5, 0.0]), yfov=45.0, znear=0.1, zfar=20
+    )
+    images = []
+    for hdr in (False, True):
+        doc = load_glb(export_glb(bk, tmp_path / f"layered-{hdr}.glb", sc, layered=True, hdr=hdr))
+        assert any(p.ill_rgbm > 0 for p in doc.primitives) == hdr
+        with GlbView(doc, egl_ctx) as view:
+            images.append(view.render(cam, (W, H)))
+    plain, rgbm = images
+    lit = plain.max(axis=-1) > 0
+    assert lit.mean() > 0.2
+    rel = np.abs(rgbm - plain)[lit] / np.maximum(plain[lit], 1e-3)
+    assert np.median(rel) < 0.02 and np.percentile(rel, 99) < 0.08
+
+
 def _quad_glb(path, sampler: dict, texel_rgb8, node_kwargs=None, factor=(1.0, 1.0, 1.0, 1.0), colors=None):
     """A unit quad in z = 0 with a 2 x 2 texture, uv = (x, y), drawn through a node."""
 

@@ -67,6 +67,8 @@ class GlbPrimitive:
     factor : (4,) baseColorFactor
     base_texture, base_set : texture index of baseColorTexture (None) and its texCoord set
     ill_texture, ill_set : the layered export's illumination texture (None) and its set
+    ill_rgbm : the illumination texture's RGBM range (``--hdr``: texel = sRGB-decoded rgb x alpha x
+      this), 0 for a plain sRGB texture
     radiance_scale : colour x this = radiance
     material : material index or None; node : node name
     """
@@ -81,6 +83,7 @@ class GlbPrimitive:
     base_set: int
     ill_texture: int | None
     ill_set: int
+    ill_rgbm: float
     radiance_scale: float
     material: int | None
     node: str
@@ -340,9 +343,11 @@ def _load(doc: dict, binary: bytes, path: Path) -> GlbDocument:
             extras = mat.get("extras") or {}
             scale = float(extras.get("radiance_scale", root_scale))
             ill = extras.get("iat_illumination")
-            ill_tex, ill_set = None, 0
+            ill_tex, ill_set, ill_rgbm = None, 0, 0.0
             if isinstance(ill, dict) and "index" in ill:
                 ill_tex, ill_set = int(ill["index"]), int(ill.get("texCoord", 0))
+                if ill.get("encoding") == "rgbm":
+                    ill_rgbm = float(ill.get("rgbm_range", 0.0))
                 scale = float(ill.get("radiance_scale", scale))
                 texture(ill_tex)
             if base is not None:
@@ -359,6 +364,7 @@ def _load(doc: dict, binary: bytes, path: Path) -> GlbDocument:
                     base_set=0 if base is None else int(base.get("texCoord", 0)),
                     ill_texture=ill_tex,
                     ill_set=ill_set,
+                    ill_rgbm=ill_rgbm,
                     radiance_scale=scale,
                     material=m,
                     node=str(node.get("name", ni)),
@@ -468,6 +474,7 @@ class GlbView:
                 self._set("use_ill", ill is not None)
                 self._set("base_set", int(p.base_set))
                 self._set("ill_set", int(p.ill_set))
+                self._set("ill_rgbm", float(p.ill_rgbm))
                 self._set("base_mirror", self._mirror(p.base_texture))
                 self._set("ill_mirror", self._mirror(p.ill_texture))
                 self._set("factor", tuple(float(x) for x in p.factor))

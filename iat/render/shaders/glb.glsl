@@ -25,6 +25,7 @@ uniform bool use_base;
 uniform bool use_ill;
 uniform int base_set;         // TEXCOORD_<n> of the base colour texture (0 or 1)
 uniform int ill_set;
+uniform float ill_rgbm;       // > 0: the illumination texture is RGBM, rgb x alpha x this (--hdr)
 uniform bvec2 base_mirror;    // MIRRORED_REPEAT on s / t (the texture itself repeats)
 uniform bvec2 ill_mirror;
 uniform vec4 factor;          // baseColorFactor
@@ -43,7 +44,8 @@ void main() {
         c *= texture(base_tex, fold(base_set == 1 ? v_uv1 : v_uv0, base_mirror));
     }
     if (use_ill) {
-        c.rgb *= texture(ill_tex, fold(ill_set == 1 ? v_uv1 : v_uv0, ill_mirror)).rgb;
+        vec4 t = texture(ill_tex, fold(ill_set == 1 ? v_uv1 : v_uv0, ill_mirror));
+        c.rgb *= ill_rgbm > 0.0 ? t.rgb * t.a * ill_rgbm : t.rgb;
     }
     frag_color = vec4(c.rgb * radiance_scale, 1.0);
 }
