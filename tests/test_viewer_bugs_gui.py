@@ -34,7 +34,7 @@ def make_app(model, tmp_path, monkeypatch):
     return ViewerApp(model, size=(1280, 800), solve_options=SolveOptions(max_depth=3), idle=False)
 
 
-def settle(ctx, app, seconds: float = 30.0, frames: int = 3) -> None:
+def settle(ctx, app, seconds: float = 300.0, frames: int = 3) -> None:
     """Wait for the model and every background job (open, bake, re-solve), then a few frames."""
     s = app.state
 

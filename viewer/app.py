@@ -4,8 +4,9 @@
 window until it is closed (``iat view`` loads it through the ``iat.apps`` entry point).
 :class:`ViewerApp` is the runner and its callbacks: the 3D view is drawn in hello_imgui's
 ``custom_background`` callback into the central dock node's rectangle (the viewport is set
-every frame); the panels (:mod:`viewer.panels`) dock around it and change the
-:class:`~viewer.state.AppState`. Every frame the app:
+every frame) by :class:`~viewer.view3d.View3D`, only when what it shows changed (else its last
+image is copied); the window has no multisampling (``msaa``); the panels (:mod:`viewer.panels`)
+dock around it and change the :class:`~viewer.state.AppState`. Every frame the app:
 
 1. picks up finished background work: an opened model (:class:`~viewer.jobs.OpenJob`)
    or a re-bake (:class:`~viewer.bake_worker.BakeWorker`), and uploads it to the
@@ -22,7 +23,8 @@ every frame); the panels (:mod:`viewer.panels`) dock around it and change the
    lighting states for the day cycle (:class:`~viewer.jobs.SetJob`) and blends them
    at the time-of-day slider (one pass on the GPU: ``Renderer.set_blend``).
 
-Measurements and pictures that drive this app are in :mod:`viewer.bench`.
+Measurements and pictures that drive this app are in :mod:`viewer.bench`; ``iat view MODEL --play
+NAME`` (:mod:`viewer.play`) plays a camera path and prints its frame times.
 """
 
 from __future__ import annotations
@@ -43,16 +45,16 @@ import glfw  # isort: skip
 
 from iat.errors import IATError
 from iat.radiosity import SolveOptions
-from viewer import controls, panels
+from viewer import controls, overlay, panels
 from viewer.bake_worker import BakeSource, BakeWorker
 from viewer.jobs import Opened, OpenJob, SetJob, error_text
 from viewer.navigation import CameraPath, Navigator, load_paths, navigation_speed, paths_file, save_paths
 from viewer.state import AppState, default_model
+from viewer.view3d import View3D, auto_exposure, screenshot
 
 log = logging.getLogger(__name__)
 
 WINDOW_TITLE = "IAT viewer"
-BACKGROUND = (0.08, 0.08, 0.09)
 
 
 def screenshot_dir() -> Path:
@@ -83,6 +85,8 @@ class ViewerApp:
     swap_hook : called as ``swap_hook(app, record)`` after each buffer swap that added a
       ``record`` to :attr:`frame_log` (when measuring: the benchmark labels its frames)
     idle : let hello_imgui idle to a few fps when nothing moves (False for measurements)
+    msaa : samples of the window's framebuffer (0: none; hello_imgui's default of 8 costs a
+      software rasteriser such as llvmpipe most of every frame: 8 samples to clear and resolve)
     """
 
     def __init__(
@@ -95,6 +99,7 @@ class ViewerApp:
         frame_hook=None,
         swap_hook=None,
         idle: bool = True,
+        msaa: int = 0,
     ):
         self.state = state or AppState()
         if solve_options is not None:
@@ -104,17 +109,21 @@ class ViewerApp:
         self.frame_hook = frame_hook
         self.swap_hook = swap_hook
         self.idle = idle
+        self.msaa = int(msaa)
+        self.view3d: View3D | None = None
         self.ctx = None
         self.renderer = None
         self.frame_log: list[dict] | None = None  # per-frame records when measuring
         self._pending_open: Opened | None = None  # opened, waiting for the next draw to upload it
+        self._preview = None  # a loaded scene to show unlit while it solves (next draw)
         self._to_upload = None  # a BakeResult waiting for the next draw
         self._uploaded_this_frame = False
         self._upload_ms = 0.0
         self._bg_threads: list[threading.Thread] = []
         self._messages: list[tuple[str, str]] = []  # (kind, text) from background threads
         self._last_swap: float | None = None
-        self._draw_error = ""
+        self._frame_t0: float | None = None  # when this frame started (pre_new_frame)
+        self._frame_idle = False
         self.frames_drawn = 0
         self._relit = None  # a re-solved solution waiting for the next draw
         self._day_shown = False  # the renderer holds the day-cycle set (not the single solution)
@@ -135,6 +144,7 @@ class ViewerApp:
         rp.ini_disable = True  # the layout is the app's, not the last session's
         rp.fps_idling.enable_idling = bool(self.idle)
         rp.fps_idling.vsync_to_monitor = bool(self.idle)
+        rp.renderer_backend_options.open_gl_options.anti_aliasing_samples = self.msaa
         cb = rp.callbacks
         cb.post_init = self._guard(self._post_init)
         cb.before_exit = self._before_exit
@@ -143,6 +153,7 @@ class ViewerApp:
         cb.custom_background = self._guard(self._draw)
         cb.post_render_dockable_windows = self._guard(self._central_rect)
         cb.after_swap = self._after_swap
+        cb.pre_new_frame = self._frame_start
         dp = rp.docking_params
         dp.docking_splits = [
             hello_imgui.DockingSplit("MainDockSpace", "LeftSpace", imgui.Dir.left, 0.25),
@@ -194,6 +205,7 @@ class ViewerApp:
 
         self.ctx = moderngl.create_context()
         self.renderer = Renderer(self.ctx)
+        self.view3d = View3D(self.ctx, self.renderer)
         if self.initial_path:
             self.open(self.initial_path)
 
@@ -211,6 +223,8 @@ class ViewerApp:
             s.jobs.bake_worker.close()
         for t in self._bg_threads:
             t.join(30.0)
+        if self.view3d is not None:
+            self.view3d.release()  # (its counts stay readable)
         if self.renderer is not None:
             try:
                 self.renderer.release()
@@ -295,8 +309,8 @@ class ViewerApp:
     def _reset_lighting(self, opened: Opened) -> None:
         """A new model: a fresh light editor, background re-solve and day-cycle state."""
         from iat.lighting.editor import LightEditor
-        from iat.lighting.relight import Relighter
         from iat.lighting.states import lighting_states
+        from viewer.relight import ProgressRelighter
 
         s = self.state
         if s.lighting.relighter is not None:
@@ -304,7 +318,7 @@ class ViewerApp:
         if s.lighting.set_job is not None:
             s.lighting.set_job.cancel()
         s.lighting.editor = LightEditor(opened.scene)
-        s.lighting.relighter = Relighter(opened.solution, opened.scene)
+        s.lighting.relighter = ProgressRelighter(opened.solution, opened.scene)
         (
             s.lighting.relight_version,
             s.lighting.relights,
@@ -364,17 +378,18 @@ class ViewerApp:
         controls.navigate(s, self.idle)
         controls.shortcuts(s)
         panels.error_window(s)
-        panels.view_overlay(s)
+        overlay.view_overlay(s)
         busy = s.jobs.opening or s.jobs.rebaking or s.lighting.relighting or s.lighting.solving_day_cycle
-        if self.idle and (
-            busy or s.paths.player or s.paths.recorder or s.view.looking or s.lighting.dragging_light
-        ):
-            hello_imgui.request_refresh()
+        moving = s.paths.player or s.paths.recorder or s.view.looking or s.lighting.dragging_light
+        if self.idle and (busy or moving or (self.view3d is not None and self.view3d.dirty)):
+            hello_imgui.request_refresh()  # no idling while the view changes
 
     def _poll_work(self) -> None:
         """Collect finished background work; the GL upload waits for the next draw (see _upload)."""
         s = self.state
         job = s.jobs.open_job
+        if job is not None and not job.done and job.scene is not None and s.model.scene is None:
+            self._preview = job.scene  # nothing shown yet: the model unlit while it solves
         if job is not None and job.done:
             s.jobs.open_job = None
             if job.result is not None:
@@ -406,10 +421,16 @@ class ViewerApp:
             self._to_upload = None  # results of the previous model's worker
             self.adopt(opened)
             self._uploaded_this_frame = True
-        self._upload_lighting()
+            self.view3d.invalidate()
+        if self._preview is not None:
+            self._show_preview(self._preview)
+            self._preview = None
+        if self._upload_lighting():
+            self.view3d.invalidate()
         res, self._to_upload = self._to_upload, None
         if res is None:
             return
+        self.view3d.invalidate()
         try:
             t0 = time.perf_counter()
             if _is_set(res.baked):
@@ -430,6 +451,22 @@ class ViewerApp:
         s.jobs.rebakes += 1
         s.jobs.uploads += 1
         self._uploaded_this_frame = True
+
+    def _show_preview(self, scene) -> None:
+        """Show ``scene`` unlit (preview mode) while its solve runs (nothing else is on screen)."""
+        s = self.state
+        if s.model.scene is not None:
+            return
+        try:
+            self.renderer.set_scene(scene)
+        except Exception as e:
+            s.messages.set_error(f"cannot show the preview: {error_text(e)}")
+            return
+        s.model.scene = scene
+        s.view.nav = Navigator(scene.default_camera(), speed=navigation_speed(scene.bounds))
+        s.view.camera = s.view.nav.camera
+        s.requests.auto_exposure = True
+        self.view3d.invalidate()
 
     def _submit_policy(self) -> None:
         s = self.state
@@ -505,11 +542,13 @@ class ViewerApp:
             elif job.error:
                 s.messages.set_error(job.error)
 
-    def _upload_lighting(self) -> None:
+    def _upload_lighting(self) -> bool:
         """GL side of the lighting (during the draw): a re-solved solution, entering or leaving the
-        day cycle, and the blend of the time-of-day slider."""
+        day cycle, and the blend of the time-of-day slider. True when the renderer got new data."""
         s, r = self.state, self.renderer
         want_day = bool(s.lighting.day_cycle and s.lighting.solution_set is not None)
+        res = self._relit
+        changed = want_day != self._day_shown or res is not None
         if want_day != self._day_shown:
             try:
                 if want_day:
@@ -540,6 +579,7 @@ class ViewerApp:
                         f"lighting re-solved in {res.total_seconds:.2f} s ({res.mode}, {res.steps} steps)"
                     )
         r.set_blend(*s.lighting.day_blend())
+        return changed
 
     def _serve_requests(self) -> None:
         s = self.state
@@ -638,95 +678,48 @@ class ViewerApp:
         return vx, fh - vy - vh, vw, vh
 
     def _draw(self) -> None:
-        s, ctx = self.state, self.ctx
-        if ctx is None:
+        s = self.state
+        if self.ctx is None or self.view3d is None:
             return
         self._upload()
-        fw, fh = glfw.get_framebuffer_size(glfw.get_current_context())
-        ctx.screen.use()
-        ctx.viewport = (0, 0, fw, fh)
-        ctx.clear(*BACKGROUND)
-        mode = self.shown_mode()
-        vp = self.gl_viewport()
-        if mode is None or vp is None or s.view.camera is None and s.view.nav is None:
-            return
-        cam = s.view.camera if s.view.camera is not None else s.view.nav.camera
-        if s.requests.auto_exposure:
+        mode, vp = self.shown_mode(), self.gl_viewport()
+        cam = s.view.camera if s.view.camera is not None else (s.view.nav.camera if s.view.nav else None)
+        if mode is not None and vp is not None and cam is not None and s.requests.auto_exposure:
             s.requests.auto_exposure = False
-            self._auto_exposure(cam, mode, vp)
-        try:
-            self.renderer.draw(
-                cam,
-                mode,
-                viewport=vp,
-                exposure=s.tuning.exposure,
-                tonemap=s.view.tonemap,
-                split=s.view.split,
-                diff_gain=s.view.diff_gain,
-            )
-            s.stats.render = self.renderer.stats()
-            self._draw_error = ""
-        except Exception as e:
-            msg = f"cannot draw: {error_text(e)}"
-            if msg != self._draw_error:  # once, not every frame
-                self._draw_error = msg
-                s.messages.set_error(msg)
-        finally:
-            ctx.screen.use()
-            ctx.viewport = (0, 0, fw, fh)
+            auto_exposure(s, self.renderer, cam, mode, vp)
+        self.view3d.draw(s, mode, vp, cam)
+        if mode is None or vp is None or cam is None:
+            return
         self.frames_drawn += 1
         if s.requests.screenshot is not None:
-            path, s.requests.screenshot = s.requests.screenshot, None
-            self._screenshot(path, vp, mode)
-
-    def _auto_exposure(self, cam, mode: str, vp) -> None:
-        """The exposure ``iat render`` would pick for this view: :func:`iat.color.auto_exposure` of
-        its linear radiance, drawn offscreen at the view's size (the split and difference views are
-        exposed as the mesh)."""
-        from iat.color import auto_exposure
-
-        s = self.state
-        w, h = int(vp[2]), int(vp[3])
-        scale = min(1.0, 512.0 / max(w, h))  # the 99th percentile does not need every pixel
-        size = (max(int(round(w * scale)), 1), max(int(round(h * scale)), 1))
-        try:
-            img = self.renderer.render(
-                cam, size=size, mode=mode if mode in ("mesh", "iat", "preview") else "mesh"
-            )
-        except Exception as e:
-            s.messages.set_error(f"cannot measure the exposure: {error_text(e)}")
-            return
-        s.tuning.exposure = float(auto_exposure(img))
+            screenshot(s, self.view3d, vp, mode, screenshot_dir())
 
     def read_view(self, vp=None) -> np.ndarray:
-        """(h, w, 3) uint8 of the 3D view as drawn this frame (call during the background callback)."""
-        vp = vp or self.gl_viewport()
-        x, y, w, h = vp
-        raw = self.ctx.screen.read(viewport=(x, y, w, h), components=3, alignment=1)
-        return np.frombuffer(raw, np.uint8).reshape(h, w, 3)[::-1].copy()
+        """(h, w, 3) uint8 of the 3D view as shown this frame (call during the background callback)."""
+        return self.view3d.read(vp or self.gl_viewport())
 
-    def _screenshot(self, path: str, vp, mode: str) -> None:
-        from PIL import Image
-
-        s = self.state
-        if not path:
-            stem = Path(s.model.path).stem or "iat"
-            path = str(screenshot_dir() / f"{stem}-{mode}-{time.strftime('%Y%m%d-%H%M%S')}.png")
+    def _idling(self) -> bool:
         try:
-            img = self.read_view(vp)
-            Path(path).parent.mkdir(parents=True, exist_ok=True)
-            Image.fromarray(img).save(path)
-            s.messages.last_screenshot = path
-            s.messages.set_status(f"wrote {path}")
-        except Exception as e:
-            s.messages.set_error(f"cannot write the screenshot {path}: {error_text(e)}")
+            return bool(hello_imgui.get_runner_params().fps_idling.is_idling)
+        except Exception:  # outside a run
+            return False
+
+    def _frame_start(self) -> None:
+        self._frame_t0 = time.perf_counter()
+        self._frame_idle = self._idling()
+        dp = hello_imgui.get_runner_params().docking_params
+        if dp.layout_reset:  # View > Restore default layout (before it is applied): closed panels too
+            for w in dp.dockable_windows:
+                w.is_visible = True
 
     def _after_swap(self) -> None:
         now = time.perf_counter()
         if self._last_swap is not None:
             ms = (now - self._last_swap) * 1000.0
             s = self.state
-            s.stats.add_frame_time(ms)
+            t0 = self._frame_t0
+            work = (now - t0) * 1000.0 if t0 is not None else ms
+            s.stats.add_frame_time(ms, work_ms=work, idle=self._frame_idle or self._idling())
             if s.paths.player is not None and s.paths.posed:  # only frames that drew a pose
                 s.paths.play_frame_ms.append(ms)
             if self.frame_log is not None:
@@ -756,16 +749,43 @@ def _is_set(baked) -> bool:
 
 
 # -- entry points ----------------------------------------------------------------------------------------
-def main(path: str | None = None, *, size=(1280, 800), solve_options: SolveOptions | None = None) -> int:
+def main(
+    path: str | None = None,
+    *,
+    size=(1280, 800),
+    solve_options: SolveOptions | None = None,
+    play: str | None = None,
+    frames: int = 120,
+    modes=("mesh", "iat"),
+    as_json: bool = False,
+) -> int:
     """``iat view [SOL|MODEL]``: run the viewer; 0 when closed, 2 when there is no display.
 
     path : a model or a solution ``.npz``; None opens the Cornell box sample
     solve_options : how to solve a model that has no (cached) solution; default ``SolveOptions()``
+    play : ``--play NAME``: play camera path NAME (or a ``.paths.json`` file) over ``frames`` frames
+      in each of ``modes``, print frame-time statistics (JSON when ``as_json``) and exit
+      (:func:`viewer.play.play_path`); 1 when the playback failed, 2 for a path that is not there
     """
     target = Path(path) if path else default_model()
-    app = ViewerApp(target, size=size, solve_options=solve_options)
     try:
-        app.run()
+        if play is not None:
+            import json
+
+            from viewer.play import format_play, play_path
+
+            def make_app(**kw) -> ViewerApp:
+                return ViewerApp(target, size=size, solve_options=solve_options, **kw)
+
+            res = play_path(make_app, target, play, frames=frames, modes=modes, size=size)
+            if res["error"]:
+                print(f"iat view: {res['error']}", file=sys.stderr)
+            if as_json:
+                print(json.dumps(res, indent=1))
+            elif res["modes"]:
+                print(format_play(res))
+            return int(res["exit_code"])
+        ViewerApp(target, size=size, solve_options=solve_options).run()
     except RuntimeError as e:
         print(f"iat view: cannot open a window ({e}); try 'iat render' or xvfb-run", file=sys.stderr)
         return 2

@@ -45,7 +45,7 @@ PAD_BUTTONS = {
     glfw.GAMEPAD_BUTTON_BACK: "back",
     glfw.GAMEPAD_BUTTON_START: "start",
 }
-DIVIDER_GRAB_PX = 8.0
+DIVIDER_GRAB_PX = 16.0  # half the width of the divider's grab zone
 
 
 def read_gamepad() -> tuple[tuple[float, ...], frozenset[str]]:

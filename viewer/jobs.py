@@ -133,6 +133,7 @@ class OpenJob(_Job):
         self.use_cache = use_cache
         self.load_started: float | None = None
         self.solve_started: float | None = None
+        self.scene = None  # set once a model is loaded (before its solve)
         super().__init__(self.path, "iat-open")
 
     @property
@@ -177,6 +178,7 @@ class OpenJob(_Job):
             self.message = "loading model"
             self.load_started = time.perf_counter()
             scene = load_scene(p, progress=self.load_progress, **self.options.load_kwargs())
+            self.scene = scene  # the model, before its solve: the viewer shows it unlit meanwhile
             solution = None
             cpath = solution_cache_path(p, self.options) if self.use_cache else None
             solution = load_cached(cpath, scene.n_patches) if cpath is not None else None

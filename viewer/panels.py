@@ -11,8 +11,8 @@ solve and re-bake times, solve progress with ETA and cancel), **Model** (open,
 solve options, export, save), **Lighting** (select, add, delete, move and colour point
 and spot lights, emissive strengths, the background re-solve's progress, saving the
 lights back to glTF; the day cycle: solve the model's lighting states and blend them
-with the time-of-day slider). Plus the menus, the error window and the overlay drawn
-over the 3D view (split divider, light markers, labels, the day-cycle HUD).
+with the time-of-day slider). Plus the menus, the error window and the HUD's lines (what
+:mod:`viewer.overlay` draws over the 3D view).
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from imgui_bundle import ImVec2, ImVec4, hello_imgui, imgui, implot
 from iat.bake.flatten import METHODS
 from iat.io.load import SUPPORTED_EXTENSIONS
 from viewer.bake_worker import snap_scale
+from viewer.daylight import sun_label
 from viewer.lights import new_light_intensity, new_light_position
 from viewer.navigation import paths_file
 from viewer.state import MODE_LABELS, MODES, AppState
@@ -55,6 +56,14 @@ def _help(text: str) -> None:
     imgui.same_line()
     imgui.text_disabled("(?)")
     imgui.set_item_tooltip(text)
+
+
+def same_line_if_fits(label: str) -> None:
+    """Put the next button on this line when it fits in the panel, else on the next (no clipping)."""
+    need = imgui.calc_text_size(label).x + 2 * imgui.get_style().frame_padding.x
+    imgui.same_line()
+    if imgui.get_content_region_avail().x < need:
+        imgui.new_line()
 
 
 def _mb(nbytes: float) -> str:
@@ -234,11 +243,22 @@ def _bar(fraction: float, text: str, color: ImVec4 | None = None) -> None:
 
 
 def stats_panel(state: AppState) -> None:
-    h = state.stats.frame_history()
-    recent = h[-60:]
-    mean = float(recent.mean()) if recent.size else 0.0
-    worst = float(recent.max()) if recent.size else 0.0
-    imgui.text(f"{state.stats.fps:5.1f} fps   {mean:5.1f} ms/frame   max {worst:5.1f} ms")
+    st = state.stats
+    h = st.frame_history()
+    if st.idling:
+        imgui.text(f"idling: {st.idle_fps:4.1f} fps while nothing changes")
+        _help(
+            "Nothing moves, so the window redraws a few times a second (Menu View: FPS idling).\n"
+            "A frame's own work now allows the rate below; moving the camera ends idling."
+        )
+        imgui.text_colored(
+            DIM, f"a frame's work {1000.0 / max(st.work_fps, 1e-9):5.1f} ms ({st.work_fps:.0f} fps)"
+        )
+    else:
+        recent = h[-60:]
+        mean = 1000.0 / st.fps if st.fps > 0 else 0.0
+        worst = float(recent.max()) if recent.size else 0.0
+        imgui.text(f"{st.fps:5.1f} fps   {mean:5.1f} ms/frame   max {worst:5.1f} ms")
     if h.size and implot.begin_plot(
         "##frametimes",
         ImVec2(-1, hello_imgui.em_size(7.0)),
@@ -285,19 +305,30 @@ def stats_panel(state: AppState) -> None:
         imgui.end_table()
     if state.model.mesh_triangles and mem:
         fewer = state.model.mesh_triangles / max(state.model.iat_triangles, 1)
-        imgui.text(f"IAT draws {fewer:,.0f}x fewer triangles than the mesh")
+        imgui.text_wrapped(f"IAT draws {fewer:,.0f}x fewer triangles than the mesh")
     rs = state.stats.render
-    if rs:
-        imgui.text_colored(
-            DIM, f"last frame drew {rs.get('triangles', 0):,} triangles in {rs.get('draw_calls', 0)} calls"
+    if st.view_redraws or st.view_copies:
+        imgui.text_colored(DIM, f"3D view drawn {st.view_redraws:,} times, copied {st.view_copies:,}")
+        _help(
+            "The 3D view is drawn only when camera, mode, exposure, bake or blend change;\n"
+            "else its last image is copied."
         )
+    if rs:
+        imgui.push_style_color(imgui.Col_.text, DIM)
+        imgui.text_wrapped(
+            f"last frame drew {rs.get('triangles', 0):,} triangles in {rs.get('draw_calls', 0)} calls"
+        )
+        imgui.pop_style_color()
 
     imgui.separator()
     used = float(mem.get("texture_bytes", 0)) if mem else 0.0
     budget = float(state.tuning.budget_mb) * MB
     over = state.tuning.budget_on and used > budget
-    frac = used / budget if budget > 0 else (1.0 if used > 0 else 0.0)
-    label = f"{_mb(used)} / {_mb(budget)}" + ("" if state.tuning.budget_on else " (budget off)")
+    if state.tuning.budget_on:
+        frac = used / budget if budget > 0 else (1.0 if used > 0 else 0.0)
+        label = f"{_mb(used)} / {_mb(budget)}"
+    else:  # nothing to compare with: the bar is full, the text says so
+        frac, label = (1.0 if used > 0 else 0.0), f"{_mb(used)} (budget off)"
     n_states = int(mem.get("solutions", 1)) if mem else 1
     layers = f"  ({n_states} lighting states: {n_states} layers per page)" if n_states > 1 else ""
     imgui.text("Texture memory" + layers)
@@ -313,6 +344,8 @@ def stats_panel(state: AppState) -> None:
             DIM, f"vertex + index bytes {_mb(mem.get('vertex_bytes', 0) + mem.get('index_bytes', 0))}"
         )
 
+    if state.lighting.relighting:
+        imgui.text_colored(RED, "stale: the lights changed, re-solving (Lighting panel)")
     imgui.separator()
     solve = _seconds(state.model.solve_seconds) if state.model.loaded else "-"
     if state.model.from_cache:
@@ -355,7 +388,9 @@ def lighting_panel(state: AppState) -> None:
     lights = ed.lights
     if state.lighting.selected_light >= len(lights):
         state.lighting.selected_light = len(lights) - 1
-    if imgui.begin_list_box("##lights", ImVec2(-1, hello_imgui.em_size(3.6))):
+    rows = max(min(len(lights), 6), 2)  # every light shown up to 6, then the list scrolls
+    tall = rows * imgui.get_text_line_height_with_spacing() + 2 * imgui.get_style().frame_padding.y
+    if imgui.begin_list_box("##lights", ImVec2(-1, tall)):
         for k, lt in enumerate(lights):
             clicked, _ = imgui.selectable(_light_label(k, lt), k == state.lighting.selected_light)
             if clicked:
@@ -365,11 +400,11 @@ def lighting_panel(state: AppState) -> None:
         imgui.end_list_box()
     for kind in ("point", "spot"):  # where the camera looks, as bright as the scene's lamps
         if kind == "spot":
-            imgui.same_line()
+            same_line_if_fits(f"Add {kind} light")
         if imgui.button(f"Add {kind} light"):
             pos, power = new_light_position(ed.scene, state.view.camera), new_light_intensity(ed.scene)
             state.lighting.selected_light = ed.add(kind, pos, intensity=power)
-    imgui.same_line()
+    same_line_if_fits("Delete light")
     imgui.begin_disabled(state.lighting.selected_light < 0)
     if imgui.button("Delete light") and state.lighting.selected_light >= 0:
         ed.delete(state.lighting.selected_light)
@@ -419,9 +454,11 @@ def lighting_panel(state: AppState) -> None:
         imgui.text_colored(DIM, "turn the day cycle off to edit the lights")
 
     imgui.separator()
+    rl = state.lighting.relighter
     if state.lighting.relighting:
-        step, steps = state.lighting.relight_step
-        imgui.text_colored(DIM, f"re-solving... (step {step + 1 if step < steps else 1} of {max(steps, 1)})")
+        relight_progress(rl)
+    elif rl is not None and getattr(rl, "cancelled", False):
+        imgui.text_colored(RED, "re-solve cancelled: the view keeps the last lighting solved")
     elif state.lighting.relights:
         step, steps = state.lighting.relight_step
         imgui.text_colored(
@@ -450,6 +487,22 @@ def lighting_panel(state: AppState) -> None:
     )
 
     day_cycle_panel(state)
+
+
+def relight_progress(rl) -> None:
+    """The re-solve under way: a bar with the step and the time left, and Cancel."""
+    f = float(getattr(rl, "fraction", 0.0))
+    eta = getattr(rl, "eta", None)
+    step = int(getattr(rl, "step", 0))
+    left = f"{_seconds(eta)} left" if eta is not None else "measuring..."
+    _bar(f, f"re-solving: step {max(step, 1)}  {100 * f:.0f} %  {left}")
+    if hasattr(rl, "cancel"):
+        if imgui.button("Cancel##relight"):
+            rl.cancel()
+        _help(
+            "Stop the re-solve; the view keeps the last lighting solved\n"
+            "(a coarse step, or from before the edit)."
+        )
 
 
 def day_cycle_panel(state: AppState) -> None:
@@ -484,6 +537,10 @@ def day_cycle_panel(state: AppState) -> None:
     if changed:
         state.lighting.day_time = float(min(max(v, 0.0), 1.0))
     imgui.text(state.lighting.day_label() or " ")
+    sun = sun_label(state)
+    if sun:
+        imgui.text(sun)
+        _help("Where the sun stands at this time (the compass in the view's corner points to it).")
     keys = "  ".join(f"{n} {t:.2f}" for n, t in zip(sset.names, sset.times, strict=True))
     imgui.text_colored(DIM, "keys: " + keys)
     mem = state.model.memory
@@ -576,7 +633,7 @@ def poll_dialogs(state: AppState) -> None:
             state.requests.export = res if res.lower().endswith(".glb") else res + ".glb"
 
 
-# -- menus, errors, overlay ---------------------------------------------------------------------------
+# -- menus, errors, the HUD's lines ------------------------------------------------------------------------
 def menus(state: AppState) -> None:
     native = has_native_dialogs()
     if imgui.begin_menu("File"):
@@ -654,53 +711,14 @@ def error_window(state: AppState) -> None:
         state.messages.clear_error()
 
 
-def view_overlay(state: AppState) -> None:
-    """Labels and the split divider over the 3D view (imgui background draw list, no GL)."""
-    x, y, w, h = state.view.rect
-    if w <= 0 or h <= 0:
-        return
-    dl = imgui.get_background_draw_list()
-    white = imgui.get_color_u32(ImVec4(1, 1, 1, 0.9))
-    shadow = imgui.get_color_u32(ImVec4(0, 0, 0, 0.7))
-
-    def label(px: float, text: str) -> None:
-        dl.add_text(ImVec2(px + 9, y + 9), shadow, text)
-        dl.add_text(ImVec2(px + 8, y + 8), white, text)
-
-    if not state.model.loaded:
-        job = state.jobs.open_job
-        label(x, f"opening {Path(job.path).name}: {job.message}" if job and not job.done else "nothing open")
-        return
-    shown = state.view.mode
-    if state.view.mode == "split":
-        sx = x + state.view.split * w
-        col = imgui.get_color_u32(ImVec4(1.0, 0.85, 0.2, 1.0 if state.view.dragging_split else 0.8))
-        dl.add_line(ImVec2(sx, y), ImVec2(sx, y + h), col, 3.0 if state.view.dragging_split else 2.0)
-        dl.add_circle_filled(ImVec2(sx, y + h * 0.5), 7.0, col)
-        label(x, "Mesh")
-        label(sx, "IAT")
-    else:
-        label(
-            x, MODE_LABELS.get(shown, shown) + (f"  x{state.view.diff_gain:.0f}" if shown == "diff" else "")
-        )
-    _light_markers(state, dl)
-    hud = hud_lines(state)
-    for k, line in enumerate(hud):
-        yy = y + h - 10 - 16 * (len(hud) - k)
-        dl.add_text(ImVec2(x + 9, yy + 1), shadow, line)
-        dl.add_text(ImVec2(x + 8, yy), white, line)
-    if state.paths.recorder is not None:
-        dl.add_text(ImVec2(x + w - 60, y + 8), imgui.get_color_u32(RED), "REC")
-    if state.paths.player is not None:
-        dl.add_text(ImVec2(x + w - 60, y + 8), white, "PLAY")
-
-
 def hud_lines(state: AppState) -> list[str]:
     """Text drawn at the bottom of the view: the day-cycle moment and its texture memory against
     the budget (N states cost N texture layers), the re-solve in progress."""
     lines = []
     if state.lighting.day_cycle and state.lighting.solution_set is not None:
         lines.append(f"day {state.lighting.day_time:.2f}: {state.lighting.day_label()}")
+        if sun_label(state):
+            lines.append(sun_label(state))
         mem = state.model.memory
         if mem:
             n = int(mem.get("solutions", 1))
@@ -711,30 +729,3 @@ def hud_lines(state: AppState) -> list[str]:
     if state.lighting.relighting:
         lines.append("re-solving the lighting...")
     return lines
-
-
-def _light_markers(state: AppState, dl) -> None:
-    """A circle per light (filled for the selected one), its name, and a spot light's direction."""
-    from viewer.picking import project_points
-
-    ed, cam = state.lighting.editor, state.view.camera
-    if not state.lighting.show_lights or ed is None or cam is None or not ed.lights:
-        return
-    lights = ed.lights
-    px, ok = project_points(cam, [lt.position for lt in lights], state.view.rect)
-    lo, hi = ed.scene.bounds
-    reach = 0.06 * float(np.linalg.norm(hi - lo))
-    tips, tok = project_points(cam, [lt.position + reach * lt.direction for lt in lights], state.view.rect)
-    for k, lt in enumerate(lights):
-        if not ok[k]:
-            continue
-        c = np.clip(np.asarray(lt.color, dtype=np.float64) / max(float(np.max(lt.color)), 1e-9), 0.0, 1.0)
-        col = imgui.get_color_u32(ImVec4(float(c[0]), float(c[1]), float(c[2]), 1.0))
-        sel = k == state.lighting.selected_light
-        edge = imgui.get_color_u32(ImVec4(1.0, 0.85, 0.2, 1.0) if sel else ImVec4(0, 0, 0, 0.9))
-        p = ImVec2(float(px[k, 0]), float(px[k, 1]))
-        if lt.kind == "spot" and tok[k]:
-            dl.add_line(p, ImVec2(float(tips[k, 0]), float(tips[k, 1])), edge, 2.0)
-        dl.add_circle_filled(p, 7.0, col)
-        dl.add_circle(p, 8.0, edge, 0, 3.0 if k == state.lighting.selected_light else 1.5)
-        dl.add_text(ImVec2(p.x + 10, p.y - 7), edge if k == state.lighting.selected_light else col, lt.name)

@@ -298,15 +298,49 @@ class Messages:
 
 @dataclass
 class FrameStats:
-    """Frame times (a ring of :data:`FRAME_HISTORY` ms values) and the renderer's last counts."""
+    """Frame times (rings of :data:`FRAME_HISTORY` values) and the renderer's last counts.
+
+    frame_ms : swap-to-swap intervals; work_ms : the part of each spent on the frame (from the start
+    of the frame to its swap: what an interval would be without idling); idle : hello_imgui was
+    idling then (the interval is mostly the idle wait, not a frame's cost)
+    """
 
     frame_ms: np.ndarray = field(default_factory=lambda: np.zeros(FRAME_HISTORY, np.float32))
+    work_ms: np.ndarray = field(default_factory=lambda: np.zeros(FRAME_HISTORY, np.float32))
+    idle: np.ndarray = field(default_factory=lambda: np.zeros(FRAME_HISTORY, bool))
     frames: int = 0
     render: dict = field(default_factory=dict)
+    view_redraws: int = 0  # frames that drew the 3D view (viewer.view3d)
+    view_copies: int = 0  # frames that copied the last image of it
 
-    def add_frame_time(self, ms: float) -> None:
-        self.frame_ms[self.frames % FRAME_HISTORY] = ms
+    def add_frame_time(self, ms: float, work_ms: float | None = None, idle: bool = False) -> None:
+        k = self.frames % FRAME_HISTORY
+        self.frame_ms[k] = ms
+        self.work_ms[k] = ms if work_ms is None else work_ms
+        self.idle[k] = bool(idle)
         self.frames += 1
+
+    def _recent(self, ring: np.ndarray, n: int = 60) -> np.ndarray:
+        m = min(self.frames, FRAME_HISTORY)
+        idx = (self.frames - 1 - np.arange(min(n, m))) % FRAME_HISTORY
+        return ring[idx[::-1]]
+
+    @property
+    def idling(self) -> bool:
+        """The last frame was an idle one (nothing moved; hello_imgui waits between frames)."""
+        return bool(self.frames and self.idle[(self.frames - 1) % FRAME_HISTORY])
+
+    @property
+    def idle_fps(self) -> float:
+        """The rate of the recent idle frames (what an untouched window runs at)."""
+        f = self._recent(self.frame_ms)[self._recent(self.idle)]
+        return 1000.0 / float(f.mean()) if f.size and f.mean() > 0 else 0.0
+
+    @property
+    def work_fps(self) -> float:
+        """Frames per second the recent frames' own work allows (idle waits left out)."""
+        f = self._recent(self.work_ms)
+        return 1000.0 / float(f.mean()) if f.size and f.mean() > 0 else 0.0
 
     def frame_history(self) -> np.ndarray:
         """(n,) float32 frame times in ms, oldest first (n <= FRAME_HISTORY)."""
@@ -318,8 +352,9 @@ class FrameStats:
 
     @property
     def fps(self) -> float:
-        h = self.frame_history()[-60:]
-        m = float(np.mean(h)) if h.size else 0.0
+        """The frame rate of the recent frames that did not idle (0 when all idled)."""
+        f = self._recent(self.frame_ms)[~self._recent(self.idle)]
+        m = float(np.mean(f)) if f.size else 0.0
         return 1000.0 / m if m > 0 else 0.0
 
 

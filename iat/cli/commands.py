@@ -495,7 +495,14 @@ def cmd_view(args) -> int:
         raise RenderError(
             "no display (DISPLAY is not set): run under xvfb-run or on a desktop, or use 'iat render'"
         )
-    return _app("view")(args.input)
+    if args.play is None:
+        return _app("view")(args.input, size=parse_size(args.size))
+    if args.frames < 1:
+        raise OptionError(f"--frames must be >= 1, got {args.frames}")
+    modes = tuple(m.strip() for m in args.modes.split(",") if m.strip())
+    size = parse_size(args.size)
+    play = {"play": args.play, "frames": args.frames, "modes": modes, "as_json": args.json}
+    return _app("view")(args.input, size=size, **play)
 
 
 def _emit(args, data: dict) -> None:
@@ -686,6 +693,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("view", help="the walkthrough viewer")
     s.add_argument("input", nargs="?", metavar="SOL|MODEL")
+    s.add_argument("--size", default="1280x800", help="window size WxH")
+    s.add_argument("--play", metavar="NAME", help="play camera path NAME (or a .paths.json file), then exit")
+    s.add_argument("--frames", type=int, default=120, help="frames of the --play playback")
+    s.add_argument("--modes", default="mesh,iat", help="modes --play measures, comma-separated")
+    s.add_argument("--json", action="store_true", help="--play statistics as JSON")
     s.set_defaults(func=cmd_view)
     return p
 

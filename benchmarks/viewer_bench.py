@@ -1,0 +1,379 @@
+"""The viewer against the offscreen benchmark, in one run (issue 20).
+
+    xvfb-run -a -s "-screen 0 1280x800x24" .venv/bin/python benchmarks/viewer_bench.py [--frames 120]
+
+What it measures, each in its own process (Mesa aborts when a window context and an EGL context
+share one), rounds interleaved so that the load of a shared machine hits all alike:
+
+- **viewer**: ``iat view SOLUTION --play default --frames N --json`` on the house (the real app,
+  1280x800 window, panels docked, idling off): frame time = swap to swap, per mode;
+- **offscreen**: what ``iat bench`` times (:class:`iat.tools.bench.FrameTimer`: ``Renderer.draw``
+  into an RGBA8 framebuffer, ``ctx.finish()`` per frame, EGL) over the same path
+  (:func:`iat.tools.bench.interpolate_path` of the same poses) at the viewer's viewport size, with
+  the viewer's bake policy;
+- **empty app**: the viewer with nothing open, and a bare imgui-bundle window (one text line), at
+  1280x800, each with the window's multisampling off (the viewer's default now) and at
+  hello_imgui's default of 8 samples;
+- **profile**: the viewer's frame in phases, ``ctx.finish()`` at each boundary (so each phase's GL
+  work is counted in it; the sum exceeds an unprofiled frame): panels and app logic (Python),
+  3D view, imgui's draw, buffer swap; playing the path in IAT mode, and with nothing moving.
+
+Also the process CPU time per frame (every thread, llvmpipe's rasteriser threads included): on a
+machine shared with other work, wall-clock rates show the load, CPU time the work.
+
+The house is solved once (cached, content-keyed) and the viewer opens that solution file, so a
+solver change made meanwhile does not start a new solve in the middle of the run.
+Writes ``benchmarks/viewer_bench.json``; prints a Markdown summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+HOUSE = ROOT / "sample_models" / "house.glb"
+OUT = ROOT / "benchmarks" / "viewer_bench.json"
+WINDOW = (1280, 800)
+
+
+def cpu_seconds() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return float(r.ru_utime + r.ru_stime)
+
+
+def child(args: list[str], timeout: float = 1800.0) -> dict:
+    """Run this script in ``--child`` mode (or a command) and parse the JSON it prints last."""
+    r = subprocess.run(args, capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    if r.returncode != 0:
+        raise RuntimeError(
+            f"{' '.join(args)} failed ({r.returncode}):\n{r.stdout[-2000:]}\n{r.stderr[-3000:]}"
+        )
+    out = r.stdout
+    return json.loads(out[out.index("{") :])
+
+
+# -- children ------------------------------------------------------------------------------------------
+def run_offscreen(solution: str, frames: int, size: tuple[int, int], rounds: int) -> dict:
+    """iat bench's frame timing of the solution's default path at ``size``, mesh and IAT."""
+    import moderngl
+
+    from iat.radiosity.inputs import open_solution
+    from iat.render.renderer import Renderer
+    from iat.tools.bench import FrameTimer, interpolate_path, path_poses
+    from viewer.state import AppState
+
+    scene, sol = open_solution(Path(solution))
+    from iat.bake.baker import Baker
+
+    baked = Baker(sol, scene).bake(AppState().tuning.policy())
+    ctx = moderngl.create_standalone_context(backend="egl")
+    r = Renderer(ctx)
+    r.set_scene(scene)
+    r.set_solution(sol)
+    r.set_baked(baked)
+    cams = interpolate_path(path_poses(scene), frames)
+    timer = FrameTimer(r, size)
+    out: dict = {"size": list(size), "frames": frames, "gl_renderer": ctx.info.get("GL_RENDERER", "")}
+    try:
+        for m in ("mesh", "iat"):
+            timer.run(cams[:3], m)
+        for m in ("mesh", "iat"):
+            walls, cpus = [], []
+            for _ in range(rounds):
+                c0 = cpu_seconds()
+                walls.append(timer.run(cams, m))
+                cpus.append(cpu_seconds() - c0)
+            k = int(np.argmin(walls))
+            out[m] = {
+                "fps": frames / walls[k],
+                "mean_ms": 1000.0 * walls[k] / frames,
+                "cpu_ms": 1000.0 * cpus[k] / frames,
+                "rounds_s": walls,
+            }
+    finally:
+        timer.release()
+        r.release()
+    return out
+
+
+def run_window(kind: str, frames: int, msaa: int) -> dict:
+    """Frame times of an empty window: ``kind`` "app" (the viewer, nothing open) or "bare"."""
+    from imgui_bundle import hello_imgui, imgui, immapp
+
+    times, cpus, last = [], [], [None, None]
+    warm = 10
+
+    def after_swap(extra=None):
+        now, c = time.perf_counter(), cpu_seconds()
+        if last[0] is not None:
+            times.append((now - last[0]) * 1000.0)
+            cpus.append((c - last[1]) * 1000.0)
+        last[:] = [now, c]
+        if extra is not None:
+            extra()
+        if len(times) >= frames + warm:
+            hello_imgui.get_runner_params().app_shall_exit = True
+
+    if kind == "bare":
+        rp = hello_imgui.RunnerParams()
+        rp.app_window_params.window_geometry.size = WINDOW
+        rp.ini_disable = True  # no imgui.ini left in the working folder
+        rp.fps_idling.enable_idling = False
+        rp.fps_idling.vsync_to_monitor = False
+        rp.renderer_backend_options.open_gl_options.anti_aliasing_samples = msaa
+        rp.callbacks.show_gui = lambda: imgui.text("hello")
+        rp.callbacks.after_swap = after_swap
+        immapp.run(rp, immapp.AddOnsParams(with_implot=True))
+    else:
+        from viewer.app import ViewerApp
+
+        app = ViewerApp(None, size=WINDOW, idle=False, msaa=msaa)
+        rp = app.runner_params()
+        own = rp.callbacks.after_swap
+        rp.callbacks.after_swap = lambda: after_swap(own)
+        immapp.run(rp, app.addons())
+    t, c = np.array(times[warm:]), np.array(cpus[warm:])
+    return {
+        "kind": kind,
+        "msaa": msaa,
+        "frames": int(t.size),
+        "mean_ms": float(t.mean()),
+        "p95_ms": float(np.percentile(t, 95)),
+        "fps": 1000.0 / float(t.mean()),
+        "cpu_ms": float(c.mean()),
+    }
+
+
+def run_profile(solution: str | None, frames: int) -> dict:
+    """The viewer's frame in phases (``ctx.finish()`` at each boundary): playing the default path in
+    IAT mode (``moving``), then the same number of frames with nothing moving (``still``)."""
+    from imgui_bundle import hello_imgui
+
+    from viewer.app import ViewerApp
+
+    st = {"stage": "open", "n": 0}
+    rows: dict[str, list[dict]] = {"moving": [], "still": []}
+    cur: dict[str, float] = {}
+    app = None
+
+    def mark(name: str) -> None:
+        if app is not None and app.ctx is not None:
+            app.ctx.finish()
+        cur[name] = time.perf_counter()
+
+    def hook(a) -> None:
+        s = a.state
+        if st["stage"] == "open":
+            if solution is None or (s.model.baked is not None and not s.jobs.opening and not s.jobs.rebaking):
+                s.view.mode = "iat"
+                st["stage"], st["n"] = "moving", 0
+                if solution is not None and "default" in s.paths.named:
+                    s.paths.playback_frames = 10**6
+                    s.start_playback("default", frames=frames + 5)
+            return
+        st["n"] += 1
+        if st["stage"] == "moving" and st["n"] > frames:
+            s.stop_playback()
+            st["stage"], st["n"] = "still", 0
+        elif st["stage"] == "still" and st["n"] > frames:
+            st["stage"] = "done"
+            hello_imgui.get_runner_params().app_shall_exit = True
+
+    app = ViewerApp(solution, size=WINDOW, idle=False, frame_hook=hook)
+    rp = app.runner_params()
+    cb = rp.callbacks
+    draw = cb.custom_background  # the app's own callbacks, wrapped in phase marks
+
+    def background() -> None:
+        mark("view0")
+        draw()
+        mark("view1")
+
+    def after_swap(own) -> None:
+        mark("end")
+        if st["stage"] in rows and st["n"] > 5 and len(cur) == 6:
+            rows[st["stage"]].append(dict(cur))
+        own()
+
+    cb.pre_new_frame = lambda: mark("start")
+    cb.custom_background = background
+    cb.before_imgui_render = lambda: mark("imgui")
+    cb.before_swap = lambda: mark("swap")
+    own = cb.after_swap
+    cb.after_swap = lambda: after_swap(own)
+    from imgui_bundle import immapp
+
+    immapp.run(rp, app.addons())
+    phases = {
+        "panels_and_logic": ("start", "view0"),
+        "view_3d": ("view0", "view1"),
+        "imgui_prepare": ("view1", "imgui"),
+        "imgui_draw": ("imgui", "swap"),
+        "swap": ("swap", "end"),
+    }
+    out = {}
+    for stage, rs in rows.items():
+        out[stage] = {
+            k: float(np.mean([r[b] - r[a] for r in rs]) * 1000.0) if rs else None
+            for k, (a, b) in phases.items()
+        }
+        out[stage]["frames"] = len(rs)
+    out["redraws"], out["blits"] = app.view3d.redraws, app.view3d.blits
+    return out
+
+
+# -- the run -------------------------------------------------------------------------------------------
+def solve_house(cache: Path) -> Path:
+    """The house's solution (solver defaults, cached), written as ``cache/house.npz``."""
+    from iat.radiosity.cache import cached_solve
+
+    _, sol, info = cached_solve(HOUSE, None, cache)
+    out = cache / "house.npz"
+    sol.save(out)
+    print(f"house: {'cached' if info['cached'] else 'solved'} ({info['solve_s']:.0f} s)", file=sys.stderr)
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--frames", type=int, default=120)
+    p.add_argument("--rounds", type=int, default=2)
+    p.add_argument("--cache", default=str(ROOT / "out" / "viewer_bench"))
+    p.add_argument("--child", choices=["offscreen", "app", "bare", "profile"])
+    p.add_argument("--solution")
+    p.add_argument("--size", default="698x779")
+    p.add_argument("--msaa", type=int, default=0)
+    a = p.parse_args(argv)
+    if a.child:
+        if a.child == "offscreen":
+            w, h = (int(v) for v in a.size.split("x"))
+            res = run_offscreen(a.solution, a.frames, (w, h), a.rounds)
+        elif a.child == "profile":
+            res = run_profile(a.solution, a.frames)
+        else:
+            res = run_window(a.child, a.frames, a.msaa)
+        print(json.dumps(res))
+        return 0
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        print("run under xvfb-run -a -s '-screen 0 1280x800x24'", file=sys.stderr)
+        return 2
+    cache = Path(a.cache)
+    cache.mkdir(parents=True, exist_ok=True)
+    sol = Path(a.solution) if a.solution else solve_house(cache)  # --solution: a house solution made earlier
+    me = [sys.executable, str(Path(__file__).resolve())]
+    iat = [str(Path(sys.executable).with_name("iat"))]
+    result: dict = {
+        "machine": {
+            "cpus": os.cpu_count(),
+            "platform": platform.platform(),
+            "loadavg_start": list(os.getloadavg()),
+        },
+        "frames": a.frames,
+        "window": list(WINDOW),
+        "rounds": [],
+    }
+    for k in range(a.rounds):
+        rnd: dict = {}
+        rnd["viewer"] = child(
+            iat + ["view", str(sol), "--play", "default", "--frames", str(a.frames), "--json"]
+        )
+        vw, vh = rnd["viewer"]["viewport"]
+        rnd["offscreen"] = child(
+            me
+            + [
+                "--child",
+                "offscreen",
+                "--solution",
+                str(sol),
+                "--frames",
+                str(a.frames),
+                "--size",
+                f"{vw}x{vh}",
+            ]
+        )
+        for kind in ("app", "bare"):
+            for msaa in (0, 8):
+                rnd[f"{kind}_msaa{msaa}"] = child(
+                    me + ["--child", kind, "--frames", str(a.frames), "--msaa", str(msaa)]
+                )
+        rnd["loadavg"] = list(os.getloadavg())
+        v, o = rnd["viewer"]["modes"], rnd["offscreen"]
+        rnd["ratio_fps"] = {m: v[m]["fps"] / o[m]["fps"] for m in ("mesh", "iat")}
+        rnd["ratio_cpu"] = {m: o[m]["cpu_ms"] / v[m]["cpu_ms"] for m in ("mesh", "iat")}
+        result["rounds"].append(rnd)
+        print(
+            f"round {k + 1}: {json.dumps({'fps': rnd['ratio_fps'], 'cpu': rnd['ratio_cpu']})}",
+            file=sys.stderr,
+        )
+    result["profile_house"] = child(me + ["--child", "profile", "--solution", str(sol), "--frames", "60"])
+    result["profile_empty"] = child(me + ["--child", "profile", "--frames", "60"])
+    result["machine"]["loadavg_end"] = list(os.getloadavg())
+    OUT.write_text(json.dumps(result, indent=1))
+    print(summary(result))
+    return 0
+
+
+def summary(res: dict) -> str:
+    """Markdown tables of a run."""
+    lines = [
+        f"{res['frames']} frames of the house's default path; window {res['window'][0]}x{res['window'][1]}; "
+        f"load average {res['machine']['loadavg_start'][0]:.1f} at the start, "
+        f"{res['machine']['loadavg_end'][0]:.1f} at the end ({res['machine']['cpus']} cores).",
+        "",
+        "| round | viewport | mode | viewer fps | offscreen fps | ratio | viewer CPU ms/frame | offscreen CPU"
+        " ms/frame | CPU ratio |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for k, r in enumerate(res["rounds"]):
+        vw, vh = r["viewer"]["viewport"]
+        for m in ("mesh", "iat"):
+            v, o = r["viewer"]["modes"][m], r["offscreen"][m]
+            lines.append(
+                f"| {k + 1} | {vw}x{vh} | {m} | {v['fps']:.1f} | {o['fps']:.1f} | {r['ratio_fps'][m]:.2f} | "
+                f"{v['cpu_ms']:.1f} | {o['cpu_ms']:.1f} | {r['ratio_cpu'][m]:.2f} |"
+            )
+    lines += [
+        "",
+        "| round | window | MSAA | fps | mean ms | p95 ms | CPU ms/frame |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for k, r in enumerate(res["rounds"]):
+        for kind in ("app", "bare"):
+            for msaa in (0, 8):
+                e = r[f"{kind}_msaa{msaa}"]
+                name = "viewer, nothing open" if kind == "app" else "bare imgui-bundle"
+                lines.append(
+                    f"| {k + 1} | {name} | {msaa} | {e['fps']:.1f} | {e['mean_ms']:.1f} | {e['p95_ms']:.1f} |"
+                    f" {e['cpu_ms']:.1f} |"
+                )
+    lines += [
+        "",
+        "| profile (ms, ctx.finish() per phase) | panels + logic | 3D view | imgui prepare | imgui draw"
+        " | swap | redraws / blits |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for name in ("profile_house", "profile_empty"):
+        pr = res[name]
+        for stage in ("moving", "still"):
+            ph = pr[stage]
+            if not ph["frames"]:
+                continue
+            vals = " | ".join(
+                f"{ph[k]:.1f}" for k in ("panels_and_logic", "view_3d", "imgui_prepare", "imgui_draw", "swap")
+            )
+            lines.append(f"| {name.split('_')[1]} {stage} | {vals} | {pr['redraws']} / {pr['blits']} |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
