@@ -1,7 +1,8 @@
 # ruff: noqa: E501
 """Solver benchmarks (issue 4): accuracy per element, ray throughput, the Cornell box goal.
 
-    .venv/bin/python benchmarks/solver_bench.py [adaptive] [shadow] [rays] [cornell] [--models a,b]
+    .venv/bin/python benchmarks/solver_bench.py [adaptive] [shadow] [rays] [cornell] [speed]
+        [--models a,b] [--before DIR]
 
 writes ``benchmarks/solver.json`` (merged with what is there) and ``benchmarks/solver.md``.
 
@@ -32,12 +33,18 @@ writes ``benchmarks/solver.json`` (merged with what is there) and ``benchmarks/s
   comparison bare embreex on random rays (origins on the patches, cosine directions, tfar the
   scene diagonal: longer than the solver's shadow rays, so slower).
 * **cornell** -- the Cornell box at the defaults: time and the error of ``test_reference_compare``.
+* **speed** -- solve time before / after a change (issue 18: the compiled kernels): default solves
+  of the Cornell box and the house (or ``--models``) with an old ``iat`` tree at ``--before``
+  (default ``/tmp/before``, made by ``git archive HEAD iat | tar -x -C /tmp/before``) and with
+  this one, in alternating processes (best wall and CPU seconds of 2), the radiance difference,
+  and the kernels' cold compile time.
 """
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 import time
 from dataclasses import replace
@@ -46,7 +53,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+# IAT_BENCH_TREE: another tree's ``iat`` (e.g. the ``rays`` figures before a change)
+sys.path.insert(0, os.environ.get("IAT_BENCH_TREE", str(ROOT)))
 
 from iat.io.load import load_scene  # noqa: E402
 from iat.measure.metrics import reference_errors, smooth_lit_mask  # noqa: E402
@@ -313,7 +321,7 @@ def bare_rays_per_s(scene, n: int = 4 * CHUNK, rounds: int = 3) -> float:
     best of ``rounds``: the ceiling of the solver's tracing."""
     o, d, t = random_rays(scene, n)
     best = 0.0
-    with Visibility(scene.corner_positions, scene.patch_is_quad) as vis:
+    with Visibility.of_scene(scene) as vis:
         vis.occluded(o[:CHUNK], d[:CHUNK], t[:CHUNK])  # warm up (BVH build, threads)
         for _ in range(rounds):
             t0 = time.perf_counter()
@@ -359,7 +367,7 @@ def bare_replay_rays_per_s(scene, batches, rounds: int = 3) -> float:
 
     n = sum(len(b[0]) for b in batches)
     with (
-        Visibility(scene.corner_positions, scene.patch_is_quad) as vis,
+        Visibility.of_scene(scene) as vis,
         ThreadPoolExecutor(vis.threads) as pool,
     ):
         jobs = []
@@ -404,6 +412,89 @@ def run_rays(models=MODELS) -> dict:
             "timings": {k: st.get(k) for k in ("meshing_s", "shooting_s", "refining_s")},
         }
         print(name, out[name], flush=True)
+    return out
+
+
+#: what one subprocess of ``speed`` runs: a default solve of a sample model with the ``iat`` on
+#: its PYTHONPATH, printing its wall and CPU seconds (all threads), and saving its radiance
+SPEED_CHILD = """
+import json, sys, time
+import numpy as np
+from iat.io.load import load_scene
+from iat.radiosity import SolveOptions, solve
+scene = load_scene(sys.argv[1])
+w, c = time.perf_counter(), time.process_time()
+sol = solve(scene, SolveOptions())
+w, c = time.perf_counter() - w, time.process_time() - c
+assert __import__("iat").__file__.startswith(sys.argv[3]), "iat imported from another tree"
+np.savez(sys.argv[2], key=np.asarray(sol.vert_key), rad=np.asarray(sol.vert_radiance))
+print(json.dumps({"time_s": w, "cpu_s": c, "elements": sol.stats["elements"], "rays": sol.stats["rays"]}))
+"""
+
+
+def _speed_child(tree: Path, model: str, out: Path, env_extra: dict | None = None) -> dict:
+    import os
+    import subprocess
+
+    env = {**os.environ, "PYTHONPATH": str(tree), **(env_extra or {})}
+    path = ROOT / "sample_models" / f"{model}.glb"
+    # run from the output's folder: `python -c` puts the working directory first on sys.path
+    run = subprocess.run(
+        [sys.executable, "-c", SPEED_CHILD, str(path), str(out), str(Path(tree).resolve())],
+        env=env,
+        capture_output=True,
+        text=True,
+        cwd=out.parent,
+    )
+    if run.returncode:
+        raise RuntimeError(f"solve of {model} with {tree} failed:\n{run.stderr[-2000:]}")
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+def run_speed(before: Path, models=("cornell_box", "house"), repeats: int = 2) -> dict:
+    """Solve time before/after (issue 18): default solves of ``models`` with the ``iat`` tree at
+    ``before`` (e.g. ``git archive HEAD iat | tar -x -C /tmp/before``) and with this one, each in
+    its own process, alternating (before, after, before, after, ...) so that both see the same
+    load; best wall and CPU seconds of ``repeats``, and how far the after radiance is from the
+    before one. Also the kernels' cold compile time (an empty numba cache, a small solve, less
+    the same solve with the cache warm)."""
+    import os
+    import tempfile
+
+    tmp = Path(tempfile.mkdtemp(prefix="iat-speed-"))
+    _speed_child(ROOT, "cornell_box", tmp / "warm.npz")  # compile (or load) the kernels first
+    out = {}
+    for name in models:
+        rows = {"before": [], "after": []}
+        for _ in range(repeats):
+            for label, tree in (("before", before), ("after", ROOT)):
+                rows[label].append(_speed_child(tree, name, tmp / f"{name}-{label}.npz"))
+        a, b = np.load(tmp / f"{name}-before.npz"), np.load(tmp / f"{name}-after.npz")
+        same_mesh = a["key"].shape == b["key"].shape and bool(np.all(a["key"] == b["key"]))
+        diff = np.abs(a["rad"].astype(np.float64) - b["rad"]) if same_mesh else None
+        r = {
+            label: {
+                "time_s": min(x["time_s"] for x in v),
+                "cpu_s": min(x["cpu_s"] for x in v),
+                "elements": v[0]["elements"],
+                "rays": v[0]["rays"],
+            }
+            for label, v in rows.items()
+        }
+        r["speedup_wall"] = r["before"]["time_s"] / r["after"]["time_s"]
+        r["speedup_cpu"] = r["before"]["cpu_s"] / r["after"]["cpu_s"]
+        r["same_mesh"] = same_mesh
+        r["max_abs_radiance_diff"] = None if diff is None else float(diff.max())
+        r["max_rel_radiance_diff"] = (
+            None if diff is None else float((diff / np.maximum(np.abs(a["rad"]), 1e-6)).max())
+        )
+        out[name] = r
+        print(name, r, flush=True)
+    with tempfile.TemporaryDirectory() as cold:
+        cold_s = _speed_child(ROOT, "cornell_box", tmp / "cold.npz", {"NUMBA_CACHE_DIR": cold})["time_s"]
+    warm_s = _speed_child(ROOT, "cornell_box", tmp / "warm.npz")["time_s"]
+    out["compile_s"] = cold_s - warm_s
+    out["load"] = round(os.getloadavg()[0], 2)
     return out
 
 
@@ -499,6 +590,26 @@ def format_md(res: dict) -> str:
                 f"{r['rays_per_s_solve'] / 1e6:.2f} M | {r['fraction_solve']:.0%} | {r['bare_random_rays_per_s'] / 1e6:.2f} M |"
             )
         lines.append("")
+    sp = res.get("speed")
+    if sp:
+        lines += [
+            "## Compiled kernels (issue 18): before / after, alternating processes",
+            "",
+            "| model | elements before / after | rays | solve s before | after | speed-up | CPU s before | after | speed-up | max radiance difference |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for name, r in sp.items():
+            if not isinstance(r, dict):
+                continue
+            b, a = r["before"], r["after"]
+            diff = (
+                "-" if r["max_rel_radiance_diff"] is None else f"{r['max_rel_radiance_diff']:.1e} (relative)"
+            )
+            lines.append(
+                f"| {name} | {b['elements']} / {a['elements']} | {a['rays']:,} | {b['time_s']:.1f} | {a['time_s']:.1f} | "
+                f"{r['speedup_wall']:.2f}x | {b['cpu_s']:.1f} | {a['cpu_s']:.1f} | {r['speedup_cpu']:.2f}x | {diff} |"
+            )
+        lines += ["", f"Cold compile of the kernels: {sp['compile_s']:.0f} s (load {sp['load']}).", ""]
     cb = res.get("cornell")
     if cb:
         lines += [
@@ -522,6 +633,11 @@ def main(argv=None) -> None:
         i = argv.index("--models")
         models = tuple(argv[i + 1].split(","))
         del argv[i : i + 2]
+    before = Path("/tmp/before")
+    if "--before" in argv:
+        i = argv.index("--before")
+        before = Path(argv[i + 1])
+        del argv[i : i + 2]
     parts = argv or ["adaptive", "rays", "cornell"]
     res = json.loads(OUT_JSON.read_text()) if OUT_JSON.exists() else {}
     res["meta"] = {
@@ -537,6 +653,8 @@ def main(argv=None) -> None:
         res["adaptive_shadow"] = run_adaptive_surface()
     if "rays" in parts:
         res.setdefault("rays", {}).update(run_rays(models))
+    if "speed" in parts:
+        res["speed"] = run_speed(before, models if models != MODELS else ("cornell_box", "house"))
     OUT_JSON.write_text(json.dumps(res, indent=1))
     OUT_MD.write_text(format_md(res) + "\n")
     print(format_md(res))

@@ -14,6 +14,7 @@ from iat.color import LUMINANCE_WEIGHTS
 from iat.geometry import quadtree as qt
 from iat.geometry.clip import clamp_into, coverage_grid
 from iat.radiosity.formfactor import point_polygon
+from iat.radiosity.kernels import gather_finish, gather_rays, patch_form_factors
 from iat.radiosity.options import (
     CULL_RAYS,
     DIRECT_SAMPLE_FACTOR,
@@ -40,8 +41,6 @@ from iat.radiosity.sampling import (
     luminance_of,
     pattern_side,
     rotated_disk,
-    sample_lattice,
-    weighted_lattice_sums,
 )
 from iat.radiosity.sky import sky_radiance
 from iat.radiosity.visibility import Visibility
@@ -141,6 +140,8 @@ class Context:
         # receiver corners' heights (P, 4) over their own patch centre, for the plane tests
         self._valid_corner = np.arange(4)[None, :] < self.n_corners[:, None]
         self._shooters: dict[int, Shooter] = {}
+        self._patterns: dict[tuple[int, int, int], np.ndarray] = {}
+        self._buffers: tuple[np.ndarray, ...] | None = None
         self._cand: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         # per shooter: rays traced to each receiver patch and how many were unoccluded
         self._vis_rays: dict[int, np.ndarray] = {}
@@ -209,9 +210,16 @@ class Context:
 
     def pattern(self, s: int, m: int, shot: int) -> np.ndarray:
         """(m*m, 2) stratified jittered (u, v) in [0, 1)^2 for patch s (fixed per seed, patch, shot)."""
-        rng = np.random.default_rng([self.opts.seed, int(s), int(shot), int(m)])
-        a, b = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
-        return np.stack([(a.ravel() + rng.random(m * m)) / m, (b.ravel() + rng.random(m * m)) / m], axis=1)
+        key = (int(s), int(m), int(shot))
+        if key not in self._patterns:  # a shot gathers at the mesh and at coarse grids: made once
+            if len(self._patterns) >= 64:
+                self._patterns.clear()
+            rng = np.random.default_rng([self.opts.seed, int(s), int(shot), int(m)])
+            a, b = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
+            self._patterns[key] = np.stack(
+                [(a.ravel() + rng.random(m * m)) / m, (b.ravel() + rng.random(m * m)) / m], axis=1
+            )
+        return self._patterns[key]
 
     def shooter(self, s: int) -> Shooter:
         if s not in self._shooters:
@@ -226,6 +234,18 @@ class Context:
         return self._shooters[s]
 
     # -- kernels --------------------------------------------------------------
+    def _scratch(self, n: int) -> tuple[np.ndarray, ...]:
+        """The gathers' buffers for n samples (:func:`.kernels.gather_rays`), kept between calls."""
+        if self._buffers is None or self._buffers[0].shape[1] < n:
+            n = max(n, 2 * GATHER_BLOCK * 64)
+            self._buffers = (
+                np.empty((6, n)),
+                np.empty((n, 3), dtype=np.float32),
+                np.empty((n, 3), dtype=np.float32),
+                np.empty(n, dtype=np.float32),
+            )
+        return self._buffers
+
     def candidates(self, s: int) -> tuple[np.ndarray, np.ndarray]:
         """(P,) bool ``full, part``: receiver patches that can see the front of patch s, entirely
         in front of its plane (``full``) or straddling it (``part``: test per vertex)."""
@@ -317,20 +337,14 @@ class Context:
             for tri in self.clip_world[self.clip_start[s] : self.clip_start[s + 1]]:
                 f += point_polygon(x, nr, tri)
             return f
-        poly = self.polygon(s)
-        h = np.einsum("kc,nc->nk", poly, nr) - np.einsum("nc,nc->n", x, nr)[:, None]
-        dist = np.linalg.norm(x - self.centre[s], axis=1)
-        far = (dist > FF_FAR * self.radius[s]) & (h > 0).all(axis=1)
-        near = ~far
-        if near.any():
-            f[near] = point_polygon(x[near], nr[near], poly)
-        if far.any():
-            sh = self.shooter(s)
-            (gu, gv), gw = GAUSS_QUAD if sh.is_quad else GAUSS_TRI
-            d0 = sh.origin - x[far]
-            k = sh.kernel(gu, gv, d0, nr[far]) * sh.jacobian(gu, gv)
-            f[far] = k @ gw
-        return f
+        sh = self.shooter(s)
+        ka = sh.kernel_args()
+        (gu, gv), gw = GAUSS_QUAD if sh.is_quad else GAUSS_TRI
+        return patch_form_factors(
+            np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(nr, dtype=np.float64),
+            np.ascontiguousarray(self.polygon(s)), self.centre[s], FF_FAR * float(self.radius[s]),
+            ka["geom"], ka["para"], ka["area"], gu.ravel(), gv.ravel(), gw,
+        )  # fmt: skip
 
     def culled_fraction(self) -> float:
         """Fraction of (shooter, candidate receiver patch) pairs found fully occluded."""
@@ -386,130 +400,54 @@ class Context:
         idx, f = self.form_factors(s, geo, cull, patches)
         if len(idx) == 0:
             return out
-        sh = self.shooter(s)
+        ka = self.shooter(s).kernel_args()
         pat = self.pattern(s, m, shot)
-        n_s = len(pat)
         salt = (int(self.opts.seed) * 1_000_003 + int(s)) * 1_000_003 + int(shot)
-        flat = None if field is None else field.reshape(-1, 3)
-        flat_t = None if field is None else np.ascontiguousarray(flat.T)  # (3, M): 1-D gathers
-        if field is not None:
-            lo, hi = float(flat.min()), float(flat.max())
-            clamp_lo = 0.0 if lo >= 0 else None  # a field of one sign gives results of that sign
-            clamp_hi = 0.0 if hi <= 0 else None
+        has_field = field is not None
+        flat = np.zeros((1, 3)) if field is None else field.astype(np.float64).reshape(-1, 3)
+        nl = 0 if field is None else field.shape[0] - 1
+        mean = np.zeros(3) if field_mean is None else np.ascontiguousarray(field_mean, dtype=np.float64)
+        # a field of one sign gives results of that sign
+        clamp_lo = has_field and float(flat.min()) >= 0
+        clamp_hi = has_field and float(flat.max()) <= 0
         rays_p = np.zeros(self.n_patches)
         seen_p = np.zeros(self.n_patches)
+        origin32 = geo.origin32()
         for a in range(0, len(idx), GATHER_BLOCK):
             ii = idx[a : a + GATHER_BLOCK]
-            fb = f[a : a + GATHER_BLOCK]
+            near = f[a : a + GATHER_BLOCK] >= F_DIRECTION  # direction samples too
+            fb = np.ascontiguousarray(f[a : a + GATHER_BLOCK], dtype=np.float64)
             b = len(ii)
             x, nr = geo.ff[ii], geo.normal[ii]
             rot = hash_uniform(np.zeros(1, dtype=np.int64) if correlated else geo.key[ii], salt, 4)
-            # area samples: stratified (u, v), rotated per receiver (or once for all)
-            ua = (pat[None, :, 0] + rot[:, :1]) % 1.0
-            va = (pat[None, :, 1] + rot[:, 1:2]) % 1.0
-            if not sh.is_quad:  # area-uniform square -> triangle warp
-                su = np.sqrt(ua)
-                ua, va = su * (1 - va), su * va
-            d0 = sh.origin - x  # (b, 3) receiver -> shooter origin
-            ka = sh.kernel(ua, va, d0, nr)  # (b or 1.., S) broadcast to (b, S)
-            ja = sh.jacobian(ua, va)
-            if sh.mask is not None:  # a panel cell: area samples off its surface count for nothing
-                ka = ka * sh.on_surface(ua, va)
-            near = fb >= F_DIRECTION
-            wa = ka / (n_s / ja + n_s * ka * near[:, None] + 1e-300)
-            ua, va = np.broadcast_to(ua, wa.shape), np.broadcast_to(va, wa.shape)
-            # direction samples (near receivers): cosine-distributed about the normal, kept where they hit
-            sub = np.flatnonzero(near)
-            if len(sub):
-                wd, ud, vd = self._direction_samples(sh, pat, rot, sub, x, nr, geo.patch[ii], n_s, correlated)
-                wt = np.concatenate([wa, np.zeros_like(wa)], axis=1)  # (b, 2S)
-                wt[sub, n_s:] = wd
-                uu = np.concatenate([ua, np.zeros_like(wa)], axis=1)
-                vv = np.concatenate([va, np.zeros_like(wa)], axis=1)
-                uu[sub, n_s:], vv[sub, n_s:] = ud, vd
-            else:
-                wt, uu, vv = wa, ua, va
-            wsum = wt.sum(axis=1)
-            bi, si = np.nonzero(wt > 0)
-            if len(bi) == 0:
+            if correlated:  # one pattern for all receivers
+                rot = np.repeat(rot, b, axis=0)
+            rp = geo.patch[ii]
+            tan = self.tangent[rp]
+            # the samples' weights and rays (float32, as embreex takes them: origins and targets
+            # are off the surfaces by at least 32 float32 steps, so the rounding never crosses one)
+            off, wsum, w, u, v, o, d, tfar = gather_rays(
+                pat, rot, x, nr, np.ascontiguousarray(tan[:, 0]), np.ascontiguousarray(tan[:, 1]),
+                near, origin32[ii], ka["geom"], ka["uvc"], ka["poly_n"], ka["poly_o"],
+                ka["tol"], ka["is_quad"], ka["para"], ka["linear_uv"], ka["area"], ka["mask"],
+                ka["has_mask"], ka["t32"], ka["half_eps"], *self._scratch(2 * b * len(pat)),
+            )  # fmt: skip
+            if len(w) == 0:
                 continue
-            lu, lv = uu[bi, si], vv[bi, si]
-            # the rays in float32, as embreex takes them (origins and targets are off the surfaces
-            # by at least 32 float32 steps, so the rounding never crosses one)
-            o = geo.origin32()[ii][bi]
-            dr = sh.target_uv32(lu, lv)
-            dr -= o
-            r = np.sqrt(np.einsum("kc,kc->k", dr, dr))
-            dr /= np.maximum(r, np.float32(1e-30))[:, None]
-            vis = self.vis.visible(o, dr, np.maximum(r - np.float32(0.5 * sh.eps), np.float32(0.0)))
-            rp = geo.patch[ii][bi]
-            rays_p += np.bincount(rp, minlength=self.n_patches)
-            seen_p += np.bincount(rp, weights=vis, minlength=self.n_patches)
-            wraw = wt[bi, si] * vis  # MIS estimate of the visible kernel integral, per sample
-            wvis = np.bincount(bi, weights=wraw, minlength=b)
-            frac = wvis / np.where(wsum > 0, wsum, 1.0)
-            fv = fb * frac  # analytic F x visible fraction
-            if field is None:
-                out[ii] = fv
-            else:
-                nl = field.shape[0] - 1
-                # control variate: the field where the receiver's kernel peaks (its foot on the
-                # shooter) for near receivers, the shooter's mean for far ones
-                fu, fw = sh.foot_uv(x)
-                w_near = np.minimum(1.0, 2.0 * fb)[:, None]
-                cv = w_near * sample_lattice(flat, nl, fu, fw) + (1.0 - w_near) * field_mean  # (b, 3)
-                # sum over samples of (field - cv) * wraw = sum(field * wraw) - cv * sum(wraw)
-                res = weighted_lattice_sums(flat_t, nl, lu, lv, wraw, bi, b) - cv * wvis[:, None]
-                val = fv[:, None] * cv + res
-                if clamp_lo is not None:
-                    val = np.maximum(val, clamp_lo)
-                if clamp_hi is not None:
-                    val = np.minimum(val, clamp_hi)
-                out[ii] = val
+            vis = self.vis.visible(o, d, tfar)
+            val, seen = gather_finish(
+                off, w, vis, u, v, fb, wsum, has_field, flat, nl, x, ka["geom"], ka["uvc"],
+                ka["linear_uv"], ka["is_quad"], ka["para"], mean, clamp_lo, clamp_hi,
+            )  # fmt: skip
+            rays_p += np.bincount(rp, weights=np.diff(off), minlength=self.n_patches)
+            seen_p += np.bincount(rp, weights=seen, minlength=self.n_patches)
+            out[ii] = val if has_field else val[:, 0]
         if s in self._vis_rays:
             self._vis_rays[s] += rays_p
             self._vis_seen[s] += seen_p
         else:
             self._vis_rays[s], self._vis_seen[s] = rays_p, seen_p
         return out
-
-    def _direction_samples(self, sh, pat, rot, sub, x, nr, rpatch, n_s, correlated):
-        """MIS weights (k, S) and lattice parameters of the cosine-direction samples of the
-        receivers ``sub`` (rows of the block) that hit the shooter (weight 0 elsewhere)."""
-        r = rot if correlated else rot[sub]
-        dx, dy = rotated_disk(pat, r[:, 2:3], r[:, 3:4])
-        dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
-        t1, t2 = self.tangent[rpatch[sub], 0], self.tangent[rpatch[sub], 1]
-        xs, ns = x[sub], nr[sub]
-
-        def proj(g):  # w . g for the sample directions w, (k, S)
-            return dx * (t1 @ g)[:, None] + dy * (t2 @ g)[:, None] + dz * (ns @ g)[:, None]
-
-        den = proj(sh.normal)  # < 0: towards the front of the shooter
-        hx = (xs - sh.origin) @ sh.normal  # receiver height over the shooter's plane (> 0)
-        ok = den < -1e-12
-        t = np.where(ok, hx[:, None] / np.where(ok, -den, 1.0), 0.0)
-        if sh.parallelogram:
-            ud = ((xs - sh.origin) @ sh.a1)[:, None] + t * proj(sh.a1)
-            vd = ((xs - sh.origin) @ sh.a2)[:, None] + t * proj(sh.a2)
-            hit = ok & (t > 0) & sh.inside_uv(ud, vd)
-            ud, vd = sh.clip_uv(ud, vd)
-            if sh.mask is not None:
-                hit &= sh.on_surface(ud, vd)
-            jd = sh.area
-        else:
-            w = (
-                dx[..., None] * t1[:, None, :]
-                + dy[..., None] * t2[:, None, :]
-                + dz[..., None] * ns[:, None, :]
-            )
-            yd = xs[:, None, :] + t[..., None] * w
-            hit = ok & (t > 0) & sh.inside(yd)
-            ud, vd = sh.uv(yd)
-            jd = sh.jacobian(ud, vd)
-        kd = np.where(hit, dz * -den / (np.pi * np.maximum(t * t, 1e-300)), 0.0)
-        wd = np.where(hit, kd / (n_s / jd + n_s * kd + 1e-300), 0.0)
-        return wd, np.broadcast_to(ud, wd.shape), np.broadcast_to(vd, wd.shape)
 
     def light_kernel(self, light, geo: ReceiverGeometry) -> tuple[np.ndarray, np.ndarray]:
         """(n,) ``cos * att * vis / r^2`` at the vertices of ``geo`` for a point or spot light (the

@@ -62,17 +62,15 @@ def rotated_disk(pattern: np.ndarray, ru: np.ndarray, rv: np.ndarray) -> tuple[n
     return concentric_disk((pattern[None, :, 0] + ru) % 1.0, (pattern[None, :, 1] + rv) % 1.0)
 
 
-def _cross2(p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    return p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0]
-
-
 class Shooter:
-    """Geometry of one patch as a shooter: kernel terms, inside test, inverse parametrisation,
-    area Jacobian.
+    """Geometry of one patch as a shooter, in the form the gather kernels take it
+    (:meth:`kernel_args`, :mod:`iat.radiosity.kernels`).
 
     Quads: ``p(u, v) = c0 + u e1 + v e2 + u v e3`` (bilinear); triangles: ``c0 + u e1 + v e2``.
     ``area`` is the lattice's whole area (a panel cell's rectangle) and ``mask`` a panel cell's
-    surface coverage (samples off it count for nothing).
+    surface coverage (samples off it count for nothing). Ray targets are ``eps`` off its front
+    and pulled towards its centre by at most ``eps`` (a target at a corner is not inside a
+    neighbouring wall).
     """
 
     def __init__(
@@ -115,141 +113,34 @@ class Shooter:
         self.bn = self.basis @ normal
         cr = np.stack([np.cross(self.e1, self.e2), np.cross(self.e1, self.e3), np.cross(self.e3, self.e2)])
         self.cgram = cr @ cr.T
-
-    def kernel(self, u: np.ndarray, v: np.ndarray, d0: np.ndarray, nr: np.ndarray) -> np.ndarray:
-        """(b, S) ``cos_r cos_s / (pi r^2)`` at points p(u, v) (u, v: (b or 1, S)) seen from
-        receivers with normals nr (b, 3) at ``origin - d0`` (d0: (b, 3))."""
-        g, bn = self.gram, self.bn
-        d0n = np.einsum("bc,bc->b", d0, nr)[:, None]
-        dd = np.einsum("bc,bc->b", d0, d0)[:, None]
-        de = d0 @ self.basis.T  # (b, 3): d0 . e1, d0 . e2, d0 . e3
-        en = nr @ self.basis.T  # (b, 3)
-        h = (d0 @ self.normal)[:, None]
-        dn = d0n + u * en[:, :1] + v * en[:, 1:2]  # d . nr, d = p - x
-        ds = h + u * bn[0] + v * bn[1]  # d . n_s (< 0 in front)
-        r2 = (
-            dd
-            + 2 * u * de[:, :1]
-            + 2 * v * de[:, 1:2]
-            + u * u * g[0, 0]
-            + v * v * g[1, 1]
-            + 2 * u * v * g[0, 1]
-        )
-        if not self.parallelogram:
-            uv = u * v
-            dn = dn + uv * en[:, 2:3]
-            ds = ds + uv * bn[2]
-            r2 = r2 + 2 * uv * de[:, 2:3] + uv * uv * g[2, 2] + 2 * uv * (u * g[0, 2] + v * g[1, 2])
-        return np.maximum(dn, 0.0) * np.maximum(-ds, 0.0) / (np.pi * np.maximum(r2 * r2, 1e-300))
-
-    def on_surface(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """(...) bool: lattice (u, v) is on a panel cell's surface (its mask)."""
-        r = self.mask.shape[0]
-        a = np.clip((np.asarray(u) * r).astype(np.int64), 0, r - 1)
-        b = np.clip((np.asarray(v) * r).astype(np.int64), 0, r - 1)
-        return self.mask[b, a]
-
-    def inside(self, pts: np.ndarray) -> np.ndarray:
-        """(...) bool: points (..., 3) on the plane inside the convex polygon."""
-        ok = np.ones(pts.shape[:-1], dtype=bool)
-        for o, en in zip(self.edge_o, self.edge_n, strict=True):
-            ok &= (pts - o) @ en <= self.tol * np.linalg.norm(en)
-        return ok
-
-    def inside_uv(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """(...) bool: parallelogram / triangle parameters inside the patch."""
-        t = 1e-9
-        ok = (u >= -t) & (v >= -t)
-        return ok & (u + v <= 1 + t) if not self.is_quad else ok & (u <= 1 + t) & (v <= 1 + t)
-
-    def clip_uv(self, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        u, v = np.clip(u, 0.0, 1.0), np.clip(v, 0.0, 1.0)
-        if not self.is_quad:
-            tot = np.maximum(u + v, 1.0)
-            u, v = u / tot, v / tot
-        return u, v
-
-    def foot_uv(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Lattice parameters of the feet of points x (b, 3) on the patch plane (clipped)."""
-        if self.parallelogram:
-            rel = x - self.origin
-            return self.clip_uv(rel @ self.a1, rel @ self.a2)
-        foot = x - ((x - self.origin) @ self.normal)[:, None] * self.normal
-        return self.uv(foot)
-
-    def uv(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Lattice parameters (u, v) of points (..., 3) on the patch plane (clipped to the patch)."""
-        h = (pts - self.origin) @ self.frame.T  # (..., 2)
         e, f, g = self.frame @ self.e1, self.frame @ self.e2, self.frame @ self.e3
-        if not self.is_quad or np.abs(g).max() <= 1e-12 * max(np.abs(e).max(), np.abs(f).max()):
-            det = _cross2(e, f)
-            u, v = _cross2(h, f) / det, _cross2(e, h) / det
-        else:  # inverse bilinear: k2 v^2 + k1 v + k0 = 0
-            k2 = _cross2(g, f)
-            k1 = _cross2(e, f) + _cross2(h, g)
-            k0 = _cross2(h, e)
-            if abs(k2) < 1e-14:
-                v = -k0 / np.where(k1 == 0, 1e-300, k1)
-            else:
-                disc = np.sqrt(np.clip(k1 * k1 - 4 * k0 * k2, 0.0, None))
-                v1, v2 = (-k1 - disc) / (2 * k2), (-k1 + disc) / (2 * k2)
-                v = np.where((v1 >= -1e-9) & (v1 <= 1 + 1e-9), v1, v2)
-            den = e + v[..., None] * g
-            u = np.einsum("...c,...c->...", h - v[..., None] * f, den) / np.maximum(
-                np.einsum("...c,...c->...", den, den), 1e-300
-            )
-        return self.clip_uv(u, v)
-
-    def point(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """(..., 3) points at lattice parameters (u, v)."""
-        u, v = np.asarray(u)[..., None], np.asarray(v)[..., None]
-        p = self.origin + u * self.e1 + v * self.e2
-        return p if self.parallelogram else p + (u * v) * self.e3
-
-    def target(self, pts: np.ndarray) -> np.ndarray:
-        """(..., 3) ray targets for points on the patch: ``eps`` off its front, and pulled
-        towards its centre by at most ``eps`` (so a target at a corner is not inside a
-        neighbouring wall)."""
-        return pts + self.eps * self.normal + self.shrink * (self.centre - pts)
-
-    def target_uv(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """(k, 3) :meth:`target` of the points at lattice parameters u, v (k,)."""
+        linear = not is_quad or np.abs(g).max() <= 1e-12 * max(np.abs(e).max(), np.abs(f).max())
         k = 1.0 - self.shrink
-        base = k * self.origin + self.eps * self.normal + self.shrink * self.centre
-        out = base + np.outer(u, k * self.e1) + np.outer(v, k * self.e2)
-        return out if self.parallelogram else out + np.outer(u * v, k * self.e3)
+        base = k * self.origin + eps * normal + self.shrink * self.centre
+        rows = [self.origin, normal, self.e1, self.e2, self.e3, self.a1, self.a2, *self.frame]
+        self._kargs = {
+            "geom": np.vstack([*rows, self.gram, self.cgram, self.bn]).astype(np.float64),
+            "uvc": np.ascontiguousarray(np.stack([e, f, g]), dtype=np.float64),
+            "linear_uv": bool(linear),
+            "poly_n": np.ascontiguousarray(self.edge_n, dtype=np.float64),
+            "poly_o": np.ascontiguousarray(self.edge_o, dtype=np.float64),
+            "tol": float(self.tol),
+            "is_quad": bool(is_quad),
+            "para": bool(self.parallelogram),
+            "area": float(area),
+            "mask": np.zeros((1, 1), dtype=bool) if mask is None else np.ascontiguousarray(mask, dtype=bool),
+            "has_mask": mask is not None,
+            "t32": np.stack([base, k * self.e1, k * self.e2, k * self.e3]).astype(np.float32),
+            "half_eps": np.float32(0.5 * eps),
+        }
 
-    def target_uv32(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """(k, 3) float32 :meth:`target_uv` (the ray targets as embreex takes them)."""
-        if not hasattr(self, "_t32"):
-            k = 1.0 - self.shrink
-            base = k * self.origin + self.eps * self.normal + self.shrink * self.centre
-            self._t32 = tuple(
-                np.asarray(x, dtype=np.float32) for x in (base, k * self.e1, k * self.e2, k * self.e3)
-            )
-        base, e1, e2, e3 = self._t32
-        u32, v32 = u.astype(np.float32)[:, None], v.astype(np.float32)[:, None]
-        out = u32 * e1
-        out += v32 * e2
-        out += base
-        if not self.parallelogram:
-            out += (u32 * v32) * e3
-        return out
-
-    def jacobian(self, u: np.ndarray, v: np.ndarray) -> np.ndarray | float:
-        """Area per unit (u, v) of the area samples at lattice parameters (u, v)."""
-        if self.parallelogram:  # constant; the square -> triangle warp is area-uniform too
-            return self.area
-        c = self.cgram
-        j2 = (
-            c[0, 0]
-            + u * u * c[1, 1]
-            + v * v * c[2, 2]
-            + 2 * u * c[0, 1]
-            + 2 * v * c[0, 2]
-            + 2 * u * v * c[1, 2]
-        )
-        return np.maximum(np.sqrt(np.maximum(j2, 0.0)), 1e-300)
+    def kernel_args(self) -> dict:
+        """The shooter as :mod:`iat.radiosity.kernels` takes it: ``geom`` (16, 3) and ``uvc``
+        (3, 2) (rows in that module's docstring), the edges ``poly_n, poly_o`` (k, 3), the flags
+        and scalars, the coverage ``mask`` ((1, 1) and ``has_mask`` False when none) and the
+        float32 ray-target terms ``t32`` (4, 3) (``base, k e1, k e2, k e3``, ``k = 1 - shrink``:
+        the targets of points p(u, v)), ``half_eps`` (taken off the rays' length)."""
+        return self._kargs
 
 
 def sample_lattice(flat: np.ndarray, n: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -271,34 +162,6 @@ def sample_lattice(flat: np.ndarray, n: int, u: np.ndarray, v: np.ndarray) -> np
     w10 = np.where(lower, fx, 1.0 - fy)
     w01 = np.where(lower, fy, 1.0 - fx)
     return flat[i_base] * w_base[:, None] + flat[i00 + n + 1] * w10[:, None] + flat[i00 + 1] * w01[:, None]
-
-
-def weighted_lattice_sums(
-    flat_t: np.ndarray, n: int, u: np.ndarray, v: np.ndarray, w: np.ndarray, rows: np.ndarray, n_rows: int
-) -> np.ndarray:
-    """(n_rows, 3) sums over samples grouped by ``rows`` of ``w`` x the lattice field at (u, v):
-    ``bincount(rows, w * sample_lattice(flat, n, u, v)[:, c])`` per channel, from the
-    transposed field ``flat_t`` (3, (N+1)**2), with 1-D gathers and no (k, 3) temporaries."""
-    x, y = u * n, v * n
-    a = np.minimum(x.astype(np.int64), n - 1)
-    b = np.minimum(y.astype(np.int64), n - 1)
-    fx, fy = x - a, y - b
-    i00 = a * (n + 1) + b
-    sxy = fx + fy
-    lower = sxy <= 1.0
-    w_base = np.abs(1.0 - sxy) * w
-    i_base = np.where(lower, i00, i00 + n + 2)
-    w10 = np.where(lower, fx, 1.0 - fy) * w
-    w01 = np.where(lower, fy, 1.0 - fx) * w
-    i10, i01 = i00 + n + 1, i00 + 1
-    out = np.empty((n_rows, 3))
-    for c in range(3):
-        fc = flat_t[c]
-        val = fc.take(i_base) * w_base
-        val += fc.take(i10) * w10
-        val += fc.take(i01) * w01
-        out[:, c] = np.bincount(rows, weights=val, minlength=n_rows)
-    return out
 
 
 class Lattice:

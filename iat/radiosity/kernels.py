@@ -1,0 +1,510 @@
+"""Compiled kernels of the solver's hot loops (numba ``njit``, cached on disk): the point-to-polygon
+form factor, the sample weights of a gather (area and direction samples, balance heuristic) with
+the shadow rays they need, and the gather's visible fraction and field integral after tracing.
+
+Every kernel takes plain C-contiguous arrays (float64 unless stated; lengths in world units,
+radiance in W / (m^2 sr)) and keeps the arithmetic of the numpy code it replaced, in the same
+order (no fastmath), so its results agree with it to rounding. Loops over receivers run in
+parallel (``prange``); each output row is written by one thread in a fixed order, so results do
+not depend on the number of threads (a solve is bit-for-bit the same on a 1-thread worker).
+They release the GIL (a solve on a background thread leaves the viewer's thread running). The
+first call compiles them (tens of seconds; numba caches the result next to this file).
+
+A shooter's geometry travels as ``geom`` (16, 3) float64, rows: 0 origin ``c0``, 1 unit normal,
+2-4 ``e1, e2, e3`` of ``p(u, v) = c0 + u e1 + v e2 + u v e3``, 5-6 the dual basis ``a1, a2``
+(``(y - c0) . a1 = u`` on a parallelogram), 7-8 the in-plane frame, 9-11 the Gram matrix of
+``(e1, e2, e3)``, 12-14 that of ``(e1 x e2, e1 x e3, e3 x e2)``, 15 ``(e1, e2, e3) . normal``;
+and ``uvc`` (3, 2): ``e1, e2, e3`` in the in-plane frame (the inverse bilinear map).
+(:meth:`iat.radiosity.sampling.Shooter.kernel_args` makes them.)
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+# numba's OpenMP workers wait passively between parallel loops: spinning, they would take the
+# cores from embree's threads between two kernels (and from other processes on a shared machine)
+os.environ.setdefault("OMP_WAIT_POLICY", "passive")
+
+from numba import njit, prange  # noqa: E402
+
+_PI = math.pi
+#: receivers per parallel task of the form-factor kernels (one set of scratch arrays each)
+_CHUNK = 256
+
+
+# -- form factors -------------------------------------------------------------------------
+@njit(cache=True, error_model="numpy")
+def _contour_term(ax, ay, az, bx, by, bz, nx, ny, nz):
+    """One edge a -> b of Lambert's contour sum: gamma n . (a x b) / |a x b| (0 for a null edge)."""
+    cx = ay * bz - az * by
+    cy = az * bx - ax * bz
+    cz = ax * by - ay * bx
+    cn = math.sqrt(cx * cx + cy * cy + cz * cz)
+    if not cn > 1e-300:
+        return 0.0
+    gamma = math.atan2(cn, ax * bx + ay * by + az * bz)
+    return gamma * (cx * nx + cy * ny + cz * nz) / cn
+
+
+@njit(cache=True, error_model="numpy")
+def _point_polygon_one(x, nrm, poly, r, d, pts):
+    """Form factor from one receiver (x (3,), unit normal nrm (3,)) to the convex polygon poly
+    (k, 3), clipped to the receiver's front half-space; r (k, 3), d (k,), pts (2k, 3) scratch."""
+    k = poly.shape[0]
+    size = 0.0
+    for i in range(k):
+        for c in range(3):
+            r[i, c] = poly[i, c] - x[c]
+            size = max(size, abs(r[i, c]))
+    front = False
+    full = True
+    for i in range(k):
+        di = r[i, 0] * nrm[0] + r[i, 1] * nrm[1] + r[i, 2] * nrm[2]
+        if abs(di) <= 1e-12 * size:
+            di = 0.0
+        d[i] = di
+        front |= di > 0.0
+        full &= di >= 0.0
+    if not front:  # a polygon lying in (or behind) the tangent plane subtends nothing
+        return 0.0
+    m = 0
+    if full:
+        for i in range(k):
+            for c in range(3):
+                pts[i, c] = r[i, c]
+        m = k
+    else:  # Sutherland-Hodgman on the tangent plane: v_i if inside, the crossing where the side changes
+        for i in range(k):
+            j = (i + 1) % k
+            inside, in_next = d[i] >= 0.0, d[j] >= 0.0
+            if inside:
+                for c in range(3):
+                    pts[m, c] = r[i, c]
+                m += 1
+            if inside != in_next:
+                t = d[i] / (d[i] - d[j])
+                for c in range(3):
+                    pts[m, c] = r[i, c] + t * (r[j, c] - r[i, c])
+                m += 1
+        if m < 3:
+            return 0.0
+    s = 0.0
+    for i in range(m):
+        j = i + 1 if i + 1 < m else 0
+        s += _contour_term(
+            pts[i, 0], pts[i, 1], pts[i, 2], pts[j, 0], pts[j, 1], pts[j, 2], nrm[0], nrm[1], nrm[2]
+        )
+    return min(max(abs(s) / (2.0 * _PI), 0.0), 1.0)
+
+
+@njit(cache=True, parallel=True, nogil=True, error_model="numpy")
+def point_polygon(x, nrm, poly):
+    """(n,) form factors from receivers at x (n, 3) with unit normals nrm (n, 3) to the convex
+    planar polygon poly (k, 3) (either winding), in [0, 1]: Lambert's contour integral over the
+    part of the polygon in front of each receiver's tangent plane."""
+    n, k = x.shape[0], poly.shape[0]
+    out = np.empty(n)
+    for c in prange((n + _CHUNK - 1) // _CHUNK):  # scratch per chunk of receivers
+        r, d, pts = np.empty((k, 3)), np.empty(k), np.empty((2 * k, 3))
+        for i in range(c * _CHUNK, min(n, (c + 1) * _CHUNK)):
+            out[i] = _point_polygon_one(x[i], nrm[i], poly, r, d, pts)
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _kernel(u, v, d0n, dd, de0, de1, de2, en0, en1, en2, h, geom, para):
+    """``cos_r cos_s / (pi r^2)`` at p(u, v) from one receiver, from its scalars against the
+    shooter: ``d0 = c0 - x``: d0n = d0 . nr, dd = d0 . d0, de_k = d0 . e_k, en_k = nr . e_k,
+    h = d0 . normal (the order of operations of the numpy code it replaced)."""
+    dn = d0n + u * en0 + v * en1
+    ds = h + u * geom[15, 0] + v * geom[15, 1]
+    r2 = dd + 2 * u * de0 + 2 * v * de1 + u * u * geom[9, 0] + v * v * geom[10, 1] + 2 * u * v * geom[9, 1]
+    if not para:
+        uv = u * v
+        dn = dn + uv * en2
+        ds = ds + uv * geom[15, 2]
+        r2 = r2 + 2 * uv * de2 + uv * uv * geom[11, 2] + 2 * uv * (u * geom[9, 2] + v * geom[10, 2])
+    return max(dn, 0.0) * max(-ds, 0.0) / (_PI * max(r2 * r2, 1e-300))
+
+
+@njit(cache=True, error_model="numpy")
+def _jacobian(u, v, geom, para, area):
+    """Area per unit (u, v) at lattice parameters (u, v)."""
+    if para:
+        return area
+    j2 = (
+        geom[12, 0]
+        + u * u * geom[13, 1]
+        + v * v * geom[14, 2]
+        + 2 * u * geom[12, 1]
+        + 2 * v * geom[12, 2]
+        + 2 * u * v * geom[13, 2]
+    )
+    return max(math.sqrt(max(j2, 0.0)), 1e-300)
+
+
+@njit(cache=True, error_model="numpy")
+def _receiver_scalars(x, nr, geom):
+    """(d0n, dd, de0, de1, de2, en0, en1, en2, h) of a receiver at x with normal nr."""
+    d0x, d0y, d0z = geom[0, 0] - x[0], geom[0, 1] - x[1], geom[0, 2] - x[2]
+    d0n = d0x * nr[0] + d0y * nr[1] + d0z * nr[2]
+    dd = d0x * d0x + d0y * d0y + d0z * d0z
+    de0 = d0x * geom[2, 0] + d0y * geom[2, 1] + d0z * geom[2, 2]
+    de1 = d0x * geom[3, 0] + d0y * geom[3, 1] + d0z * geom[3, 2]
+    de2 = d0x * geom[4, 0] + d0y * geom[4, 1] + d0z * geom[4, 2]
+    en0 = nr[0] * geom[2, 0] + nr[1] * geom[2, 1] + nr[2] * geom[2, 2]
+    en1 = nr[0] * geom[3, 0] + nr[1] * geom[3, 1] + nr[2] * geom[3, 2]
+    en2 = nr[0] * geom[4, 0] + nr[1] * geom[4, 1] + nr[2] * geom[4, 2]
+    h = d0x * geom[1, 0] + d0y * geom[1, 1] + d0z * geom[1, 2]
+    return d0n, dd, de0, de1, de2, en0, en1, en2, h
+
+
+@njit(cache=True, parallel=True, nogil=True, error_model="numpy")
+def patch_form_factors(x, nr, poly, centre, far, geom, para, area, gu, gv, gw):
+    """(n,) form factors to a shooter (the convex polygon poly (k, 3), centre (3,), geometry geom)
+    from receivers x (n, 3) with unit normals nr (n, 3): for a receiver farther than ``far`` from
+    the centre that sees all of poly in front of it, a Gauss rule over the shooter (nodes gu, gv
+    (G,) in lattice parameters, weights gw (G,) summing to 1 over its lattice); else the analytic
+    contour integral (:func:`point_polygon`)."""
+    n, k = x.shape[0], poly.shape[0]
+    out = np.empty(n)
+    for c in prange((n + _CHUNK - 1) // _CHUNK):  # scratch per chunk of receivers
+        r, d, pts = np.empty((k, 3)), np.empty(k), np.empty((2 * k, 3))
+        for i in range(c * _CHUNK, min(n, (c + 1) * _CHUNK)):
+            out[i] = _patch_form_factor(
+                x[i], nr[i], poly, centre, far, geom, para, area, gu, gv, gw, r, d, pts
+            )
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _patch_form_factor(x, nr, poly, centre, far, geom, para, area, gu, gv, gw, r, d, pts):
+    """One receiver of :func:`patch_form_factors` (r, d, pts: scratch)."""
+    k, g = poly.shape[0], gu.shape[0]
+    xn = x[0] * nr[0] + x[1] * nr[1] + x[2] * nr[2]
+    ahead = True
+    for j in range(k):
+        ahead &= poly[j, 0] * nr[0] + poly[j, 1] * nr[1] + poly[j, 2] * nr[2] - xn > 0
+    dx, dy, dz = x[0] - centre[0], x[1] - centre[1], x[2] - centre[2]
+    if ahead and math.sqrt(dx * dx + dy * dy + dz * dz) > far:
+        d0n, dd, de0, de1, de2, en0, en1, en2, h = _receiver_scalars(x, nr, geom)
+        s = 0.0
+        for j in range(g):
+            kk = _kernel(gu[j], gv[j], d0n, dd, de0, de1, de2, en0, en1, en2, h, geom, para)
+            s += kk * _jacobian(gu[j], gv[j], geom, para, area) * gw[j]
+        return s
+    return _point_polygon_one(x, nr, poly, r, d, pts)
+
+
+# -- the samples of a gather ------------------------------------------------------------------
+@njit(cache=True, error_model="numpy")
+def _clip_uv(u, v, is_quad):
+    u = min(max(u, 0.0), 1.0)
+    v = min(max(v, 0.0), 1.0)
+    if not is_quad:
+        tot = max(u + v, 1.0)
+        u, v = u / tot, v / tot
+    return u, v
+
+
+@njit(cache=True, error_model="numpy")
+def _on_surface(u, v, mask):
+    r = mask.shape[0]
+    a = min(max(np.int64(u * r), 0), r - 1)
+    b = min(max(np.int64(v * r), 0), r - 1)
+    return mask[b, a]
+
+
+@njit(cache=True, error_model="numpy")
+def _inverse_bilinear(px, py, pz, geom, uvc, linear_uv, is_quad):
+    """Lattice parameters (clipped) of a point on the shooter's plane."""
+    rx, ry, rz = px - geom[0, 0], py - geom[0, 1], pz - geom[0, 2]
+    h0 = rx * geom[7, 0] + ry * geom[7, 1] + rz * geom[7, 2]
+    h1 = rx * geom[8, 0] + ry * geom[8, 1] + rz * geom[8, 2]
+    e0, e1 = uvc[0, 0], uvc[0, 1]
+    f0, f1 = uvc[1, 0], uvc[1, 1]
+    g0, g1 = uvc[2, 0], uvc[2, 1]
+    if linear_uv:
+        det = e0 * f1 - e1 * f0
+        u = (h0 * f1 - h1 * f0) / det
+        v = (e0 * h1 - e1 * h0) / det
+    else:
+        k2 = g0 * f1 - g1 * f0
+        k1 = (e0 * f1 - e1 * f0) + (h0 * g1 - h1 * g0)
+        k0 = h0 * e1 - h1 * e0
+        if abs(k2) < 1e-14:
+            v = -k0 / (1e-300 if k1 == 0 else k1)
+        else:
+            disc = math.sqrt(max(k1 * k1 - 4 * k0 * k2, 0.0))
+            v1, v2 = (-k1 - disc) / (2 * k2), (-k1 + disc) / (2 * k2)
+            v = v1 if (v1 >= -1e-9) & (v1 <= 1 + 1e-9) else v2
+        d0, d1 = e0 + v * g0, e1 + v * g1
+        u = ((h0 - v * f0) * d0 + (h1 - v * f1) * d1) / max(d0 * d0 + d1 * d1, 1e-300)
+    return _clip_uv(u, v, is_quad)
+
+
+@njit(cache=True, error_model="numpy")
+def _concentric(u, v):
+    """Shirley-Chiu concentric map of (u, v) in the unit square onto the unit disc."""
+    a, b = 2.0 * u - 1.0, 2.0 * v - 1.0
+    if abs(a) > abs(b):
+        r = a
+        phi = (_PI / 4) * b / (1.0 if a == 0 else a)
+    else:
+        r = b
+        phi = _PI / 2 - (_PI / 4) * a / (1.0 if b == 0 else b)
+    if a == 0 and b == 0:
+        phi = 0.0
+    return r * math.cos(phi), r * math.sin(phi)
+
+
+@njit(cache=True, error_model="numpy")
+def _wrap(p, r):
+    """``(p + r) % 1.0`` for p, r in [0, 1) (exact: p + r - 1 is, for a sum in [1, 2))."""
+    t = p + r
+    return t - 1.0 if t >= 1.0 else t
+
+
+@njit(cache=True, error_model="numpy")
+def _dot3(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True, error_model="numpy")
+def _row_weights(i, pat, rot, x, nr, t1, t2, near, n_s, geom, uvc, poly_n, poly_o, tol,
+                 is_quad, para, linear_uv, area, mask, has_mask, sw, su, sv, base):  # fmt: skip
+    """The samples of weight > 0 of receiver row i (its S area samples, then its S cosine-direction
+    samples when ``near``): their MIS weights sw and lattice parameters su, sv, written from
+    ``base`` on; returns their count and the sum of their weights."""
+    S = pat.shape[0]
+    xi, ni = x[i], nr[i]
+    d0n, dd, de0, de1, de2, en0, en1, en2, h = _receiver_scalars(xi, ni, geom)
+    q, wsum = base, 0.0
+    for j in range(S):  # area samples: the stratified pattern shifted by the row's rotation
+        ua = _wrap(pat[j, 0], rot[i, 0])
+        va = _wrap(pat[j, 1], rot[i, 1])
+        if not is_quad:  # area-uniform square -> triangle warp
+            sq = math.sqrt(ua)
+            ua, va = sq * (1 - va), sq * va
+        ka = _kernel(ua, va, d0n, dd, de0, de1, de2, en0, en1, en2, h, geom, para)
+        ja = _jacobian(ua, va, geom, para, area)
+        if has_mask and not _on_surface(ua, va, mask):
+            ka = 0.0
+        wa = ka / (n_s / ja + (n_s * ka if near else 0.0) + 1e-300)
+        if wa > 0:
+            sw[q], su[q], sv[q] = wa, ua, va
+            wsum += wa
+            q += 1
+    if not near:
+        return q - base, wsum
+    # direction samples: cosine-distributed about the receiver's normal, kept where they hit
+    t1n, t2n, nn = _dot3(t1[i], geom[1]), _dot3(t2[i], geom[1]), _dot3(ni, geom[1])
+    t1a, t2a, na = _dot3(t1[i], geom[5]), _dot3(t2[i], geom[5]), _dot3(ni, geom[5])
+    t1b, t2b, nb = _dot3(t1[i], geom[6]), _dot3(t2[i], geom[6]), _dot3(ni, geom[6])
+    rx, ry, rz = xi[0] - geom[0, 0], xi[1] - geom[0, 1], xi[2] - geom[0, 2]
+    hx = rx * geom[1, 0] + ry * geom[1, 1] + rz * geom[1, 2]  # height over the shooter's plane
+    xa = rx * geom[5, 0] + ry * geom[5, 1] + rz * geom[5, 2]
+    xb = rx * geom[6, 0] + ry * geom[6, 1] + rz * geom[6, 2]
+    k = poly_n.shape[0]
+    for j in range(S):
+        dx, dy = _concentric(_wrap(pat[j, 0], rot[i, 2]), _wrap(pat[j, 1], rot[i, 3]))
+        dz = math.sqrt(max(1.0 - dx * dx - dy * dy, 0.0))
+        den = dx * t1n + dy * t2n + dz * nn  # < 0: towards the front of the shooter
+        ok = den < -1e-12
+        t = hx / -den if ok else 0.0
+        if para:
+            ud = xa + t * (dx * t1a + dy * t2a + dz * na)
+            vd = xb + t * (dx * t1b + dy * t2b + dz * nb)
+            tt = 1e-9
+            hit = ok and t > 0 and ud >= -tt and vd >= -tt
+            hit = hit and ((ud <= 1 + tt and vd <= 1 + tt) if is_quad else ud + vd <= 1 + tt)
+            ud, vd = _clip_uv(ud, vd, is_quad)
+            if has_mask and hit:
+                hit = _on_surface(ud, vd, mask)
+            jd = area
+        else:
+            wx = dx * t1[i, 0] + dy * t2[i, 0] + dz * ni[0]
+            wy = dx * t1[i, 1] + dy * t2[i, 1] + dz * ni[1]
+            wz = dx * t1[i, 2] + dy * t2[i, 2] + dz * ni[2]
+            yx, yy, yz = xi[0] + t * wx, xi[1] + t * wy, xi[2] + t * wz
+            hit = ok and t > 0
+            for e in range(k):  # inside the convex polygon: behind every edge's outward normal
+                en = poly_n[e]
+                s = (yx - poly_o[e, 0]) * en[0] + (yy - poly_o[e, 1]) * en[1] + (yz - poly_o[e, 2]) * en[2]
+                hit = hit and s <= tol * math.sqrt(en[0] * en[0] + en[1] * en[1] + en[2] * en[2])
+            ud, vd = _inverse_bilinear(yx, yy, yz, geom, uvc, linear_uv, is_quad)
+            jd = _jacobian(ud, vd, geom, para, area)
+        wd = 0.0
+        if hit:
+            kd = dz * -den / (_PI * max(t * t, 1e-300))
+            wd = kd / (n_s / jd + n_s * kd + 1e-300)
+        if wd > 0:
+            sw[q], su[q], sv[q] = wd, ud, vd
+            wsum += wd
+            q += 1
+    return q - base, wsum
+
+
+@njit(cache=True, parallel=True, nogil=True, error_model="numpy")
+def gather_rays(pat, rot, x, nr, t1, t2, near, origin32, geom, uvc, poly_n, poly_o, tol,
+                is_quad, para, linear_uv, area, mask, has_mask, t32, half_eps, buf, ro, rd, rt):  # fmt: skip
+    """The samples of a block of b receivers of a gather from one shooter, and their shadow rays.
+
+    pat (S, 2) stratified pattern in [0, 1)^2; rot (b, 4) per-row rotations (area, direction);
+    x, nr (b, 3) receiver points and unit normals; t1, t2 (b, 3) their tangents; near (b,) bool
+    (direction samples too); origin32 (b, 3) float32 ray origins; geom, uvc the shooter (module
+    docstring); poly_n, poly_o (k, 3) its edges' outward normals and points; tol the inside
+    test's slack; is_quad, para (a parallelogram), linear_uv (the (u, v) inverse is linear);
+    area its lattice area; mask (r, r) bool coverage of a panel cell (used when has_mask);
+    t32 (4, 3) float32 ``base, e1, e2, e3`` of the ray targets (:meth:`Shooter.kernel_args`);
+    half_eps float32, taken off the targets' distance. buf (6, n) float64, ro, rd (n, 3) and rt
+    (n,) float32, n >= 2 b S: scratch and outputs, reused between calls (fresh memory would
+    cost a page fault per 4 KiB).
+
+    Returns ``off`` (b + 1,) int64 (row i's samples are ``off[i]:off[i+1]``), ``wsum`` (b,) the
+    rows' weight sums, and per sample of weight > 0 (row-major), views of the first k rows of
+    buf, ro, rd, rt: ``w, u, v`` (k,) float64 and the rays ``o, d`` (k, 3) float32 (unit
+    directions), ``tfar`` (k,) float32.
+    """
+    b, S = x.shape[0], pat.shape[0]
+    n_s = float(S)
+    sw, su, sv = buf[0], buf[1], buf[2]
+    cnt = np.zeros(b, dtype=np.int64)
+    wsum = np.zeros(b)
+    for i in prange(b):
+        cnt[i], wsum[i] = _row_weights(i, pat, rot, x, nr, t1, t2, near[i], n_s, geom, uvc, poly_n,
+                                       poly_o, tol, is_quad, para, linear_uv, area, mask, has_mask,
+                                       sw, su, sv, i * 2 * S)  # fmt: skip
+    off = np.zeros(b + 1, dtype=np.int64)
+    for i in range(b):
+        off[i + 1] = off[i] + cnt[i]
+    k = off[b]
+    ws, us, vs = buf[3, :k], buf[4, :k], buf[5, :k]
+    tiny = np.float32(1e-30)
+    zero = np.float32(0.0)
+    for i in prange(b):
+        p = i * 2 * S
+        for q in range(off[i], off[i + 1]):
+            ws[q], us[q], vs[q] = sw[p], su[p], sv[p]
+            u32, v32 = np.float32(su[p]), np.float32(sv[p])
+            p += 1
+            r2 = zero
+            for c in range(3):
+                tc = u32 * t32[1, c]
+                tc += v32 * t32[2, c]
+                tc += t32[0, c]
+                if not para:
+                    tc += (u32 * v32) * t32[3, c]
+                dc = tc - origin32[i, c]
+                ro[q, c] = origin32[i, c]
+                rd[q, c] = dc
+                r2 += dc * dc
+            r = np.float32(math.sqrt(r2))
+            rr = max(r, tiny)
+            for c in range(3):
+                rd[q, c] = rd[q, c] / rr
+            rt[q] = max(r - half_eps, zero)
+    return off, wsum, ws, us, vs, ro[:k], rd[:k], rt[:k]
+
+
+@njit(cache=True, error_model="numpy")
+def _sample_lattice(flat, n, u, v, c):
+    """Channel c of the piecewise-linear lattice field flat ((N+1)**2, 3) at (u, v)
+    (:func:`iat.radiosity.sampling.sample_lattice`)."""
+    xx, yy = u * n, v * n
+    a = min(np.int64(xx), n - 1)
+    b = min(np.int64(yy), n - 1)
+    fx, fy = xx - a, yy - b
+    i00 = a * (n + 1) + b
+    if fx + fy <= 1.0:
+        return flat[i00, c] * (1.0 - fx - fy) + flat[i00 + n + 1, c] * fx + flat[i00 + 1, c] * fy
+    up = flat[i00 + n + 2, c] * (fx + fy - 1.0) + flat[i00 + n + 1, c] * (1.0 - fy)
+    return up + flat[i00 + 1, c] * (1.0 - fx)
+
+
+@njit(cache=True, parallel=True, nogil=True, error_model="numpy")
+def gather_finish(off, ws, vis, us, vs, fb, wsum, has_field, flat, nl, x, geom, uvc, linear_uv,
+                  is_quad, para, field_mean, clamp_lo, clamp_hi):  # fmt: skip
+    """What a block of b receivers gathers once its rays are traced.
+
+    off, ws, us, vs, wsum as :func:`gather_rays` returned them, vis (k,) float64 what each ray
+    lets through, fb (b,) the analytic form factors. Returns ``out`` (b, 3): with no field
+    (``has_field`` False) column 0 is ``F x`` the visible fraction; with a field (flat
+    ((nl+1)**2, 3) the shooter's radiance on its lattice of nl cells a side, field_mean (3,)
+    its area mean) the radiance-weighted form factor, with the control variate at each
+    receiver's foot x (b, 3) on the shooter, clamped to >= 0 / <= 0 where ``clamp_lo`` /
+    ``clamp_hi``; and ``seen`` (b,) the rays of each row that got through (summed ``vis``).
+    """
+    b = fb.shape[0]
+    out = np.zeros((b, 3))
+    seen = np.zeros(b)
+    for i in prange(b):
+        wvis = 0.0
+        sv = 0.0
+        res0 = res1 = res2 = 0.0
+        for q in range(off[i], off[i + 1]):
+            wr = ws[q] * vis[q]  # MIS estimate of the visible kernel integral, per sample
+            wvis += wr
+            sv += vis[q]
+            if has_field:
+                xx, yy = us[q] * nl, vs[q] * nl
+                a = min(np.int64(xx), nl - 1)
+                bb = min(np.int64(yy), nl - 1)
+                fx, fy = xx - a, yy - bb
+                i00 = a * (nl + 1) + bb
+                sxy = fx + fy
+                lower = sxy <= 1.0
+                w_base = abs(1.0 - sxy) * wr
+                i_base = i00 if lower else i00 + nl + 2
+                w10 = (fx if lower else 1.0 - fy) * wr
+                w01 = (fy if lower else 1.0 - fx) * wr
+                i10, i01 = i00 + nl + 1, i00 + 1
+                val = flat[i_base, 0] * w_base
+                val += flat[i10, 0] * w10
+                val += flat[i01, 0] * w01
+                res0 += val
+                val = flat[i_base, 1] * w_base
+                val += flat[i10, 1] * w10
+                val += flat[i01, 1] * w01
+                res1 += val
+                val = flat[i_base, 2] * w_base
+                val += flat[i10, 2] * w10
+                val += flat[i01, 2] * w01
+                res2 += val
+        seen[i] = sv
+        frac = wvis / (wsum[i] if wsum[i] > 0 else 1.0)
+        fv = fb[i] * frac  # analytic F x visible fraction
+        if not has_field:
+            out[i, 0] = fv
+            continue
+        # control variate: the field at the receiver's foot on the shooter for near receivers,
+        # the shooter's mean for far ones
+        if para:
+            rx, ry, rz = x[i, 0] - geom[0, 0], x[i, 1] - geom[0, 1], x[i, 2] - geom[0, 2]
+            fu, fw = _clip_uv(
+                rx * geom[5, 0] + ry * geom[5, 1] + rz * geom[5, 2],
+                rx * geom[6, 0] + ry * geom[6, 1] + rz * geom[6, 2],
+                is_quad,
+            )
+        else:
+            hh = (x[i, 0] - geom[0, 0]) * geom[1, 0] + (x[i, 1] - geom[0, 1]) * geom[1, 1]
+            hh += (x[i, 2] - geom[0, 2]) * geom[1, 2]
+            fu, fw = _inverse_bilinear(
+                x[i, 0] - hh * geom[1, 0], x[i, 1] - hh * geom[1, 1], x[i, 2] - hh * geom[1, 2],
+                geom, uvc, linear_uv, is_quad,
+            )  # fmt: skip
+        w_near = min(1.0, 2.0 * fb[i])
+        for c in range(3):
+            cv = w_near * _sample_lattice(flat, nl, fu, fw, c) + (1.0 - w_near) * field_mean[c]
+            res = (res0 if c == 0 else res1 if c == 1 else res2) - cv * wvis
+            val = fv * cv + res
+            if clamp_lo:
+                val = max(val, 0.0)
+            if clamp_hi:
+                val = min(val, 0.0)
+            out[i, c] = val
+    return out, seen

@@ -1,0 +1,173 @@
+"""The compiled kernels (iat.radiosity.kernels) against closed forms and the numpy definitions
+they replaced: Gauss rule vs contour integral, the MIS weights' rays, the visible fraction of
+an unoccluded shooter, the field integral of a linear field, thread-count independence."""
+
+import numba
+import numpy as np
+import pytest
+
+from iat.radiosity import kernels
+from iat.radiosity.sampling import GAUSS_QUAD, Shooter, sample_lattice
+
+SQUARE = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+UP = np.array([0.0, 0.0, 1.0])
+
+
+def shooter(corners=SQUARE, is_quad=True):
+    normal = UP
+    area = float(np.linalg.norm(np.cross(corners[1] - corners[0], corners[3] - corners[0])))
+    return Shooter(corners, is_quad, normal, area if is_quad else 0.5 * area, 1e-4)
+
+
+def receivers(n=64, seed=3, height=(0.3, 3.0)):
+    """Receivers in front of the square (z > 0) facing it (unit normals tilted a little)."""
+    rng = np.random.default_rng(seed)
+    x = np.column_stack([rng.uniform(-1, 2, n), rng.uniform(-1, 2, n), rng.uniform(*height, n)])
+    nr = np.column_stack([rng.normal(0, 0.3, n), rng.normal(0, 0.3, n), -np.ones(n)])
+    return x, nr / np.linalg.norm(nr, axis=1, keepdims=True)
+
+
+def test_point_polygon_unit_square_corner():
+    # receiver under a corner of a unit square at height 1, facing it: the closed form
+    f = kernels.point_polygon(np.array([[0.0, 0.0, -1.0]]), np.array([UP]), SQUARE)[0]
+    a = 1.0 / np.sqrt(2.0)  # parallel unit square, receiver under a corner: 2 a atan(a) / (2 pi)
+    exact = 2 * a * np.arctan(a) / (2 * np.pi)
+    assert f == pytest.approx(exact, rel=1e-12)
+
+
+def test_gauss_rule_agrees_with_contour_far_away():
+    sh = shooter()
+    ka = sh.kernel_args()
+    x, nr = receivers(height=(4.5, 8.0))
+    (gu, gv), gw = GAUSS_QUAD
+    exact = kernels.point_polygon(x, nr, SQUARE)
+    args = (ka["geom"], ka["para"], ka["area"], gu.ravel(), gv.ravel(), gw)
+    far = kernels.patch_form_factors(x, nr, SQUARE, SQUARE.mean(axis=0), 4.0, *args)
+    near = kernels.patch_form_factors(x, nr, SQUARE, SQUARE.mean(axis=0), 1e9, *args)
+    np.testing.assert_array_equal(near, exact)  # nothing far: the contour integral itself
+    assert np.all(exact > 0)
+    np.testing.assert_allclose(far, exact, rtol=5e-3)
+
+
+def block(sh, n=200, m=6, near_share=0.5, seed=5):
+    """A gather block's inputs: receivers in front of the shooter (+z), facing it."""
+    x, nr = receivers(n, seed)
+    rng = np.random.default_rng(seed)
+    a, b = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
+    pat = np.stack([(a.ravel() + rng.random(m * m)) / m, (b.ravel() + rng.random(m * m)) / m], axis=1)
+    rot = rng.random((n, 4))
+    t1 = np.cross(nr, [1.0, 0.0, 0.0])
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(nr, t1)
+    near = rng.random(n) < near_share
+    o32 = (x + 1e-4 * nr).astype(np.float32)
+    return pat, rot, x, nr, t1, t2, near, o32
+
+
+def rays(sh, inputs):
+    ka = sh.kernel_args()
+    pat, rot, x, nr, t1, t2, near, o32 = inputs
+    n = 2 * len(x) * len(pat)
+    buf = (
+        np.empty((6, n)),
+        np.empty((n, 3), np.float32),
+        np.empty((n, 3), np.float32),
+        np.empty(n, np.float32),
+    )
+    out = kernels.gather_rays(
+        pat, rot, x, nr, t1, t2, near, o32, ka["geom"], ka["uvc"], ka["poly_n"], ka["poly_o"], ka["tol"],
+        ka["is_quad"], ka["para"], ka["linear_uv"], ka["area"], ka["mask"], ka["has_mask"], ka["t32"],
+        ka["half_eps"], *buf,
+    )  # fmt: skip
+    return [np.array(a) for a in out]
+
+
+def finish(sh, inputs, r, vis, fb, flat=None, mean=None):
+    ka = sh.kernel_args()
+    off, wsum, w, u, v = r[:5]
+    has = flat is not None
+    flat = np.zeros((1, 3)) if flat is None else flat
+    nl = int(round(np.sqrt(len(flat)))) - 1
+    return kernels.gather_finish(
+        off, w, vis, u, v, fb, wsum, has, flat, nl, inputs[2], ka["geom"], ka["uvc"], ka["linear_uv"],
+        ka["is_quad"], ka["para"], np.zeros(3) if mean is None else mean, False, False,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("is_quad", [True, False])
+def test_rays_end_on_the_shooter(is_quad):
+    sh = shooter(is_quad=is_quad)
+    inputs = block(sh)
+    off, wsum, w, u, v, o, d, tfar = rays(sh, inputs)
+    assert off[-1] == len(w) > 0 and np.all(w > 0)
+    assert np.all(np.diff(off) <= 2 * len(inputs[0]))
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-6)
+    # origin + (tfar + eps/2) d is the target of (u, v): on the square (pulled in by <= eps), eps above it
+    end = o + (tfar + sh.kernel_args()["half_eps"])[:, None] * d
+    target = sh.origin + u[:, None] * sh.e1 + v[:, None] * sh.e2
+    np.testing.assert_allclose(end[:, :2], target[:, :2], atol=2e-4)
+    np.testing.assert_allclose(end[:, 2], 1e-4, atol=1e-5)
+    if not is_quad:
+        assert np.all(u + v <= 1 + 1e-9)
+    # each row's weights add up to its wsum
+    np.testing.assert_allclose(np.add.reduceat(w, off[:-1])[np.diff(off) > 0], wsum[np.diff(off) > 0])
+
+
+def test_unoccluded_gather_is_the_form_factor():
+    sh = shooter()
+    inputs = block(sh)
+    r = rays(sh, inputs)
+    fb = kernels.point_polygon(inputs[2], inputs[3], SQUARE)
+    vis = np.ones(len(r[2]))
+    out, seen = finish(sh, inputs, r, vis, fb)
+    hit = np.diff(r[0]) > 0
+    np.testing.assert_allclose(out[hit, 0], fb[hit], rtol=1e-12)
+    np.testing.assert_array_equal(seen, np.diff(r[0]))
+    # half the rays blocked, in every row: between 0 and F
+    vis[::2] = 0.0
+    part, _ = finish(sh, inputs, r, vis, fb)
+    assert np.all(part[:, 0] <= fb + 1e-15) and part[hit, 0].sum() < fb[hit].sum()
+    # a constant field c: F c
+    c = np.array([1.0, 2.0, 0.5])
+    n = 9
+    flat = np.tile(c, ((n + 1) ** 2, 1))
+    val, _ = finish(sh, inputs, r, np.ones(len(r[2])), fb, flat, c)
+    np.testing.assert_allclose(val[hit], fb[hit, None] * c, rtol=1e-9)
+
+
+def test_field_integral_of_a_linear_field():
+    """A field linear in u: the control variate plus the MIS estimate of the rest is the
+    kernel-weighted mean of the field, so it lies between the field's extremes times F."""
+    sh = shooter()
+    inputs = block(sh, n=100, m=12)
+    r = rays(sh, inputs)
+    fb = kernels.point_polygon(inputs[2], inputs[3], SQUARE)
+    n = 8
+    g = np.arange(n + 1) / n
+    uu, _ = np.meshgrid(g, g, indexing="ij")
+    flat = np.repeat((1.0 + uu.ravel())[:, None], 3, axis=1)
+    val, _ = finish(sh, inputs, r, np.ones(len(r[2])), fb, flat, np.full(3, 1.5))
+    hit = np.diff(r[0]) > 0
+    mean = val[hit, 0] / fb[hit]
+    assert np.all(mean > 0.95) and np.all(mean < 2.05)
+    # sample_lattice (numpy) and the kernel read the same field
+    u = np.random.default_rng(0).random(50)
+    np.testing.assert_allclose(sample_lattice(flat, n, u, 0 * u)[:, 0], 1.0 + u, rtol=1e-12)
+
+
+def test_results_do_not_depend_on_the_thread_count():
+    sh = shooter()
+    inputs = block(sh, n=300)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = rays(sh, inputs)
+        ff1 = kernels.point_polygon(inputs[2], inputs[3], SQUARE)
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        many = rays(sh, inputs)
+        ffn = kernels.point_polygon(inputs[2], inputs[3], SQUARE)
+    finally:
+        numba.set_num_threads(before)
+    for a, b in zip(one, many, strict=True):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(ff1, ffn)
