@@ -54,3 +54,24 @@ def test_angles_follow_the_sun_module():
 
     for az, el in ((0, 30), (90, 5), (270, 80), (200, 45)):
         assert angles(sun_direction(az, el)) == pytest.approx((az, el), abs=1e-6)
+
+
+def test_the_states_own_angles_win_for_a_model_with_another_north():
+    """The daylit house's north is +Z: its states' azimuth/elevation (sun_states) are what the
+    label shows, not the angles of the direction read against -Z."""
+    from iat.lighting.sun import sun_states
+    from viewer.daylight import angles, sun_at, sun_label
+
+    states = sun_states(48.85, 2.35, "2026-09-22", ["11:00", "14:00"], "Europe/Paris", north=(0, 0, 1))
+    s = app_with(states, [0.0, 1.0])
+    s.lighting.day_time = 0.0
+    first = states["11:00"]
+    assert sun_label(s) == f"sun: azimuth {first['azimuth']:.0f} deg, elevation {first['elevation']:.0f} deg"
+    assert abs(angles(sun_at(s))[0] - first["azimuth"]) > 90  # read against -Z it would be wrong
+    s.lighting.day_time = 0.5
+    az = float(sun_label(s).split()[2])
+    assert (
+        min(first["azimuth"], states["14:00"]["azimuth"])
+        < az
+        < max(first["azimuth"], states["14:00"]["azimuth"])
+    )

@@ -282,3 +282,33 @@ def test_three_lights_and_the_light_buttons_are_not_clipped(tmp_path, monkeypatc
     for name, (full, seen) in got.items():
         # (a selectable's rectangle reaches half the item spacing beyond its row: a pixel row may go)
         assert full > 0 and seen >= 0.95 * full, f"{name} is clipped: {seen:.0f} of {full:.0f} px²"
+
+
+@pytest.mark.gui
+def test_levels_of_detail_switch_rebakes_and_reads_out(tmp_path, monkeypatch, gui_child):
+    """The Tuning panel's "Levels of detail" re-bakes with the quad-tree's level chains, and the
+    Stats panel's readout gets the renderer's levels in use; switched off, the readout is empty."""
+    if gui_child():
+        return
+    app = make_app(tmp_path, monkeypatch)
+    got: dict = {}
+
+    def drive(ctx) -> None:
+        settle(ctx, app)
+        s = app.state
+        got["before"] = dict(s.stats.lod)
+        ctx.item_click("//**/Levels of detail")
+        wait_until(
+            ctx, lambda: s.model.baked is not None and s.model.baked.policy.uses_lod, 300, "LOD bake"
+        )
+        wait_until(ctx, lambda: bool(s.stats.lod), 60, "LOD readout")
+        got["on"] = dict(s.stats.lod)
+        ctx.item_click("//**/Levels of detail")
+        wait_until(ctx, lambda: not s.model.baked.policy.uses_lod, 300, "plain bake")
+        ctx.yield_(5)
+        got["off"] = dict(s.stats.lod)
+
+    run_gui(app, drive)
+    assert got["before"] == {} and got["off"] == {}
+    assert got["on"]["enabled"] and got["on"]["tiles"] > 0
+    assert 0 < got["on"]["resident_bytes"] <= got["on"]["total_bytes"]

@@ -257,6 +257,7 @@ class ViewerApp:
         s, r = self.state, self.renderer
         try:
             r.set_scene(opened.scene)
+            r.set_sky(opened.scene.sky)  # the model's own sky behind it
             r.set_solution(opened.solution)
             if opened.baked is not None:
                 r.set_baked(opened.baked)
@@ -347,6 +348,7 @@ class ViewerApp:
         try:
             if s.model.scene is not None:
                 r.set_scene(s.model.scene)
+                r.set_sky(s.model.scene.sky)
             if s.model.solution is not None:
                 r.set_solution(s.model.solution)
             if s.model.baked is not None:

@@ -58,10 +58,39 @@ def sun_at(app_state: AppState) -> np.ndarray | None:
     return d / n if n > 1e-9 else da
 
 
+def stated_angles(app_state: AppState) -> tuple[float, float] | None:
+    """(azimuth, elevation) in degrees at the slider's time from the key states' own ``azimuth`` and
+    ``elevation`` (:func:`iat.lighting.sun.sun_states` writes them, against the model's own north),
+    blended as the light is (the azimuth along the shorter arc); None when the states give none."""
+    lt = app_state.lighting
+    sset = lt.solution_set
+    if sset is None or not lt.day_cycle:
+        return None
+    a, b, w = lt.day_blend()
+    sides = [lt.states.get(sset.names[k], {}) for k in (a, b)]
+    lit = [
+        st if towards_sun(st) is not None and {"azimuth", "elevation"} <= set(st) else None for st in sides
+    ]
+    if lit[0] is None and lit[1] is None:
+        return None
+    if lit[0] is None or lit[1] is None:
+        st = lit[0] if lit[0] is not None else lit[1]
+        return float(st["azimuth"]) % 360.0, float(st["elevation"])
+    za, zb = (math.radians(float(st["azimuth"])) for st in lit)
+    s = (1.0 - w) * math.sin(za) + w * math.sin(zb)
+    c = (1.0 - w) * math.cos(za) + w * math.cos(zb)
+    el = (1.0 - w) * float(lit[0]["elevation"]) + w * float(lit[1]["elevation"])
+    return math.degrees(math.atan2(s, c)) % 360.0, el
+
+
 def sun_label(app_state: AppState) -> str:
-    """'sun: azimuth 135 deg, elevation 32 deg' at the slider's time, or ''."""
-    d = sun_at(app_state)
-    if d is None:
-        return ""
-    az, el = angles(d)
+    """'sun: azimuth 135 deg, elevation 32 deg' at the slider's time, or ''. The states' own angles
+    when they give them (a model whose north is not -Z), else those of :func:`sun_at`."""
+    stated = stated_angles(app_state)
+    if stated is None:
+        d = sun_at(app_state)
+        if d is None:
+            return ""
+        stated = angles(d)
+    az, el = stated
     return f"sun: azimuth {az:.0f} deg, elevation {el:.0f} deg"

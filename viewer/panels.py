@@ -126,6 +126,13 @@ def tuning_panel(state: AppState) -> None:
 
     changed, t.detail = imgui.checkbox("Detail textures", t.detail)
     _help("Store incoming light where a material has a detail texture; the shader multiplies both.")
+    changed, t.lod = imgui.checkbox("Levels of detail", t.lod)
+    _help("Also bake each texture's coarser quad-tree levels; far surfaces blend two of them per pixel.")
+    imgui.begin_disabled(not t.lod)
+    imgui.same_line()
+    changed, t.lod_stream = imgui.checkbox("Stream", t.lod_stream)
+    _help("Keep on the GPU only the levels the view needs (the budget, when on, caps them).")
+    imgui.end_disabled()
     lo, hi = min(0.05, float(t.exposure)), max(20.0, float(t.exposure))  # an auto exposure may be outside
     changed, v = imgui.slider_float(
         "Exposure", float(t.exposure), lo, hi, "%.3g", imgui.SliderFlags_.logarithmic
@@ -332,6 +339,14 @@ def stats_panel(state: AppState) -> None:
     n_states = int(mem.get("solutions", 1)) if mem else 1
     layers = f"  ({n_states} lighting states: {n_states} layers per page)" if n_states > 1 else ""
     imgui.text("Texture memory" + layers)
+    lod = state.stats.lod
+    if lod:
+        resident = sorted(lod.get("resident_levels", {}).items(), reverse=True)
+        levels = ", ".join(f"{k}: {n}" for k, n in resident)
+        imgui.text_wrapped(
+            f"LOD resident {_mb(lod.get('resident_bytes', 0))} / {_mb(lod.get('total_bytes', 0))}"
+            f"{' (streaming)' if lod.get('streaming') else ''}; tree levels (tiles) {levels}"
+        )
     _bar(frac, label, RED if (over or (budget <= 0 and used > 0 and state.tuning.budget_on)) else None)
     if mem:
         pages = f"{mem.get('pages', 0)} page(s) {mem.get('page_width', 0)}x{mem.get('page_height', 0)}"

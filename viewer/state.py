@@ -60,6 +60,8 @@ class Tuning:
     scale_mode : "clamped" | "naive"
     budget_on, budget_mb : texture budget in MiB; when on, threshold and scale are chosen by the baker
     detail : detail textures combined with incoming light (report §3.7)
+    lod, lod_stream : levels of detail (report §6.2.2; :mod:`iat.bake.lod`), and keeping only the
+      levels the view needs resident (the budget, when on, caps them)
     exposure : display multiplier on radiance before the tone map
     """
 
@@ -70,6 +72,8 @@ class Tuning:
     budget_on: bool = False
     budget_mb: float = 4.0
     detail: bool = True
+    lod: bool = False
+    lod_stream: bool = False
     exposure: float = 1.0
 
     def policy(self) -> BakePolicy:
@@ -80,6 +84,8 @@ class Tuning:
             scale_mode=self.scale_mode,
             budget_mb=float(self.budget_mb) if self.budget_on else None,
             detail=bool(self.detail),
+            lod=bool(self.lod),
+            lod_stream=bool(self.lod and self.lod_stream),
         )
 
 
@@ -310,6 +316,7 @@ class FrameStats:
     idle: np.ndarray = field(default_factory=lambda: np.zeros(FRAME_HISTORY, bool))
     frames: int = 0
     render: dict = field(default_factory=dict)
+    lod: dict = field(default_factory=dict)  # Renderer.lod_info() of the last frame ({} without LOD)
     view_redraws: int = 0  # frames that drew the 3D view (viewer.view3d)
     view_copies: int = 0  # frames that copied the last image of it
 

@@ -183,6 +183,7 @@ class View3D:
                 target=target,
             )
             state.stats.render = self.renderer.stats()
+            state.stats.lod = self.renderer.lod_info()
             self.draw_error = ""
         except Exception as e:
             msg = f"cannot draw: {error_text(e)}"
