@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -256,3 +257,36 @@ def test_damaged_paths_file_names_the_file(tmp_path):
     bad.write_text('{"walk": 3}')
     with pytest.raises(LoadError, match="not a list"):
         load_paths(bad)
+
+
+def test_walls_stop_the_walk_and_the_walk_slides_along_them():
+    """Walking into the Cornell box's back wall (z = 0.559) stops a radius in front of it; walking at
+    it at 45 degrees slides along it into the corner; with walls off you pass through."""
+    from iat.io.load import load_scene
+    from viewer.collision import collision_radius
+    from viewer.navigation import walker
+
+    scene = load_scene(Path(__file__).resolve().parent.parent / "sample_models" / "cornell_box.glb")
+    hi = scene.bounds[1]
+    radius = collision_radius(scene.bounds)
+    # above the blocks, looking at the back wall
+    start = Camera(eye=[0.278, 0.45, 0.1], target=[0.278, 0.45, 1.0], yfov=40.0, znear=0.01, zfar=10.0)
+    walk = InputState(keys={"w"})
+    dt = 0.05
+
+    nav = walker(scene, start)
+    for _ in range(100):
+        nav.update(dt, walk)
+    assert hi[2] - radius - nav.speed * dt <= nav.eye[2] <= hi[2] - radius  # stopped at the wall
+    nav = walker(scene, start)
+    for _ in range(100):
+        nav.update(dt, walk, walls=False)
+    assert nav.eye[2] > hi[2]  # through it
+
+    nav = walker(scene, start)
+    nav.yaw = math.radians(-135.0)  # towards +z and +x
+    for _ in range(100):
+        nav.update(dt, walk)
+    # slid along both walls into the corner, a radius from each
+    assert hi[0] - radius - nav.speed * dt <= nav.eye[0] <= hi[0] - radius
+    assert hi[2] - radius - nav.speed * dt <= nav.eye[2] <= hi[2] - radius

@@ -48,7 +48,7 @@ from iat.radiosity import SolveOptions
 from viewer import controls, overlay, panels
 from viewer.bake_worker import BakeSource, BakeWorker
 from viewer.jobs import Opened, OpenJob, SetJob, error_text
-from viewer.navigation import CameraPath, Navigator, load_paths, navigation_speed, paths_file, save_paths
+from viewer.navigation import CameraPath, load_paths, paths_file, save_paths, walker
 from viewer.state import AppState, default_model
 from viewer.view3d import View3D, auto_exposure, screenshot
 
@@ -287,7 +287,7 @@ class ViewerApp:
         if s.tuning.threshold > s.model.deepest + 1:
             s.tuning.threshold = s.model.deepest + 1
         cam = opened.scene.default_camera()
-        s.view.nav = Navigator(cam, speed=navigation_speed(opened.scene.bounds))
+        s.view.nav = walker(opened.scene, cam)
         s.view.camera = s.view.nav.camera
         s.view.camera_index = 0
         s.paths.recorder = s.paths.player = None
@@ -465,7 +465,7 @@ class ViewerApp:
             s.messages.set_error(f"cannot show the preview: {error_text(e)}")
             return
         s.model.scene = scene
-        s.view.nav = Navigator(scene.default_camera(), speed=navigation_speed(scene.bounds))
+        s.view.nav = walker(scene, scene.default_camera())
         s.view.camera = s.view.nav.camera
         s.requests.auto_exposure = True
         self.view3d.invalidate()

@@ -157,7 +157,7 @@ def navigate(s: AppState, idle: bool) -> None:
             s.view.camera = cam
             s.paths.posed = True  # this frame shows a pose of the path: counted after its swap
             return
-    s.view.camera = s.view.nav.update(dt, inp)
+    s.view.camera = s.view.nav.update(dt, inp, walls=s.view.walls)
     if s.paths.recorder is not None:
         s.paths.recorder.add(s.view.camera, time.perf_counter() - s.paths.record_started)
 

@@ -138,7 +138,8 @@ class Navigator:
     config : :class:`NavConfig`
 
     State: ``eye`` (3,) float64, ``yaw`` and ``pitch`` in radians (yaw 0 looks down -Z,
-    positive yaw turns left; positive pitch looks up), ``speed`` and ``gear``.
+    positive yaw turns left; positive pitch looks up), ``speed`` and ``gear``. ``collide``: None,
+    or ``collide(eye, step) -> step`` clipping each frame's move (:class:`viewer.collision.Collider`).
     """
 
     def __init__(self, camera: Camera, speed: float = 1.0, config: NavConfig | None = None):
@@ -148,6 +149,7 @@ class Navigator:
         self.gear = 0
         self._home = camera
         self._prev_buttons: frozenset[str] = frozenset()
+        self.collide = None
         self.set_camera(camera)
 
     # -- pose ------------------------------------------------------------------------------
@@ -205,8 +207,9 @@ class Navigator:
         return g[self.gear % len(g)] if g else 1.0
 
     # -- one frame -------------------------------------------------------------------------
-    def update(self, dt: float, inp: InputState) -> Camera:
-        """Advance by ``dt`` seconds under input ``inp``; returns the new camera."""
+    def update(self, dt: float, inp: InputState, walls: bool = True) -> Camera:
+        """Advance by ``dt`` seconds under input ``inp``; returns the new camera. ``walls``: let
+        :attr:`collide` clip the move (when there is one)."""
         c = self.config
         dt = max(float(dt), 0.0)
         keys = {k.lower() for k in inp.keys}
@@ -248,8 +251,22 @@ class Navigator:
         n = float(np.linalg.norm(move))
         if n > 1.0:  # diagonal moves are not faster
             move /= n
-        self.eye = self.eye + speed * dt * (move + WORLD_UP * max(-1.0, min(1.0, lift)))
+        step = speed * dt * (move + WORLD_UP * max(-1.0, min(1.0, lift)))
+        if walls and self.collide is not None and step.any():
+            step = self.collide(self.eye, step)
+        self.eye = self.eye + step
         return self.camera
+
+
+def walker(scene, camera: Camera) -> Navigator:
+    """A :class:`Navigator` for ``scene`` starting at ``camera``: its speed from the model's size and
+    its walls stopping the walk (:class:`viewer.collision.Collider`; ``nav.collide = None`` lets
+    you through)."""
+    from viewer.collision import Collider, collision_radius
+
+    nav = Navigator(camera, speed=navigation_speed(scene.bounds))
+    nav.collide = Collider(scene, collision_radius(scene.bounds)).clip
+    return nav
 
 
 # -- camera paths -------------------------------------------------------------------------------

@@ -183,6 +183,9 @@ def view_panel(state: AppState) -> None:
     if imgui.button("Reset view") and state.view.nav is not None:
         state.view.nav.reset()
     imgui.same_line()
+    changed, state.view.walls = imgui.checkbox("Walls", state.view.walls)
+    _help("Walls stop you (you slide along them); off, you walk through them.")
+    imgui.same_line()
     if imgui.button("Auto exposure"):
         state.requests.auto_exposure = True
     _help("Exposure from the view on screen, as 'iat render' picks it: its 99th percentile at 0.8 (key X).")

@@ -161,6 +161,7 @@ class ViewState:
     diff_gain : the difference view's gain; tonemap : sRGB tone map on
     dragging_split, looking : the mouse drags the divider / looks around
     nav, camera, camera_index : the navigator, the pose drawn this frame, the scene camera chosen
+    walls : walls stop the walk (:mod:`viewer.collision`)
     rect : the 3D view's rectangle in window pixels (x, y from the top left, w, h), updated every
       frame from the central dock node; framebuffer_scale : framebuffer pixels per window pixel
     """
@@ -172,6 +173,7 @@ class ViewState:
     dragging_split: bool = False
     looking: bool = False
     nav: Navigator | None = None
+    walls: bool = True
     camera: Camera | None = None
     camera_index: int = 0
     rect: tuple[int, int, int, int] = (0, 0, 0, 0)
