@@ -628,7 +628,10 @@ class ViewerApp:
         baked, scene = s.model.baked, s.model.scene
         if _is_set(baked):  # the day cycle: the moment on screen
             baked = baked.blend(*s.lighting.day_blend())
-        self._in_background(f"exported the bake to {path}", lambda: export_glb(baked, path, scene))
+        self._in_background(
+            f"exported the bake to {path}",
+            lambda: export_glb(baked, path, scene, watertight=True, match_clip=True),  # as iat bake writes it
+        )
 
     def _in_background(self, done: str, fn) -> None:
         def run():  # reports through a queue: the state is changed on the UI thread only
