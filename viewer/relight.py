@@ -59,13 +59,11 @@ class ProgressRelighter(Relighter):
         return spent * (1.0 - f) / f
 
     # -- worker side ---------------------------------------------------------------------------
-    def _progress(self, fraction, message) -> bool:
+    def report(self, fraction, message) -> bool:
         f = float(min(max(fraction, 0.0), 1.0))
         now = time.perf_counter()
         if self.step_started is None or f < self.fraction - 0.2:  # a new step starts from 0
             self.step += 1
             self.step_started = now
         self.fraction, self.message = f, str(message)
-        if self._cancel_event.is_set():
-            return False
-        return super()._progress(fraction, message)
+        return not self._cancel_event.is_set()

@@ -93,7 +93,15 @@ class Relighter(LatestWorker):
             self._request((scene, self._version, bool(remesh)))
 
     # -- worker ----------------------------------------------------------------------------------
+    def report(self, fraction: float, message: str) -> bool:
+        """Each progress report of the step under way (fraction 0..1 of the step, on the worker
+        thread); False stops the step. Override it to watch or cancel (the viewer's
+        ``ProgressRelighter``); this one lets every step go on."""
+        return True
+
     def _progress(self, fraction, message) -> bool:
+        if not self.report(fraction, message):
+            return False
         # the first (coarse) step always finishes, so a light dragged without pause still
         # shows a new solution every step's time; later steps give way to a newer edit
         if self._hold:
