@@ -25,6 +25,10 @@ def test_presets_and_overrides(tmp_path):
         OptionError, match=r"unknown quality 'best' \(choose from draft, default, fine, final\)"
     ):
         SolveOptions.preset("best")
+    from iat.cli.commands import build_parser
+
+    for name in QUALITY_PRESETS:  # the CLI takes every preset the library has
+        assert build_parser().parse_args(["solve", "m.glb", "-o", "s.npz", "--quality", name]).quality == name
     out = tmp_path / "d.npz"
     assert (
         main(["solve", str(MODEL), "--quality", "draft", "--max-depth", "3", "-o", str(out), "--json"]) == 0

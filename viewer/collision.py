@@ -53,8 +53,3 @@ class Collider:
             if not vis.occluded(p[None], d, np.array([abs(s) + self.radius]))[0]:
                 p[axis] += s
         return p - start
-
-    def close(self) -> None:
-        if self._vis is not None:
-            self._vis.close()
-            self._vis = None

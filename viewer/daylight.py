@@ -39,16 +39,25 @@ def angles(to_sun: np.ndarray) -> tuple[float, float]:
     return az, el
 
 
-def sun_at(app_state: AppState) -> np.ndarray | None:
-    """(3,) unit vector towards the sun at the day-cycle slider's time, or None (no day cycle shown,
-    or its states have no sun)."""
+def key_states(app_state: AppState) -> tuple[dict, dict, float] | None:
+    """``(state a, state b, w)``: the two key lighting states the day-cycle set blends at the
+    slider's time and the weight of b, or None when no day cycle is shown."""
     lt = app_state.lighting
     sset = lt.solution_set
     if sset is None or not lt.day_cycle:
         return None
     a, b, w = lt.day_blend()
-    names = sset.names
-    da, db = (towards_sun(lt.states.get(names[k], {})) for k in (a, b))
+    return lt.states.get(sset.names[a], {}), lt.states.get(sset.names[b], {}), w
+
+
+def sun_at(app_state: AppState) -> np.ndarray | None:
+    """(3,) unit vector towards the sun at the day-cycle slider's time, or None (no day cycle shown,
+    or its states have no sun)."""
+    keys = key_states(app_state)
+    if keys is None:
+        return None
+    sa, sb, w = keys
+    da, db = towards_sun(sa), towards_sun(sb)
     if da is None and db is None:
         return None
     if da is None or db is None:  # sunrise or sunset: the side that has a sun
@@ -62,12 +71,10 @@ def stated_angles(app_state: AppState) -> tuple[float, float] | None:
     """(azimuth, elevation) in degrees at the slider's time from the key states' own ``azimuth`` and
     ``elevation`` (:func:`iat.lighting.sun.sun_states` writes them, against the model's own north),
     blended as the light is (the azimuth along the shorter arc); None when the states give none."""
-    lt = app_state.lighting
-    sset = lt.solution_set
-    if sset is None or not lt.day_cycle:
+    keys = key_states(app_state)
+    if keys is None:
         return None
-    a, b, w = lt.day_blend()
-    sides = [lt.states.get(sset.names[k], {}) for k in (a, b)]
+    *sides, w = keys
     lit = [
         st if towards_sun(st) is not None and {"azimuth", "elevation"} <= set(st) else None for st in sides
     ]

@@ -182,12 +182,11 @@ def _solve_states_on_engine(args, opts) -> int:
         return 1
     written = []
     for r in report.results:
-        src = folder / f"{r.name}.npz"
-        state = r.name[len(out.stem) + 1 :]
         if not r.name.startswith(f"{out.stem}-"):
             continue  # a state's own solve or the shared mesh
+        state = r.name[len(out.stem) + 1 :]
         p = _set_output(out, state)
-        shutil.copyfile(src, p)
+        shutil.copyfile(folder / f"{r.name}.npz", p)
         written.append({"state": state, "output": str(p), "status": r.status, "time_s": r.seconds})
     _emit(args, {"states": written, "workers": report.workers, "wall_s": report.wall_s})
     return 0
@@ -532,7 +531,7 @@ def build_parser() -> argparse.ArgumentParser:
     def solve_flags(sp):
         sp.add_argument(
             "--quality",
-            choices=["draft", "default", "fine", "final"],
+            choices=["draft", "default", "fine", "final"],  # QUALITY_PRESETS (not imported: start-up)
             help="a preset of the options below (SolveOptions.preset); flags given override it",
         )
         sp.add_argument("--max-depth", type=int, dest="max_depth", help="deepest quad-tree level (default 6)")
