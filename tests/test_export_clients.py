@@ -179,13 +179,14 @@ def _jobs(paths: dict, plugin=None) -> list[dict]:
 @pytest.fixture(scope="module")
 def three_images(bakes, tmp_path_factory):
     """({(model, kind): (three.js image (h, w, 3) uint8, info)}, {(kind, model): GLB path}), kind
-    "cracked" (``export_glb``'s defaults: no T-junction split, colours clipped as they are), "default"
-    (as ``iat bake`` writes it: watertight, match_clip) or "layered" (the same, ``--layered``, drawn
-    with only the shipped plugin); all in one browser session."""
+    "cracked" (``watertight=False, match_clip=False``: no T-junction split, colours clipped as
+    they are), "default" (as ``iat bake`` writes it: watertight, match_clip) or "layered" (the
+    same, ``--layered``, drawn with only the shipped plugin); all in one browser session."""
     d = tmp_path_factory.mktemp("three")
     files = {}
     for n, (scene, bk, _) in bakes.items():
-        files["cracked", n] = export_glb(bk, d / f"{n}_cracked.glb", scene)
+        raw = {"watertight": False, "match_clip": False}
+        files["cracked", n] = export_glb(bk, d / f"{n}_cracked.glb", scene, **raw)
         files["default", n] = export_glb(bk, d / f"{n}.glb", scene, watertight=True, match_clip=True)
         files["layered", n] = export_glb(
             bk, d / f"{n}_layered.glb", scene, layered=True, watertight=True, match_clip=True

@@ -541,16 +541,17 @@ def test_exported_glb_validates_loads_and_draws_like_iat_mode(name, threshold, r
     bk = Baker(sol, scene).bake(BakePolicy(threshold=threshold, detail=False))
     path = export_glb(bk, tmp_path / f"{name}.glb", scene)
     s = radiance_scale(bk)
-    # trimesh reads it back: every triangle is there
+    # trimesh reads it back: every triangle is there (and those the T-junction split adds)
     tm = trimesh.load(path, force="scene")
-    assert sum(len(g.faces) for g in tm.geometry.values()) == bk.memory.triangles
+    faces = sum(len(g.faces) for g in tm.geometry.values())
+    assert faces >= bk.memory.triangles
     # our drawer against IAT mode
     renderer.set_baked(bk)
     iat = renderer.render(cam, SIZE, mode="iat")
     view = GlbView(path, renderer.ctx)
     try:
         img = view.render(cam, SIZE)
-        assert view.triangles == bk.memory.triangles
+        assert view.triangles == faces
     finally:
         view.release()
     at_file = psnr8(img, iat, 1.0 / s)  # the exposure the file is written for: radiance_scale -> white

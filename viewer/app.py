@@ -258,9 +258,11 @@ class ViewerApp:
         try:
             r.set_scene(opened.scene)
             r.set_sky(opened.scene.sky)  # the model's own sky behind it
-            r.set_solution(opened.solution)
+            if opened.solution is not None:
+                r.set_solution(opened.solution)
             if opened.baked is not None:
                 r.set_baked(opened.baked)
+            self.view3d.show_export(opened.export)
         except Exception as e:
             s.messages.set_error(f"{opened.path}: cannot show it: {error_text(e)}")
             self._restore()
@@ -274,9 +276,8 @@ class ViewerApp:
         s.requests.auto_exposure = True
         s.model.scene, s.model.solution, s.model.baker = opened.scene, opened.solution, opened.baker
         s.model.baked = opened.baked
-        s.jobs.bake_worker = BakeWorker(
-            opened.baker, warm_from=opened.policy if opened.baked is not None else None
-        )
+        warm = opened.policy if opened.baked is not None else None
+        s.jobs.bake_worker = BakeWorker(opened.baker, warm_from=warm) if opened.baker is not None else None
         s.jobs.requested_policy = opened.policy
         s.model.solve_seconds = opened.solve_seconds
         s.model.from_cache = opened.from_cache
@@ -301,11 +302,7 @@ class ViewerApp:
         s.paths.selected = next(iter(s.paths.named), "")
         self._reset_lighting(opened)
         freeze_heap()
-        what = "cached solution" if opened.from_cache else f"solved in {opened.solve_seconds:.1f} s"
-        n = opened.scene.n_patches
-        s.messages.set_status(
-            f"opened {opened.path} ({n} patches, {s.model.mesh_triangles:,} mesh triangles, {what})"
-        )
+        s.messages.set_status(opened.status(s.model.mesh_triangles))
 
     def _reset_lighting(self, opened: Opened) -> None:
         """A new model: a fresh light editor, background re-solve and day-cycle state."""
@@ -318,8 +315,9 @@ class ViewerApp:
             s.lighting.relighter.close(5.0)
         if s.lighting.set_job is not None:
             s.lighting.set_job.cancel()
-        s.lighting.editor = LightEditor(opened.scene)
-        s.lighting.relighter = ProgressRelighter(opened.solution, opened.scene)
+        lit = opened.solution is not None  # an exported bake has its light in its textures
+        s.lighting.editor = LightEditor(opened.scene) if lit else None
+        s.lighting.relighter = ProgressRelighter(opened.solution, opened.scene) if lit else None
         (
             s.lighting.relight_version,
             s.lighting.relights,
@@ -630,7 +628,7 @@ class ViewerApp:
             baked = baked.blend(*s.lighting.day_blend())
         self._in_background(
             f"exported the bake to {path}",
-            lambda: export_glb(baked, path, scene, watertight=True, match_clip=True),  # as iat bake writes it
+            lambda: export_glb(baked, path, scene),
         )
 
     def _in_background(self, done: str, fn) -> None:
@@ -691,7 +689,7 @@ class ViewerApp:
         cam = s.view.camera if s.view.camera is not None else (s.view.nav.camera if s.view.nav else None)
         if mode is not None and vp is not None and cam is not None and s.requests.auto_exposure:
             s.requests.auto_exposure = False
-            auto_exposure(s, self.renderer, cam, mode, vp)
+            auto_exposure(s, self.view3d, cam, mode, vp)
         self.view3d.draw(s, mode, vp, cam)
         if mode is None or vp is None or cam is None:
             return

@@ -6,7 +6,9 @@ holds ``result`` or ``error`` (one line for the user, :func:`error_text`).
 
 - :class:`OpenJob` loads a model or solution, solves a model that has none (progress, ETA,
   cancel; solutions are cached under :func:`iat.radiosity.cache.cache_dir`), builds the
-  :class:`~iat.bake.baker.Baker` and makes the first bake: an :class:`Opened`;
+  :class:`~iat.bake.baker.Baker` and makes the first bake: an :class:`Opened`. A GLB that
+  ``iat bake`` wrote is not solved: it is read as it is (:func:`iat.render.glb_view.load_glb`)
+  and shown as baked;
 - :class:`SetJob` solves the model's lighting states on one mesh for the day-cycle slider.
 
 The re-bakes run on :class:`viewer.bake_worker.BakeWorker`, the re-solves after light edits on
@@ -102,18 +104,34 @@ class _Job:
 
 @dataclass
 class Opened:
-    """A model or solution ready to show (made by :class:`OpenJob`)."""
+    """A model or solution ready to show (made by :class:`OpenJob`).
+
+    export : for a GLB that ``iat bake`` wrote, its :class:`~iat.render.glb_view.GlbDocument` (drawn
+    as baked; ``solution``, ``baker`` and ``baked`` are None, ``scene`` is its geometry and cameras)
+    """
 
     path: str
     scene: Any
     solution: Any
-    baker: Baker
+    baker: Baker | None
     baked: Any
     policy: BakePolicy
     solve_seconds: float = 0.0
     from_cache: str = ""
     bake_seconds: float = 0.0
     bake_error: str | None = None
+    export: Any = None
+
+    def status(self, mesh_triangles: int) -> str:
+        """The status line once shown."""
+        if self.export is not None:
+            return (
+                f"opened {self.path}: an exported bake ({self.export.triangles:,} triangles), drawn as the "
+                "file stores it; open its model to tune or relight it"
+            )
+        what = "cached solution" if self.from_cache else f"solved in {self.solve_seconds:.1f} s"
+        n = self.scene.n_patches
+        return f"opened {self.path} ({n} patches, {mesh_triangles:,} mesh triangles, {what})"
 
 
 class OpenJob(_Job):
@@ -164,10 +182,13 @@ class OpenJob(_Job):
         from iat.io.load import load_scene
         from iat.radiosity import solve
         from iat.radiosity.inputs import is_solution_path, open_solution
+        from iat.render.glb_view import is_iat_export
 
         p = Path(self.path)
         if not p.exists():
             raise LoadError("no such file", p)
+        if is_iat_export(p):
+            return self._open_export(p)
         solve_seconds, cached = 0.0, ""
         if is_solution_path(p):
             self.message = "loading solution"
@@ -222,6 +243,19 @@ class OpenJob(_Job):
             bake_seconds=time.perf_counter() - t0,
             bake_error=bake_error,
         )
+
+    def _open_export(self, p: Path) -> Opened:
+        """An exported bake: its geometry and cameras as a scene, its primitives and textures to draw."""
+        from iat.io.load import load_scene
+        from iat.render.glb_view import load_glb
+
+        self.message = "loading exported bake"
+        self.load_started = time.perf_counter()
+        scene = load_scene(p, progress=self.load_progress)
+        doc = load_glb(p)
+        if self._cancel.is_set():
+            raise Cancelled("cancelled")
+        return Opened(self.path, scene, None, None, None, self.policy, export=doc)
 
 
 # -- the day cycle's solve ---------------------------------------------------------------------------

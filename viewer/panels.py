@@ -396,7 +396,7 @@ def _light_label(k: int, lt) -> str:
 def lighting_panel(state: AppState) -> None:
     ed = state.lighting.editor
     if ed is None:
-        imgui.text_disabled("nothing open yet")
+        imgui.text_disabled("an exported bake: lit by its textures" if state.model.path else "nothing open")
         return
     _, state.lighting.show_lights = imgui.checkbox("Show lights", state.lighting.show_lights)
     _help("Light markers in the view: click one to select it, drag it to move it at its height.")

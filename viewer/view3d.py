@@ -11,6 +11,9 @@ on that image is copied to the window (``glBlitFramebuffer``: one copy of the vi
 Panels, sliders and menus that change nothing in the view therefore cost no 3D drawing, and a
 moving camera pays nothing for the cache.
 
+A GLB that ``iat bake`` wrote is drawn as the file stores it (:meth:`View3D.show_export`: a
+:class:`~iat.render.glb_view.GlbView` on the window's context), whatever the mode.
+
 Counts for the Stats panel and the tests: :attr:`View3D.redraws` (3D draws) and
 :attr:`View3D.blits` (frames that only copied).
 """
@@ -75,6 +78,18 @@ class View3D:
         self._disable = _gl_function("glDisable", u)
         self.draw_error = ""
         self._dirty = True
+        self.export = None  # a GlbView of an exported bake, drawn instead of the renderer
+
+    def show_export(self, document) -> None:
+        """Draw ``document`` (a :class:`~iat.render.glb_view.GlbDocument`) from now on; None: the
+        renderer again. The previous file's GL objects are freed."""
+        from iat.render.glb_view import GlbView
+
+        view = GlbView(document, self.ctx) if document is not None else None
+        if self.export is not None:
+            self.export.release()
+        self.export = view
+        self.invalidate()
 
     # -- state ---------------------------------------------------------------------------------
     def invalidate(self) -> None:
@@ -87,6 +102,7 @@ class View3D:
         return self._dirty
 
     def release(self) -> None:
+        """Free the offscreen image (the export's view stays: :meth:`show_export` ``(None)`` frees it)."""
         for o in (self._fbo, self._color, self._depth):
             if o is not None:
                 try:
@@ -172,18 +188,21 @@ class View3D:
     def _render(self, state: AppState, cam, mode: str, target, viewport) -> None:
         t0 = time.perf_counter()
         try:
-            self.renderer.draw(
-                cam,
-                mode,
-                viewport=viewport,
-                exposure=state.tuning.exposure,
-                tonemap=state.view.tonemap,
-                split=state.view.split,
-                diff_gain=state.view.diff_gain,
-                target=target,
-            )
-            state.stats.render = self.renderer.stats()
-            state.stats.lod = self.renderer.lod_info()
+            if self.export is not None:
+                self._draw_export(state, cam, target, viewport)
+            else:
+                self.renderer.draw(
+                    cam,
+                    mode,
+                    viewport=viewport,
+                    exposure=state.tuning.exposure,
+                    tonemap=state.view.tonemap,
+                    split=state.view.split,
+                    diff_gain=state.view.diff_gain,
+                    target=target,
+                )
+                state.stats.render = self.renderer.stats()
+                state.stats.lod = self.renderer.lod_info()
             self.draw_error = ""
         except Exception as e:
             msg = f"cannot draw: {error_text(e)}"
@@ -192,6 +211,20 @@ class View3D:
                 state.messages.set_error(msg)
         self.last_draw_ms = (time.perf_counter() - t0) * 1000.0
         self.redraws += 1
+
+    def _draw_export(self, state: AppState, cam, target, viewport) -> None:
+        x, y, w, h = (int(v) for v in viewport)
+        target.use()
+        target.clear(*BACKGROUND, 1.0, depth=1.0, viewport=(x, y, w, h))
+        self.ctx.viewport = (x, y, w, h)
+        self.export.draw(cam, (w, h), exposure=state.tuning.exposure, tonemap=state.view.tonemap)
+        state.stats.render = {"triangles": self.export.triangles, "draw_calls": self.export.draw_calls}
+
+    def render(self, cam, size: tuple[int, int], mode: str) -> np.ndarray:
+        """``(h, w, 3) float32`` linear radiance of what the view shows in ``mode``, drawn offscreen."""
+        if self.export is not None:
+            return self.export.render(cam, size)
+        return self.renderer.render(cam, size=size, mode=mode)
 
     def _copy_to_screen(self, fbo, x: int, y: int, w: int, h: int) -> None:
         if self._blit is not None and self._bind is not None:
@@ -233,7 +266,7 @@ def screenshot(state: AppState, view: View3D, vp, mode: str, directory: Path) ->
         s.messages.set_error(f"cannot write the screenshot {path}: {error_text(e)}")
 
 
-def auto_exposure(state: AppState, renderer, cam, mode: str, vp) -> None:
+def auto_exposure(state: AppState, view: View3D, cam, mode: str, vp) -> None:
     """Set ``state.tuning.exposure`` to what ``iat render`` would pick for this view:
     :func:`iat.color.auto_exposure` of its linear radiance, drawn offscreen at the view's size (the
     split and difference views are exposed as the mesh)."""
@@ -243,7 +276,7 @@ def auto_exposure(state: AppState, renderer, cam, mode: str, vp) -> None:
     scale = min(1.0, 512.0 / max(w, h))  # the 99th percentile does not need every pixel
     size = (max(int(round(w * scale)), 1), max(int(round(h * scale)), 1))
     try:
-        img = renderer.render(cam, size=size, mode=mode if mode in ("mesh", "iat", "preview") else "mesh")
+        img = view.render(cam, size, mode if mode in ("mesh", "iat", "preview") else "mesh")
     except Exception as e:
         state.messages.set_error(f"cannot measure the exposure: {error_text(e)}")
         return

@@ -1,7 +1,7 @@
 """Baked → GLB that opens in any glTF viewer.
 
-What is written (``export_glb(baked, path, scene=None, layered=False, watertight=False,
-match_clip=False, hdr=False)``; ``iat bake`` passes ``watertight=True, match_clip=True``; how
+What is written (``export_glb(baked, path, scene=None, layered=False, watertight=True,
+match_clip=True, hdr=False)``, as ``iat bake``, the viewer and ``iat batch`` write it; how
 clients use the files: docs/export.md):
 
 - **Watertight** (``watertight=True``): every triangle edge of either part is split at the
@@ -351,19 +351,20 @@ def export_glb(
     path,
     scene=None,
     layered: bool = False,
-    watertight: bool = False,
-    match_clip: bool = False,
+    watertight: bool = True,
+    match_clip: bool = True,
     hdr: bool = False,
 ) -> Path:
     """Write ``baked`` as a GLB at ``path`` (atomically); returns the path. See the module docstring.
 
     scene : the Scene (albedo of detail materials, names); optional
     layered : write detail (albedo) on TEXCOORD_0 and illumination on TEXCOORD_1 (see above)
-    watertight : split triangle edges at T-junctions (:func:`watertight_parts`; ``iat bake`` does)
+    watertight : split triangle edges at T-junctions (:func:`watertight_parts`); False keeps the
+        baked triangles as they are
     match_clip : clients clip vertex colours and texels to 1 before interpolating, our renderer after:
         cut mesh-part triangles where a colour channel crosses 1 (:mod:`iat.export.isoclip`) and place
         the 8-bit texels around values above 1 by least squares (:mod:`iat.export.texels`), so that
-        clients show what our renderer shows (``iat bake`` does)
+        clients show what our renderer shows; False writes colours and texels clipped as they are
     hdr : with ``layered``, the lightmaps as RGBM PNGs (alpha = multiplier, up to
         :data:`iat.export.texels.RGBM_RANGE` x white), decoded by the shipped three.js plugin and
         Blender script; ``extras.iat_illumination.encoding = "rgbm"``

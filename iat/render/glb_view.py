@@ -454,8 +454,9 @@ class GlbView:
             else:
                 self._prog[name].value = value
 
-    def draw(self, camera, size: tuple[int, int]) -> None:
-        """Draw into the bound framebuffer (viewport ``(0, 0, w, h)``); linear radiance, no tone map."""
+    def draw(self, camera, size: tuple[int, int], exposure: float = 1.0, tonemap: bool = False) -> None:
+        """Draw into the bound framebuffer at its viewport, whose aspect is ``size`` (w, h): exposure x
+        linear radiance, or with ``tonemap`` clamped and sRGB-encoded for a display framebuffer."""
         mgl, ctx = self._mgl, self.ctx
         w, h = (int(v) for v in size)
         clip = np.asarray(camera.clip_from_world(w / h), dtype=np.float64).T.astype("f4").tobytes()
@@ -464,6 +465,8 @@ class GlbView:
         self._set("clip_from_world", clip)
         self._set("base_tex", 0)
         self._set("ill_tex", 1)
+        self._set("exposure", float(exposure))
+        self._set("tonemap", bool(tonemap))
         try:
             for vao, p in self._draws:
                 base = self._textures.get(p.base_texture) if p.base_texture is not None else None

@@ -412,8 +412,8 @@ def _bake_and_render(sol, scene, bake, render) -> dict:
 
         baked = Baker(sol, scene).bake(policy)
         with tempfile.TemporaryDirectory() as d:
-            glb = export_glb(baked, Path(d) / "out.glb", scene=scene, watertight=True, match_clip=True)
-            out["glb"] = glb.read_bytes()  # as iat bake writes it
+            glb = export_glb(baked, Path(d) / "out.glb", scene=scene)
+            out["glb"] = glb.read_bytes()
     if render is not None:
         from iat.render.renderer import Renderer
 

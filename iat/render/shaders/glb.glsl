@@ -1,7 +1,7 @@
 // GLB view (iat.render.glb_view): an exported glTF drawn unlit, as a viewer does with
 // KHR_materials_unlit: baseColorFactor x baseColorTexture x COLOR_0 (x the layered export's
 // illumination texture) x radiance_scale. Textures are sRGB (decoded by the GPU); the output is
-// linear radiance (a float target, no tone map).
+// exposure x linear radiance, sRGB-encoded when tonemap is set (the viewer's window).
 
 #if defined VERTEX_SHADER
 uniform mat4 clip_from_world;
@@ -30,10 +30,13 @@ uniform bvec2 base_mirror;    // MIRRORED_REPEAT on s / t (the texture itself re
 uniform bvec2 ill_mirror;
 uniform vec4 factor;          // baseColorFactor
 uniform float radiance_scale;
+uniform float exposure;
+uniform bool tonemap;
 in vec4 v_color;
 in vec2 v_uv0;
 in vec2 v_uv1;
 out vec4 frag_color;
+#include "color.glsl"
 vec2 fold(vec2 uv, bvec2 m) {
     vec2 f = 1.0 - abs(mod(uv, 2.0) - 1.0);
     return vec2(m.x ? f.x : uv.x, m.y ? f.y : uv.y);
@@ -47,6 +50,7 @@ void main() {
         vec4 t = texture(ill_tex, fold(ill_set == 1 ? v_uv1 : v_uv0, ill_mirror));
         c.rgb *= ill_rgbm > 0.0 ? t.rgb * t.a * ill_rgbm : t.rgb;
     }
-    frag_color = vec4(c.rgb * radiance_scale, 1.0);
+    vec3 r = c.rgb * radiance_scale * exposure;
+    frag_color = vec4(tonemap ? srgb_encode(r) : r, 1.0);
 }
 #endif
