@@ -245,6 +245,16 @@ def test_solve_with_sun_and_sky(tmp_path):
     assert r.returncode == 0, r.stderr
     stats = json.loads(r.stdout)
     assert stats["received_power"] > 0 and stats["shots"] > 0 and stats["sources"]["daylight"]
+    # the solution reopens with the sun and the sky it was solved under (the file has neither)
+    from iat.radiosity.inputs import open_solution
+
+    scene, sol = open_solution(out)
+    (sun,) = scene.lights
+    assert sun.kind == "directional" and sun.direction.tolist() == stats["sources"]["suns"][0]["direction"]
+    assert sun.radiant_intensity.tolist() == pytest.approx(stats["sources"]["suns"][0]["radiant_intensity"])
+    assert scene.sky.kind == "preetham" and scene.sky.turbidity == 3.0
+    assert scene.sky.radiance.tolist() == pytest.approx(stats["sources"]["sky"]["radiance"])
+    assert scene.sky.sun_direction @ -sun.direction == pytest.approx(1.0)
     r = iat("solve", obj, "-o", out, "--sun", "48.14,11.58,2026-06-21T23:30,Europe/Berlin")
     assert r.returncode == 2 and "below the horizon" in r.stderr
     r = iat("solve", obj, "-o", out, "--sky", "cloudy")

@@ -138,6 +138,18 @@ class Sky:
             raise OptionError(f"sky radiance must be finite and >= 0, got {sky.radiance.tolist()}")
         return sky
 
+    def spec(self) -> dict | None:
+        """The JSON spec :meth:`from_spec` reads back; None for an "hdr" sky (its image is no spec)."""
+        if self.kind == "hdr":
+            return None
+        return {
+            "kind": self.kind,
+            "radiance": [float(x) for x in self.radiance],
+            "sun_direction": [float(x) for x in self.sun_direction],
+            "turbidity": float(self.turbidity),
+            "ground": [float(x) for x in self.ground],
+        }
+
 
 #: the keys of a sky's JSON spec (:meth:`Sky.from_spec`)
 SKY_SPEC_KEYS = ("kind", "radiance", "sun_direction", "turbidity", "ground")

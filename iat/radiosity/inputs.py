@@ -23,8 +23,10 @@ def open_solution(path: str | Path, options=None, progress=None, load_progress=N
     """(scene, solution) from a solution file or a model file.
 
     A solution's model is reloaded from ``solution.model_path`` (for materials
-    and detail textures); when that file is gone the scene is rebuilt from the
-    solution's own patches, without detail textures.
+    and detail textures), with the suns and the sky the solve had
+    (:func:`restore_daylight`: ``iat solve --sun/--sky`` puts them in no file); when
+    that file is gone the scene is rebuilt from the solution's own patches, without
+    detail textures.
 
     progress : the solve's ``progress(fraction, message) -> bool`` (a model only).
     load_progress : the model load's (:func:`iat.io.load.load_scene`); False cancels.
@@ -48,12 +50,38 @@ def open_solution(path: str | Path, options=None, progress=None, load_progress=N
                 )
         else:
             scene = scene_from_solution(sol)
+        restore_daylight(scene, sol.stats.get("sources") if isinstance(sol.stats, dict) else None)
         return scene, sol
     if not path.exists():
         raise LoadError("file not found", path)
     options = options or SolveOptions()
     scene = load_scene(path, progress=load_progress, **options.load_kwargs())
     return scene, solve(scene, options, progress=progress)
+
+
+def restore_daylight(scene: Scene, record: dict | None) -> None:
+    """Give ``scene`` the suns and the sky of a solve's sources record (``stats["sources"]``,
+    :func:`iat.radiosity.sources.sources_record`), in place: its directional lights become the
+    recorded suns, and a recorded sky replaces its own. Older records (no such keys) change nothing."""
+    from iat.io.scene import Light, Sky
+
+    if not record:
+        return
+    if "suns" in record:
+        suns = [
+            Light(
+                kind="directional",
+                name=d.get("name", ""),
+                direction=d["direction"],
+                color=d["radiant_intensity"],
+                intensity=1.0,
+                angular_diameter=float(d["angular_diameter"]),
+            )
+            for d in record["suns"]
+        ]
+        scene.lights = [lt for lt in scene.lights if lt.kind != "directional"] + suns
+    if record.get("sky") is not None:
+        scene.sky = Sky.from_spec(record["sky"])
 
 
 def scene_from_solution(sol) -> Scene:

@@ -11,11 +11,25 @@ import numpy as np
 def sources_record(ctx) -> dict:
     """JSON-able description of the light sources of a solve on ``ctx`` (a
     :class:`iat.radiosity.context.Context`): its point / spot lights and its emitting patches
-    (``[patch, r, g, b]``, emitted radiance), and whether a sun or a sky lit it (``daylight``)."""
+    (``[patch, r, g, b]``, emitted radiance), whether a sun or a sky lit it (``daylight``), its suns
+    (:func:`sun_record`) and its sky (:meth:`iat.io.scene.Sky.spec`, None without one or for an HDR
+    image): what a scene reloaded from the model lacks when ``--sun`` / ``--sky`` gave them."""
     return {
         "lights": [light_record(lt) for lt in ctx.lights],
         "emitters": [[int(p), *(float(x) for x in ctx.emission[p])] for p in ctx.emitters],
         "daylight": bool(ctx.suns or ctx.sky is not None),
+        "suns": [sun_record(lt) for lt in ctx.suns],
+        "sky": ctx.sky.spec() if ctx.sky is not None else None,
+    }
+
+
+def sun_record(lt) -> dict:
+    """JSON-able description of a directional light (direction its light travels, W/m² per colour)."""
+    return {
+        "name": str(lt.name),
+        "direction": [float(x) for x in lt.direction],
+        "radiant_intensity": [float(x) for x in lt.radiant_intensity],
+        "angular_diameter": float(lt.angular_diameter),
     }
 
 
