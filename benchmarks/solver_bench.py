@@ -1,7 +1,7 @@
 # ruff: noqa: E501
 """Solver benchmarks (issue 4): accuracy per element, ray throughput, the Cornell box goal.
 
-    .venv/bin/python benchmarks/solver_bench.py [adaptive] [shadow] [rays] [cornell] [speed]
+    .venv/bin/python benchmarks/solver_bench.py [adaptive] [shadow] [rays] [cornell] [quality] [speed]
         [--models a,b] [--before DIR]
 
 writes ``benchmarks/solver.json`` (merged with what is there) and ``benchmarks/solver.md``.
@@ -22,6 +22,9 @@ writes ``benchmarks/solver.json`` (merged with what is there) and ``benchmarks/s
   is interpolated (log elements against log error, between the two uniform solves that bracket
   it) and the ratio adaptive / uniform reported (goal <= 0.25). The uniform depth-6 row (the
   reference's mesh) shows the noise floor of a solve at the default samples.
+* **quality** -- each ``--quality`` level (``QUALITY_PRESETS``) on the Cornell box against the
+  4096-spp reference: solve time (best of 2, kernels loaded), vertices, the per-pixel and block
+  errors and the bias.
 * **shadow** -- the same comparison on a floor under a point light with an occluder (one hard
   shadow), by the surface error against uniform depth 7, every solve converged to 0.1 % without
   the ambient term (so the error is the mesh's).
@@ -73,15 +76,16 @@ REFERENCE = {"max_depth": 6, "criterion": "uniform", "min_element_size": 0.0, "s
 
 
 class Cornell:
-    """The Cornell box, its camera, its Mitsuba reference and a renderer (EGL)."""
+    """The Cornell box, its camera, its Mitsuba reference (``spp``, ``seed``: 512 / 1 is the issue-4
+    figures' reference, 4096 / 3 that of ``tests/test_reference_compare.py``) and a renderer (EGL)."""
 
-    def __init__(self):
+    def __init__(self, spp: int = 512, seed: int = 1):
         from iat.measure.reference import render_reference_cached
         from iat.render.renderer import Renderer
 
         self.scene = load_scene(ROOT / "sample_models" / "cornell_box.glb")
         self.camera = self.scene.default_camera()
-        self.ref = render_reference_cached(self.scene, self.camera, SIZE, spp=512, cache_dir=REFS, seed=1)
+        self.ref = render_reference_cached(self.scene, self.camera, SIZE, spp=spp, cache_dir=REFS, seed=seed)
         self.mask = smooth_lit_mask(self.ref)
         self.renderer = Renderer(None)
 
@@ -517,6 +521,25 @@ def run_cornell(options: dict | None = None, repeats: int = 2) -> dict:
     return res
 
 
+def run_quality(repeats: int = 2) -> list[dict]:
+    """Each ``--quality`` level on the Cornell box against the Mitsuba reference (best of ``repeats``)."""
+    from iat.radiosity.options import QUALITY_PRESETS
+
+    cb = Cornell(spp=4096, seed=3)
+    timed_solve(cb.scene, SolveOptions(max_depth=2))  # the kernels loaded before the first timing
+    rows = []
+    for level in QUALITY_PRESETS:
+        opts = SolveOptions.preset(level)
+        best = None
+        for _ in range(repeats):
+            sol, dt = timed_solve(cb.scene, opts)
+            best = dt if best is None else min(best, dt)
+        rows.append({"quality": level, "time_s": best, "vertices": len(sol.vert_key), **cb.errors(sol)})
+        print(rows[-1], flush=True)
+    cb.renderer.release()
+    return rows
+
+
 # -- output -------------------------------------------------------------------------------------
 def _f(x, nd=3):
     return "-" if x is None else (f"{x:.{nd}f}" if isinstance(x, float) else str(x))
@@ -620,6 +643,20 @@ def format_md(res: dict) -> str:
             f"bias {cb['bias']:+.1%}",
             "",
         ]
+    q = res.get("quality")
+    if q:
+        lines += [
+            "## Quality presets on the Cornell box (`--quality`)",
+            "",
+            "| quality | solve (best of 2) | vertices | per pixel | 8 x 8 blocks | bias |",
+            "|---|---|---|---|---|---|",
+        ]
+        lines += [
+            f"| {r['quality']} | {r['time_s']:.2f} s | {r['vertices']:,} | {r['rel_smooth']:.4f} | "
+            f"{r['rel_blocks']:.4f} | {r['bias']:+.1%} |"
+            for r in q
+        ]
+        lines.append("")
     return "\n".join(lines)
 
 
@@ -653,6 +690,8 @@ def main(argv=None) -> None:
         res["adaptive_shadow"] = run_adaptive_surface()
     if "rays" in parts:
         res.setdefault("rays", {}).update(run_rays(models))
+    if "quality" in parts:
+        res["quality"] = run_quality()
     if "speed" in parts:
         res["speed"] = run_speed(before, models if models != MODELS else ("cornell_box", "house"))
     OUT_JSON.write_text(json.dumps(res, indent=1))
