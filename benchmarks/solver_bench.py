@@ -90,8 +90,11 @@ class Cornell:
         self.renderer = Renderer(None)
 
     def image(self, sol) -> np.ndarray:
+        """The mesh image at ``SIZE``, box-filtered as the reference's pixels are."""
+        from iat.measure.reference import box_filtered_render
+
         self.renderer.set_solution(sol)
-        return self.renderer.render(self.camera, SIZE, mode="mesh").astype(np.float64)
+        return box_filtered_render(self.renderer, self.camera, SIZE, "mesh")
 
     def errors(self, sol, ref: np.ndarray | None = None) -> dict:
         return reference_errors(self.image(sol), self.ref if ref is None else ref, self.mask)

@@ -38,11 +38,12 @@ def test_presets_and_overrides(tmp_path):
 
 
 def test_error_falls_from_draft_to_final(egl_ctx):
-    """Measured (2 cores at load ~10): draft 0.041, default 0.0325, fine 0.027, final 0.025."""
+    """Measured, box-filtered as the reference's pixels: draft 0.0281, default 0.0190, final 0.0117 (the
+    issue's goal: <= 1.5 % at some preset; at pixel centres they read 0.041, 0.0325, 0.0254)."""
     pytest.importorskip("mitsuba")
     from iat.io.load import load_scene
     from iat.measure.metrics import reference_errors, smooth_lit_mask
-    from iat.measure.reference import render_reference_cached
+    from iat.measure.reference import box_filtered_render, render_reference_cached
     from iat.render.renderer import Renderer
 
     scene = load_scene(MODEL)
@@ -54,11 +55,10 @@ def test_error_falls_from_draft_to_final(egl_ctx):
     try:
         for quality in ("draft", "default", "final"):
             r.set_solution(solve(scene, SolveOptions.preset(quality)))
-            errors[quality] = reference_errors(r.render(camera, (96, 96), mode="mesh"), ref, mask)[
-                "rel_smooth"
-            ]
+            img = box_filtered_render(r, camera, (96, 96), "mesh")
+            errors[quality] = reference_errors(img, ref, mask)["rel_smooth"]
     finally:
         r.release()
     print(errors)
-    assert errors["draft"] < 0.05 and errors["final"] < 0.029
+    assert errors["draft"] < 0.04 and errors["final"] <= 0.015
     assert errors["draft"] > errors["default"] > errors["final"]
