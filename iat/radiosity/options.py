@@ -52,8 +52,8 @@ REFINE_SAMPLE_FACTOR = 2
 GAIN_LIMIT = 0.25
 #: changed sources' power, fraction of the new emitted power, above which ``resolve`` solves afresh (noise)
 RESOLVE_MAX_CHANGE = 1.0
-#: rays per vertex that measure the closure of its hemisphere for the ambient term, a count
-AMBIENT_RAYS = 16
+#: rays per vertex of the ambient term (the closure of its hemisphere, the unshot light it sees)
+AMBIENT_RAYS = 64
 #: upper bound of the measured reflected fraction r in the ambient term (keeps r / (1 - r) finite)
 MAX_REFLECTANCE = 0.95
 #: stage C refines once the unshot power is below this times ``convergence`` of the received power

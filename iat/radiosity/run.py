@@ -441,34 +441,53 @@ class SolveRun:
             pass
 
     # -- the result ---------------------------------------------------------------
-    def closure(self) -> np.ndarray:
-        """(V,) fraction of each vertex's cosine-weighted hemisphere that meets the scene (1 in
-        a closed room, less near an opening), from ``AMBIENT_RAYS`` directions in one pattern for
-        all vertices (so it varies smoothly)."""
-        ctx, geo = self.ctx, self.mesh["geo"]
+    def gathered_unshot(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What each vertex sees over ``AMBIENT_RAYS`` cosine-distributed directions (one pattern for
+        all vertices, so it varies smoothly) of the patches the rays meet first: ``seen`` (V, 3) the
+        mean unshot radiance (a patch's mean times its shot gain, on its front; 0 where a ray leaves
+        the scene or meets a back face), ``around`` (V, 3) the mean albedo seen the same way, and
+        ``closure`` (V,) the fraction of rays that meet the scene (1 in a closed room)."""
+        ctx, mesh, geo = self.ctx, self.mesh, self.mesh["geo"]
         m = pattern_side(AMBIENT_RAYS)
         pat = ctx.pattern(self.P, m, 0)  # (a patch index no shooter has)
         dx, dy = concentric_disk(pat[:, 0], pat[:, 1])
         dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
-        out = np.zeros(len(geo.key))
-        for a in range(0, len(geo.key), GATHER_BLOCK):
+        patch_unshot = np.asarray(mesh["M"] @ self.unshot) * self.gain[:, None]  # (P, 3)
+        tri_patch = self.scene.world_triangle_patch()[self.vis.opaque]
+        albedo = np.asarray(ctx.albedo, dtype=np.float64)
+        n, k = len(geo.key), len(pat)
+        seen, around, closure = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
+        for a in range(0, n, GATHER_BLOCK):
             sl = slice(a, a + GATHER_BLOCK)
             t1, t2 = ctx.tangent[geo.patch[sl], 0], ctx.tangent[geo.patch[sl], 1]
             w = (
                 dx[None, :, None] * t1[:, None]
                 + dy[None, :, None] * t2[:, None]
                 + dz[None, :, None] * geo.normal[sl][:, None]
-            )
-            o = np.repeat(geo.origin[sl], len(pat), axis=0)
-            hit = self.vis.occluded(o, w.reshape(-1, 3), np.full(len(o), 4.0 * ctx.scale))
-            out[sl] = hit.reshape(-1, len(pat)).mean(axis=1)
+            ).reshape(-1, 3)
+            o = np.repeat(geo.origin[sl], k, axis=0)
+            tri = self.vis.first_hit(o, w, np.full(len(o), 4.0 * ctx.scale))
+            hp = tri_patch[np.maximum(tri, 0)]
+            front = (tri >= 0) & (np.einsum("nc,nc->n", w, ctx.normal[hp]) < 0)
+            seen[sl] = np.where(front[:, None], patch_unshot[hp], 0.0).reshape(-1, k, 3).mean(axis=1)
+            around[sl] = np.where(front[:, None], albedo[hp], 0.0).reshape(-1, k, 3).mean(axis=1)
+            closure[sl] = (tri >= 0).reshape(-1, k).mean(axis=1)
             self.check()
-        return out
+        return seen, around, closure
 
     def ambient(self, fallback_reflectance=None) -> tuple[np.ndarray, np.ndarray]:
-        """(V, 3) reflected radiance standing for the unshot light's later bounces: a uniform
-        incoming radiance ``E`` times each vertex's albedo and :meth:`closure`; and the (3,)
-        reflected fraction r it was derived from (:mod:`iat.radiosity.solver`, stage D)."""
+        """(V, 3) reflected radiance standing for the unshot light's later bounces, and the (3,)
+        reflected fraction r of the last half of the shots it was derived from
+        (:mod:`iat.radiosity.solver`, stage D). Per vertex the larger of
+
+        - the uniform term: an incoming radiance ``E`` times the vertex's albedo and closure, where
+          ``E`` spreads the unshot power's later reflected power ``phi_u r / (1 - r)`` over the
+          scene (right in a room: the remainder is everywhere);
+        - the local term: its albedo times the unshot light it sees (:meth:`gathered_unshot`, its
+          first bounce where it falls) times ``1 / (1 - a)`` for the bounces after, ``a`` the albedo
+          its surroundings show it: an interior of a sunlit building gets the bounces of its own
+          sunlit floor, which the uniform term spreads over the whole exterior.
+        """
         ctx, mesh = self.ctx, self.mesh
         log = self.shot_log[len(self.shot_log) // 2 :]
         if log:
@@ -483,10 +502,12 @@ class SolveRun:
         phi_u = np.pi * (ctx.area[:, None] * (mesh["M"] @ self.unshot)).sum(axis=0)
         if not np.any(phi_u):
             return np.zeros((len(self.keys), 3)), r
-        weight = mesh["rho"] * self.closure()[:, None]  # reflected per unit of incoming E
+        seen, around, closure = self.gathered_unshot()
+        weight = mesh["rho"] * closure[:, None]  # reflected per unit of incoming E
         denom = np.pi * (ctx.area[:, None] * (mesh["M"] @ weight)).sum(axis=0)
         e = np.where(denom > 0, phi_u * r / (1.0 - r) / np.where(denom > 0, denom, 1.0), 0.0)
-        return weight * e, r
+        local = mesh["rho"] * seen / (1.0 - np.clip(around, 0.0, MAX_REFLECTANCE))
+        return np.maximum(weight * e, local), r
 
     def finish(self, mode="solve", fallback_reflectance=None, extra=None) -> Solution:
         ctx, opts = self.ctx, self.opts

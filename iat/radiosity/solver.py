@@ -70,7 +70,14 @@ D. **Ambient term** (``ambient``, after Cohen et al. 1988): the light still
    1 in a closed room, less near an opening): the energy of the result is right,
    only the distribution of the last ``convergence`` of the light is
    approximated (in the house, stopping at 5 % with the ambient term is 1.2 %
-   from the converged solution on average, against 4.7 % without it).
+   from the converged solution on average, against 4.7 % without it). Where it is
+   larger, a vertex takes instead the local term: its albedo times the unshot
+   radiance its hemisphere sees (the same rays, each the mean of the patch it meets),
+   times ``1 / (1 - a)``, ``a`` the albedo it sees. In an open scene the remainder
+   sits where the light came in: a sunlit building's interior holds its sunlit
+   floor's unshot light, which the uniform term spread over the whole exterior
+   (the IFC house's interior at 5 %: 0.48 of a solve converged to 0.2 % with the
+   uniform term alone, 0.95 with the local one).
 
 Because every vertex, early or late, receives every shot, the final values are
 unbiased with respect to the mesh: no late vertex misses early shots, the trap

@@ -49,6 +49,8 @@ class Visibility:
             )
             self._glass_tau = tau[glass]
             tris = tris[~glass]
+        #: (T_opaque,) int64 index into ``triangles`` of each opaque triangle (what :meth:`first_hit` numbers)
+        self.opaque = np.flatnonzero(~glass)
         self._scene = rtcs.EmbreeScene()
         self._n_tris = len(tris)
         if self._n_tris:
@@ -90,15 +92,11 @@ class Visibility:
         t : (n,) float32."""
         return self._scene.run(o, d, dists=t, query="OCCLUDED")
 
-    def occluded(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray) -> np.ndarray:
-        """(n,) bool: True where something lies on the ray before ``tfar``.
-
-        origins : (n, 3) ray origins (already offset off the surface)
-        dirs : (n, 3) unit directions
-        tfar : (n,) distances along the ray beyond which hits are ignored
-        """
+    def _traced(self, query, origins, dirs, tfar, fill: int) -> np.ndarray:
+        """``query(o, d, t)`` (one embreex call) over chunks of the rays, spread over the threads
+        and counted in ``rays`` and ``seconds``; (n,) int of its answers (``fill`` for no scene)."""
         n = len(origins)
-        out = np.zeros(n, dtype=bool)
+        out = np.full(n, fill, dtype=np.int64)
         if n == 0 or self._n_tris == 0:
             with self._lock:
                 self.rays += n
@@ -111,16 +109,29 @@ class Visibility:
         bounds = list(range(0, n, c))
         if self._pool is None or len(bounds) == 1:
             for a in bounds:
-                out[a : a + c] = self.occluded_chunk(o[a : a + c], d[a : a + c], t[a : a + c]) == 0
+                out[a : a + c] = query(o[a : a + c], d[a : a + c], t[a : a + c])
         else:
-            chunk = self.occluded_chunk
-            futs = [(a, self._pool.submit(chunk, o[a : a + c], d[a : a + c], t[a : a + c])) for a in bounds]
+            futs = [(a, self._pool.submit(query, o[a : a + c], d[a : a + c], t[a : a + c])) for a in bounds]
             for a, f in futs:
-                out[a : a + c] = f.result() == 0
+                out[a : a + c] = f.result()
         with self._lock:
             self.rays += n
             self.seconds += time.perf_counter() - t0
         return out
+
+    def occluded(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray) -> np.ndarray:
+        """(n,) bool: True where something lies on the ray before ``tfar``.
+
+        origins : (n, 3) ray origins (already offset off the surface)
+        dirs : (n, 3) unit directions
+        tfar : (n,) distances along the ray beyond which hits are ignored
+        """
+        return self._traced(self.occluded_chunk, origins, dirs, tfar, 1) == 0
+
+    def first_hit(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray) -> np.ndarray:
+        """(n,) int64 the opaque triangle each ray meets first before ``tfar`` (an index into
+        :attr:`opaque`), -1 where none; arguments as :meth:`occluded`."""
+        return self._traced(lambda o, d, t: self._scene.run(o, d, dists=t), origins, dirs, tfar, -1)
 
     def visible(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray) -> np.ndarray:
         """(n,) float64 what of each ray's light gets through before ``tfar``: 0 when something
