@@ -22,9 +22,9 @@ writes ``benchmarks/solver.json`` (merged with what is there) and ``benchmarks/s
   is interpolated (log elements against log error, between the two uniform solves that bracket
   it) and the ratio adaptive / uniform reported (goal <= 0.25). The uniform depth-6 row (the
   reference's mesh) shows the noise floor of a solve at the default samples.
-* **quality** -- each ``--quality`` level (``QUALITY_PRESETS``) on the Cornell box against the
-  4096-spp reference: solve time (best of 2, kernels loaded), vertices, the per-pixel and block
-  errors and the bias.
+* **quality** -- each ``--quality`` level (``QUALITY_PRESETS``) on the Cornell box and on the
+  daylit room of ``tests/test_daylight.py`` against their 4096-spp references: solve time (best
+  of 2, kernels loaded), vertices, the per-pixel and block errors and the bias.
 * **shadow** -- the same comparison on a floor under a point light with an occluder (one hard
   shadow), by the surface error against uniform depth 7, every solve converged to 0.1 % without
   the ambient term (so the error is the mesh's).
@@ -543,6 +543,37 @@ def run_quality(repeats: int = 2) -> list[dict]:
     return rows
 
 
+def run_quality_daylit(repeats: int = 2) -> list[dict]:
+    """Each ``--quality`` level on the daylit room of ``tests/test_daylight.py`` (sun and sky through
+    a window) against its 4096-spp reference, on the pixels wholly on the model (the sky left out)."""
+    from iat.measure.reference import SUPERSAMPLE, box_filtered_render, render_reference_cached
+    from iat.radiosity.options import QUALITY_PRESETS
+    from iat.render.renderer import Renderer
+    from tests.support.daylight import CAMERA, daylit_room
+
+    scene, size, k = daylit_room(), (96, 72), SUPERSAMPLE
+    ref = render_reference_cached(scene, CAMERA, size, spp=4096, cache_dir=REFS, seed=3)
+    r = Renderer(None)
+    r.set_scene(scene)
+    covered = r.render(CAMERA, (size[0] * k, size[1] * k), mode="preview").max(axis=-1) > 0
+    surface = covered.reshape(size[1], k, size[0], k).all(axis=(1, 3))
+    ref = np.where(surface[..., None], ref, 0.0)
+    mask = smooth_lit_mask(ref) & surface
+    rows = []
+    for level in QUALITY_PRESETS:
+        opts = SolveOptions.preset(level)
+        best = None
+        for _ in range(repeats):
+            sol, dt = timed_solve(scene, opts)
+            best = dt if best is None else min(best, dt)
+        r.set_solution(sol)
+        e = reference_errors(box_filtered_render(r, CAMERA, size, "mesh"), ref, mask)
+        rows.append({"quality": level, "time_s": best, "vertices": len(sol.vert_key), **e})
+        print(rows[-1], flush=True)
+    r.release()
+    return rows
+
+
 # -- output -------------------------------------------------------------------------------------
 def _f(x, nd=3):
     return "-" if x is None else (f"{x:.{nd}f}" if isinstance(x, float) else str(x))
@@ -661,6 +692,19 @@ def format_md(res: dict) -> str:
             f"{r['rel_blocks']:.4f} | {r['bias']:+.1%} |"
             for r in q["rows"]
         ]
+        if q.get("daylit"):
+            lines += [
+                "",
+                "The daylit room of `tests/test_daylight.py` (sun and sky through a window; 96 x 72):",
+                "",
+                "| quality | solve (best of 2) | vertices | per pixel | 8 x 8 blocks | bias |",
+                "|---|---|---|---|---|---|",
+            ]
+            lines += [
+                f"| {r['quality']} | {r['time_s']:.2f} s | {r['vertices']:,} | {r['rel_smooth']:.4f} | "
+                f"{r['rel_blocks']:.4f} | {r['bias']:+.1%} |"
+                for r in q["daylit"]
+            ]
         lines.append("")
     return "\n".join(lines)
 
@@ -698,7 +742,7 @@ def main(argv=None) -> None:
     if "rays" in parts:
         res.setdefault("rays", {}).update(run_rays(models))
     if "quality" in parts:
-        res["quality"] = {**meta, "rows": run_quality()}
+        res["quality"] = {**meta, "rows": run_quality(), "daylit": run_quality_daylit()}
     if "speed" in parts:
         res["speed"] = run_speed(before, models if models != MODELS else ("cornell_box", "house"))
     OUT_JSON.write_text(json.dumps(res, indent=1))
