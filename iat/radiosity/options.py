@@ -52,6 +52,10 @@ REFINE_SAMPLE_FACTOR = 2
 GAIN_LIMIT = 0.25
 #: changed sources' power, fraction of the new emitted power, above which ``resolve`` solves afresh (noise)
 RESOLVE_MAX_CHANGE = 1.0
+#: a shooter whose field peaks above this times its mean gets more samples per side, up to
+#: PEAK_SAMPLE_LIMIT times (:func:`iat.radiosity.sampling.peak_factor`; the daylit room's sunlit floor)
+PEAK_RATIO = 4.0
+PEAK_SAMPLE_LIMIT = 3.0
 #: rays per vertex of the ambient term (the closure of its hemisphere, the unshot light it sees)
 AMBIENT_RAYS = 64
 #: upper bound of the measured reflected fraction r in the ambient term (keeps r / (1 - r) finite)

@@ -28,12 +28,14 @@ from iat.radiosity.options import (
     COARSE_SIZE,
     GATHER_BLOCK,
     MAX_REFLECTANCE,
+    PEAK_RATIO,
+    PEAK_SAMPLE_LIMIT,
     REFINE_SAMPLE_FACTOR,
     SHOT_FULL_SHARE,
     SHOT_SAMPLE_FACTOR,
     SolveOptions,
 )
-from iat.radiosity.sampling import Lattice, concentric_disk, luminance_of, pattern_side
+from iat.radiosity.sampling import Lattice, concentric_disk, luminance_of, pattern_side, peak_factor
 from iat.radiosity.solution import Solution
 from iat.radiosity.sources import sources_record
 from iat.radiosity.visibility import Visibility
@@ -269,10 +271,12 @@ class SolveRun:
                 a, b = mesh["start"][s], mesh["start"][s + 1]
                 field = mesh["lattice"].grid(s, self.unshot) * self.gain[s]
                 field_mean = np.ravel(mesh["M"][s] @ self.unshot) * self.gain[s]
-                # fewer samples for faint shots: their noise matters less (sqrt keeps power / m flat-ish)
+                # fewer samples for faint shots: their noise matters less (sqrt keeps power / m flat-ish);
+                # more for a concentrated field (a sunlit patch on a floor), whose points must land in it
                 m_hi = SHOT_SAMPLE_FACTOR * self.m_side
                 share = float(power[s]) / (SHOT_FULL_SHARE * self.power_ref)
                 m = max(1, min(m_hi, round(m_hi * math.sqrt(share))))
+                m = round(m * peak_factor(field, PEAK_RATIO, PEAK_SAMPLE_LIMIT))
                 dv = self.shot_gather(s, m, field, field_mean)
                 self.shot_index[s] += 1
                 self.shot_power[s] += float(power[s])
@@ -357,7 +361,11 @@ class SolveRun:
         ref = max(SHOT_FULL_SHARE * self.power_ref, 1e-300)
         m_ref = REFINE_SAMPLE_FACTOR * self.m_side
         m_src = {
-            int(p): max(1, min(m_ref, round(m_ref * math.sqrt(self.shot_power[p] / ref)))) for p in sources
+            int(p): round(
+                max(1, min(m_ref, round(m_ref * math.sqrt(self.shot_power[p] / ref))))
+                * peak_factor(grids[int(p)], PEAK_RATIO, PEAK_SAMPLE_LIMIT)
+            )
+            for p in sources
         }
         n_pass = self.stats["refine_passes"]
 

@@ -216,3 +216,16 @@ def pattern_side(samples: int) -> int:
 
 def luminance_of(x: np.ndarray) -> np.ndarray:
     return np.asarray(x) @ LUMINANCE_WEIGHTS
+
+
+def peak_factor(grid: np.ndarray, ratio: float, limit: float) -> float:
+    """How much more finely per side a shooter's field must be sampled than a smooth one:
+    ``sqrt(peak / mean / ratio)`` of its luminance, between 1 and ``limit`` (a sun patch on a floor
+    is a small bright part: the stratified points must land in it, or the shot's light is off by
+    as much; fields within ``ratio`` of their mean are sampled as before).
+    grid : a patch's lattice field, (..., 3) radiance."""
+    lum = np.abs(luminance_of(np.asarray(grid, dtype=np.float64).reshape(-1, 3)))
+    mean = float(lum.mean()) if lum.size else 0.0
+    if mean <= 0:
+        return 1.0
+    return float(min(max(np.sqrt(lum.max() / mean / ratio), 1.0), limit))
