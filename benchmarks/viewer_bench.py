@@ -6,17 +6,21 @@ What it measures, each in its own process (Mesa aborts when a window context and
 share one), rounds interleaved so that the load of a shared machine hits all alike:
 
 - **viewer**: ``iat view SOLUTION --play default --frames N --json`` on the house (the real app,
-  1280x800 window, panels docked, idling off): frame time = swap to swap, per mode;
+  1280x800 window, panels docked, idling off): frame time = swap to swap, per mode; and the same
+  with the panel cache off (``IAT_VIEWER_PANEL_CACHE=0``: every frame draws the panels, as before
+  :mod:`viewer.panel_cache`);
 - **offscreen**: what ``iat bench`` times (:class:`iat.tools.bench.FrameTimer`: ``Renderer.draw``
   into an RGBA8 framebuffer, ``ctx.finish()`` per frame, EGL) over the same path
   (:func:`iat.tools.bench.interpolate_path` of the same poses) at the viewer's viewport size, with
   the viewer's bake policy;
-- **empty app**: the viewer with nothing open, and a bare imgui-bundle window (one text line), at
-  1280x800, each with the window's multisampling off (the viewer's default now) and at
-  hello_imgui's default of 8 samples;
+- **empty app**: the viewer with nothing open (panel cache on and off) and a bare imgui-bundle
+  window (one text line), at 1280x800, without multisampling (``--msaa8``: also at hello_imgui's
+  default of 8 samples);
 - **profile**: the viewer's frame in phases, ``ctx.finish()`` at each boundary (so each phase's GL
-  work is counted in it; the sum exceeds an unprofiled frame): panels and app logic (Python),
-  3D view, imgui's draw, buffer swap; playing the path in IAT mode, and with nothing moving.
+  work is counted in it; the sum exceeds an unprofiled frame), in hello_imgui's order: new frame
+  (events, ``ImGui::NewFrame``), 3D view, panels and app logic (``show_gui`` and the docked
+  windows: Python and imgui's widgets), ``ImGui::Render`` and drawing its lists, buffer swap;
+  playing the path in IAT mode, and with nothing moving; with the panel cache's counts.
 
 Also the process CPU time per frame (every thread, llvmpipe's rasteriser threads included): on a
 machine shared with other work, wall-clock rates show the load, CPU time the work.
@@ -51,9 +55,11 @@ def cpu_seconds() -> float:
     return float(r.ru_utime + r.ru_stime)
 
 
-def child(args: list[str], timeout: float = 1800.0) -> dict:
-    """Run this script in ``--child`` mode (or a command) and parse the JSON it prints last."""
-    r = subprocess.run(args, capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+def child(args: list[str], timeout: float = 1800.0, cache: bool = True) -> dict:
+    """Run this script in ``--child`` mode (or a command) and parse the JSON it prints last.
+    ``cache=False``: the viewer without its panel cache (``IAT_VIEWER_PANEL_CACHE=0``)."""
+    env = dict(os.environ, IAT_VIEWER_PANEL_CACHE="1" if cache else "0")
+    r = subprocess.run(args, capture_output=True, text=True, timeout=timeout, cwd=ROOT, env=env)
     if r.returncode != 0:
         raise RuntimeError(
             f"{' '.join(args)} failed ({r.returncode}):\n{r.stdout[-2000:]}\n{r.stderr[-3000:]}"
@@ -205,20 +211,32 @@ def run_profile(solution: str | None, frames: int) -> dict:
             rows[st["stage"]].append(dict(cur))
         own()
 
-    cb.pre_new_frame = lambda: mark("start")
+    own_start, own_render, own_swap = cb.pre_new_frame, cb.before_imgui_render, cb.before_swap
+
+    def chain(name, own):
+        def f():
+            if own is not None and name != "swap":
+                own()
+            mark(name)
+            if own is not None and name == "swap":
+                own()
+
+        return f
+
+    cb.pre_new_frame = lambda: (mark("start"), own_start())
     cb.custom_background = background
-    cb.before_imgui_render = lambda: mark("imgui")
-    cb.before_swap = lambda: mark("swap")
+    cb.before_imgui_render = chain("imgui", own_render)
+    cb.before_swap = chain("swap", own_swap)
     own = cb.after_swap
     cb.after_swap = lambda: after_swap(own)
     from imgui_bundle import immapp
 
     immapp.run(rp, app.addons())
-    phases = {
-        "panels_and_logic": ("start", "view0"),
+    phases = {  # hello_imgui's order: NewFrame, custom_background (3D), show_gui + panels, Render
+        "new_frame": ("start", "view0"),
         "view_3d": ("view0", "view1"),
-        "imgui_prepare": ("view1", "imgui"),
-        "imgui_draw": ("imgui", "swap"),
+        "panels_and_logic": ("view1", "imgui"),
+        "imgui_render": ("imgui", "swap"),
         "swap": ("swap", "end"),
     }
     out = {}
@@ -229,6 +247,14 @@ def run_profile(solution: str | None, frames: int) -> dict:
         }
         out[stage]["frames"] = len(rs)
     out["redraws"], out["blits"] = app.view3d.redraws, app.view3d.blits
+    pc = app.panel_cache
+    out["panel_cache"] = {
+        "partial": pc.partial_frames,
+        "preserved": pc.preserved,
+        "full": pc.full_frames,
+        "skipped": pc.skipped_frames,
+        "lean": pc.lean_frames,
+    }
     return out
 
 
@@ -253,6 +279,7 @@ def main(argv=None) -> int:
     p.add_argument("--solution")
     p.add_argument("--size", default="698x779")
     p.add_argument("--msaa", type=int, default=0)
+    p.add_argument("--msaa8", action="store_true", help="also the empty windows at 8 samples")
     a = p.parse_args(argv)
     if a.child:
         if a.child == "offscreen":
@@ -282,37 +309,39 @@ def main(argv=None) -> int:
         "window": list(WINDOW),
         "rounds": [],
     }
+    view = iat + ["view", str(sol), "--play", "default", "--frames", str(a.frames), "--json"]
     for k in range(a.rounds):
-        rnd: dict = {}
-        rnd["viewer"] = child(
-            iat + ["view", str(sol), "--play", "default", "--frames", str(a.frames), "--json"]
-        )
+        rnd: dict = {"loadavg_start": list(os.getloadavg())}
+        rnd["viewer"] = child(view)
+        rnd["viewer_nocache"] = child(view, cache=False)
         vw, vh = rnd["viewer"]["viewport"]
-        rnd["offscreen"] = child(
-            me
-            + [
-                "--child",
-                "offscreen",
-                "--solution",
-                str(sol),
-                "--frames",
-                str(a.frames),
-                "--size",
-                f"{vw}x{vh}",
-            ]
-        )
+        off = [
+            "--child",
+            "offscreen",
+            "--solution",
+            str(sol),
+            "--frames",
+            str(a.frames),
+            "--size",
+            f"{vw}x{vh}",
+        ]
+        rnd["offscreen"] = child(me + off)
         for kind in ("app", "bare"):
-            for msaa in (0, 8):
-                rnd[f"{kind}_msaa{msaa}"] = child(
-                    me + ["--child", kind, "--frames", str(a.frames), "--msaa", str(msaa)]
-                )
+            for msaa in (0, 8) if a.msaa8 else (0,):
+                args = me + ["--child", kind, "--frames", str(max(a.frames, 200)), "--msaa", str(msaa)]
+                rnd[f"{kind}_msaa{msaa}"] = child(args)
+                if kind == "app" and msaa == 0:
+                    rnd["app_msaa0_nocache"] = child(args, cache=False)
         rnd["loadavg"] = list(os.getloadavg())
-        v, o = rnd["viewer"]["modes"], rnd["offscreen"]
-        rnd["ratio_fps"] = {m: v[m]["fps"] / o[m]["fps"] for m in ("mesh", "iat")}
-        rnd["ratio_cpu"] = {m: o[m]["cpu_ms"] / v[m]["cpu_ms"] for m in ("mesh", "iat")}
+        o = rnd["offscreen"]
+        for key in ("viewer", "viewer_nocache"):
+            v = rnd[key]["modes"]
+            rnd[f"ratio_fps{key[6:]}"] = {m: v[m]["fps"] / o[m]["fps"] for m in ("mesh", "iat")}
+            rnd[f"ratio_cpu{key[6:]}"] = {m: o[m]["cpu_ms"] / v[m]["cpu_ms"] for m in ("mesh", "iat")}
         result["rounds"].append(rnd)
         print(
-            f"round {k + 1}: {json.dumps({'fps': rnd['ratio_fps'], 'cpu': rnd['ratio_cpu']})}",
+            f"round {k + 1}: fps ratio {json.dumps(rnd['ratio_fps'])}, "
+            f"no panel cache {json.dumps(rnd['ratio_fps_nocache'])}",
             file=sys.stderr,
         )
     result["profile_house"] = child(me + ["--child", "profile", "--solution", str(sol), "--frames", "60"])
@@ -330,37 +359,39 @@ def summary(res: dict) -> str:
         f"load average {res['machine']['loadavg_start'][0]:.1f} at the start, "
         f"{res['machine']['loadavg_end'][0]:.1f} at the end ({res['machine']['cpus']} cores).",
         "",
-        "| round | viewport | mode | viewer fps | offscreen fps | ratio | viewer CPU ms/frame | offscreen CPU"
-        " ms/frame | CPU ratio |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| round (load) | mode | viewer fps | viewer fps, no panel cache | offscreen fps | ratio | ratio, no"
+        " cache | viewer CPU ms/frame | no cache | offscreen CPU ms/frame |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for k, r in enumerate(res["rounds"]):
-        vw, vh = r["viewer"]["viewport"]
+        load = r.get("loadavg_start", r["loadavg"])[0]
         for m in ("mesh", "iat"):
-            v, o = r["viewer"]["modes"][m], r["offscreen"][m]
+            v, n, o = r["viewer"]["modes"][m], r["viewer_nocache"]["modes"][m], r["offscreen"][m]
             lines.append(
-                f"| {k + 1} | {vw}x{vh} | {m} | {v['fps']:.1f} | {o['fps']:.1f} | {r['ratio_fps'][m]:.2f} | "
-                f"{v['cpu_ms']:.1f} | {o['cpu_ms']:.1f} | {r['ratio_cpu'][m]:.2f} |"
+                f"| {k + 1} ({load:.1f}) | {m} | {v['fps']:.1f} | {n['fps']:.1f} | {o['fps']:.1f} |"
+                f" {r['ratio_fps'][m]:.2f} | {r['ratio_fps_nocache'][m]:.2f} | {v['cpu_ms']:.1f} |"
+                f" {n['cpu_ms']:.1f} | {o['cpu_ms']:.1f} |"
             )
     lines += [
         "",
         "| round | window | MSAA | fps | mean ms | p95 ms | CPU ms/frame |",
         "|---|---|---|---|---|---|---|",
     ]
+    names = {"app": "viewer, nothing open", "app_nocache": "viewer, nothing open, no panel cache"}
     for k, r in enumerate(res["rounds"]):
-        for kind in ("app", "bare"):
-            for msaa in (0, 8):
-                e = r[f"{kind}_msaa{msaa}"]
-                name = "viewer, nothing open" if kind == "app" else "bare imgui-bundle"
-                lines.append(
-                    f"| {k + 1} | {name} | {msaa} | {e['fps']:.1f} | {e['mean_ms']:.1f} | {e['p95_ms']:.1f} |"
-                    f" {e['cpu_ms']:.1f} |"
-                )
+        for key in sorted(x for x in r if x.startswith(("app_", "bare_"))):
+            e = r[key]
+            kind = key.split("_msaa")[0] + ("_nocache" if key.endswith("_nocache") else "")
+            name = names.get(kind, "bare imgui-bundle")
+            lines.append(
+                f"| {k + 1} | {name} | {e['msaa']} | {e['fps']:.1f} | {e['mean_ms']:.1f} |"
+                f" {e['p95_ms']:.1f} | {e['cpu_ms']:.1f} |"
+            )
     lines += [
         "",
-        "| profile (ms, ctx.finish() per phase) | panels + logic | 3D view | imgui prepare | imgui draw"
-        " | swap | redraws / blits |",
-        "|---|---|---|---|---|---|---|",
+        "| profile (ms, ctx.finish() per phase) | new frame | 3D view | panels + logic | imgui render"
+        " | swap | redraws / blits | panels drawn (partly) / kept (lean) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for name in ("profile_house", "profile_empty"):
         pr = res[name]
@@ -369,9 +400,14 @@ def summary(res: dict) -> str:
             if not ph["frames"]:
                 continue
             vals = " | ".join(
-                f"{ph[k]:.1f}" for k in ("panels_and_logic", "view_3d", "imgui_prepare", "imgui_draw", "swap")
+                f"{ph[k]:.1f}" for k in ("new_frame", "view_3d", "panels_and_logic", "imgui_render", "swap")
             )
-            lines.append(f"| {name.split('_')[1]} {stage} | {vals} | {pr['redraws']} / {pr['blits']} |")
+            pc = pr.get("panel_cache", {})
+            g = {k: pc.get(k, "-") for k in ("full", "partial", "skipped", "lean")}
+            cache = f"{g['full']} ({g['partial']}) / {g['skipped']} ({g['lean']})"
+            lines.append(
+                f"| {name.split('_')[1]} {stage} | {vals} | {pr['redraws']} / {pr['blits']} | {cache} |"
+            )
     return "\n".join(lines)
 
 

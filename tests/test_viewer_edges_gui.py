@@ -298,9 +298,7 @@ def test_levels_of_detail_switch_rebakes_and_reads_out(tmp_path, monkeypatch, gu
         s = app.state
         got["before"] = dict(s.stats.lod)
         ctx.item_click("//**/Levels of detail")
-        wait_until(
-            ctx, lambda: s.model.baked is not None and s.model.baked.policy.uses_lod, 300, "LOD bake"
-        )
+        wait_until(ctx, lambda: s.model.baked is not None and s.model.baked.policy.uses_lod, 300, "LOD bake")
         wait_until(ctx, lambda: bool(s.stats.lod), 60, "LOD readout")
         got["on"] = dict(s.stats.lod)
         ctx.item_click("//**/Levels of detail")

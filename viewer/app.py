@@ -6,7 +6,8 @@ window until it is closed (``iat view`` loads it through the ``iat.apps`` entry 
 ``custom_background`` callback into the central dock node's rectangle (the viewport is set
 every frame) by :class:`~viewer.view3d.View3D`, only when what it shows changed (else its last
 image is copied); the window has no multisampling (``msaa``); the panels (:mod:`viewer.panels`)
-dock around it and change the :class:`~viewer.state.AppState`. Every frame the app:
+dock around it and change the :class:`~viewer.state.AppState`; they are drawn only when they may
+have changed (:mod:`viewer.panel_cache`: else the window keeps their pixels). Every frame the app:
 
 1. picks up finished background work: an opened model (:class:`~viewer.jobs.OpenJob`)
    or a re-bake (:class:`~viewer.bake_worker.BakeWorker`), and uploads it to the
@@ -45,10 +46,11 @@ import glfw  # isort: skip
 
 from iat.errors import IATError
 from iat.radiosity import SolveOptions
-from viewer import controls, overlay, panels
+from viewer import background_io, controls, overlay, panels
 from viewer.bake_worker import BakeSource, BakeWorker
 from viewer.jobs import Opened, OpenJob, SetJob, error_text
 from viewer.navigation import CameraPath, load_paths, paths_file, save_paths, walker
+from viewer.panel_cache import PanelCache
 from viewer.state import AppState, default_model
 from viewer.view3d import View3D, auto_exposure, screenshot
 
@@ -111,6 +113,7 @@ class ViewerApp:
         self.idle = idle
         self.msaa = int(msaa)
         self.view3d: View3D | None = None
+        self.panel_cache = PanelCache()  # the docked panels are drawn only when they may have changed
         self.ctx = None
         self.renderer = None
         self.frame_log: list[dict] | None = None  # per-frame records when measuring
@@ -154,6 +157,8 @@ class ViewerApp:
         cb.post_render_dockable_windows = self._guard(self._central_rect)
         cb.after_swap = self._after_swap
         cb.pre_new_frame = self._frame_start
+        cb.before_imgui_render = self._guard(self._before_render)
+        cb.before_swap = self._guard(lambda: self.panel_cache.before_swap(self.ctx))
         dp = rp.docking_params
         dp.docking_splits = [
             hello_imgui.DockingSplit("MainDockSpace", "LeftSpace", imgui.Dir.left, 0.25),
@@ -171,7 +176,8 @@ class ViewerApp:
         return rp
 
     def _window(self, label, space, fn) -> hello_imgui.DockableWindow:
-        w = hello_imgui.DockableWindow(label, space, self._guard(lambda: fn(self.state)))
+        draw = self._guard(lambda: self.panel_cache.panel(label, lambda: fn(self.state)))
+        w = hello_imgui.DockableWindow(label, space, draw)
         w.can_be_closed = True
         return w
 
@@ -588,11 +594,11 @@ class ViewerApp:
             self.open(path)
         if s.requests.export:
             path, s.requests.export = s.requests.export, None
-            self._export(path)
+            background_io.export(self, path)
         if s.requests.save_solution:
             path, s.requests.save_solution = s.requests.save_solution, None
             sol = s.model.solution
-            self._in_background(f"saved the solution to {path}", lambda: sol.save(path))
+            background_io.in_background(self, f"saved the solution to {path}", lambda: sol.save(path))
         if s.requests.save_lights:
             path, s.requests.save_lights = s.requests.save_lights, None
             ed = s.lighting.editor
@@ -602,8 +608,8 @@ class ViewerApp:
                 from iat.lighting.save import save_gltf
 
                 scene, sources, src = ed.scene, list(ed.sources), ed.base.path  # a snapshot: edits go on
-                self._in_background(
-                    f"saved the lights to {path}", lambda: save_gltf(scene, src, path, sources=sources)
+                background_io.in_background(
+                    self, f"saved the lights to {path}", lambda: save_gltf(scene, src, path, sources=sources)
                 )
         if s.requests.save_paths:
             s.requests.save_paths = False
@@ -615,33 +621,6 @@ class ViewerApp:
         if s.requests.quit:
             s.requests.quit = False
             hello_imgui.get_runner_params().app_shall_exit = True
-
-    def _export(self, path: str) -> None:
-        from iat.export.gltf import export_glb
-
-        s = self.state
-        if s.model.baked is None:
-            s.messages.set_error("nothing baked to export yet")
-            return
-        baked, scene = s.model.baked, s.model.scene
-        if _is_set(baked):  # the day cycle: the moment on screen
-            baked = baked.blend(*s.lighting.day_blend())
-        self._in_background(
-            f"exported the bake to {path}",
-            lambda: export_glb(baked, path, scene),
-        )
-
-    def _in_background(self, done: str, fn) -> None:
-        def run():  # reports through a queue: the state is changed on the UI thread only
-            try:
-                fn()
-                self._messages.append(("status", done))
-            except Exception as e:
-                self._messages.append(("error", error_text(e)))
-
-        t = threading.Thread(target=run, name="iat-io", daemon=True)
-        self._bg_threads = [b for b in self._bg_threads if b.is_alive()] + [t]
-        t.start()
 
     # -- per frame: layout and drawing --------------------------------------------------------------
     def _central_rect(self) -> None:
@@ -684,6 +663,7 @@ class ViewerApp:
         s = self.state
         if self.ctx is None or self.view3d is None:
             return
+        self.panel_cache.frame_start(self.ctx)  # (before anything is drawn: the back buffer's check)
         self._upload()
         mode, vp = self.shown_mode(), self.gl_viewport()
         cam = s.view.camera if s.view.camera is not None else (s.view.nav.camera if s.view.nav else None)
@@ -696,6 +676,13 @@ class ViewerApp:
         self.frames_drawn += 1
         if s.requests.screenshot is not None:
             screenshot(s, self.view3d, vp, mode, screenshot_dir())
+
+    def _before_render(self) -> None:
+        """Just before ``ImGui::Render``: the docked panels are drawn only when they may have changed."""
+        did = hello_imgui.get_runner_params().docking_params.dock_space_id_from_name("MainDockSpace")
+        pc = self.panel_cache
+        pc.before_render(self.state.view.rect, did)
+        self.state.stats.panel_draws, self.state.stats.panel_skips = pc.full_frames, pc.skipped_frames
 
     def read_view(self, vp=None) -> np.ndarray:
         """(h, w, 3) uint8 of the 3D view as shown this frame (call during the background callback)."""

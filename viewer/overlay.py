@@ -17,11 +17,22 @@ from viewer.state import MODE_LABELS, AppState
 
 
 def view_overlay(state: AppState) -> None:
-    """Labels and the split divider over the 3D view (imgui background draw list, no GL)."""
+    """Labels and the split divider over the 3D view (imgui background draw list, no GL), clipped to
+    the view: the panels beside it may keep last frame's pixels (:mod:`viewer.panel_cache`), and a
+    label drawn over them every frame would pile up."""
     x, y, w, h = state.view.rect
     if w <= 0 or h <= 0:
         return
     dl = imgui.get_background_draw_list()
+    dl.push_clip_rect(ImVec2(x, y), ImVec2(x + w, y + h), True)
+    try:
+        _view_overlay(state, dl)
+    finally:
+        dl.pop_clip_rect()
+
+
+def _view_overlay(state: AppState, dl) -> None:
+    x, y, w, h = state.view.rect
     white = imgui.get_color_u32(ImVec4(1, 1, 1, 0.9))
     shadow = imgui.get_color_u32(ImVec4(0, 0, 0, 0.7))
 
@@ -64,6 +75,24 @@ def view_overlay(state: AppState) -> None:
         dl.add_text(ImVec2(x + w - 60, y + 8), white, "PLAY")
 
 
+_BOUNDS: list = [None, None]  # [scene, {home: (lo, hi)}]: the last scene's boxes
+
+
+def scene_bounds(scene, home: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """``scene.bounds`` (with ``home``: grown to take in its home camera), kept for the last scene
+    asked about (a scene's box walks all its vertices: 0.2 ms a frame on the house)."""
+    if _BOUNDS[0] is not scene:
+        _BOUNDS[0], _BOUNDS[1] = scene, {}
+    boxes = _BOUNDS[1]
+    if home not in boxes:
+        lo, hi = (np.asarray(b, dtype=np.float64) for b in scene.bounds)
+        if home:
+            eye = np.asarray(scene.default_camera().eye, dtype=np.float64)
+            lo, hi = np.minimum(lo, eye), np.maximum(hi, eye)
+        boxes[home] = (lo, hi)
+    return boxes[home]
+
+
 def outside_model(state: AppState, margin: float = 0.02) -> bool:
     """The camera is outside the box of the model and its home camera (grown by ``margin`` of its
     diagonal): walked through a wall into the void (a model seen from outside, such as the Cornell
@@ -71,12 +100,40 @@ def outside_model(state: AppState, margin: float = 0.02) -> bool:
     cam, scene = state.view.camera, state.model.scene
     if cam is None or scene is None:
         return False
-    lo, hi = (np.asarray(b, dtype=np.float64) for b in scene.bounds)
-    home = np.asarray(scene.default_camera().eye, dtype=np.float64)
-    lo, hi = np.minimum(lo, home), np.maximum(hi, home)
+    lo, hi = scene_bounds(scene, home=True)
     pad = margin * float(np.linalg.norm(hi - lo))
     eye = np.asarray(cam.eye, dtype=np.float64)
     return bool(np.any(eye < lo - pad) or np.any(eye > hi + pad))
+
+
+_MARKERS: list = [None, None]  # [(editor, version, scene), per-light data]: the lights last drawn
+
+
+def _marker_data(ed) -> dict:
+    """What the markers of ``ed``'s lights need besides the camera (kept until the lights change):
+    their points and spot tips (one projection a frame), colours, kinds and names."""
+    key = (ed, getattr(ed, "version", None), ed.scene)
+    old = _MARKERS[0]
+    if old is None or old[0] is not ed or old[1] != key[1] or old[2] is not ed.scene:
+        lights = ed.lights
+        lo, hi = scene_bounds(ed.scene)
+        reach = 0.06 * float(np.linalg.norm(hi - lo))
+        pos = np.array([lt.position for lt in lights], dtype=np.float64).reshape(-1, 3)
+        tips = np.array([lt.position + reach * lt.direction for lt in lights], dtype=np.float64).reshape(
+            -1, 3
+        )
+        cols = []
+        for lt in lights:
+            c = np.clip(np.asarray(lt.color, dtype=np.float64) / max(float(np.max(lt.color)), 1e-9), 0.0, 1.0)
+            cols.append(imgui.get_color_u32(ImVec4(float(c[0]), float(c[1]), float(c[2]), 1.0)))
+        _MARKERS[0] = key
+        _MARKERS[1] = {
+            "points": np.concatenate([pos, tips]),
+            "colors": cols,
+            "spot": [lt.kind == "spot" for lt in lights],
+            "names": [lt.name for lt in lights],
+        }
+    return _MARKERS[1]
 
 
 def light_markers(state: AppState, dl) -> None:
@@ -86,31 +143,29 @@ def light_markers(state: AppState, dl) -> None:
     ed, cam = state.lighting.editor, state.view.camera
     if not state.lighting.show_lights or ed is None or cam is None or not ed.lights:
         return
-    lights = ed.lights
-    px, ok = project_points(cam, [lt.position for lt in lights], state.view.rect)
+    m = _marker_data(ed)
+    n = len(m["names"])
+    px, ok = project_points(cam, m["points"], state.view.rect)
     plate = imgui.get_color_u32(ImVec4(0.0, 0.0, 0.0, 0.65))
     white = imgui.get_color_u32(ImVec4(1.0, 1.0, 1.0, 1.0))
-    lo, hi = ed.scene.bounds
-    reach = 0.06 * float(np.linalg.norm(hi - lo))
-    tips, tok = project_points(cam, [lt.position + reach * lt.direction for lt in lights], state.view.rect)
-    for k, lt in enumerate(lights):
+    gold, dark = imgui.get_color_u32(ImVec4(1.0, 0.85, 0.2, 1.0)), imgui.get_color_u32(ImVec4(0, 0, 0, 0.9))
+    for k in range(n):
         if not ok[k]:
             continue
-        c = np.clip(np.asarray(lt.color, dtype=np.float64) / max(float(np.max(lt.color)), 1e-9), 0.0, 1.0)
-        col = imgui.get_color_u32(ImVec4(float(c[0]), float(c[1]), float(c[2]), 1.0))
         sel = k == state.lighting.selected_light
-        edge = imgui.get_color_u32(ImVec4(1.0, 0.85, 0.2, 1.0) if sel else ImVec4(0, 0, 0, 0.9))
+        edge = gold if sel else dark
         p = ImVec2(float(px[k, 0]), float(px[k, 1]))
-        if lt.kind == "spot" and tok[k]:
-            dl.add_line(p, ImVec2(float(tips[k, 0]), float(tips[k, 1])), edge, 2.0)
-        dl.add_circle_filled(p, 7.0, col)
-        dl.add_circle(p, 8.0, edge, 0, 3.0 if k == state.lighting.selected_light else 1.5)
-        if lt.name:  # on a dark plate: readable on bright surfaces too
-            size = imgui.calc_text_size(lt.name)
+        if m["spot"][k] and ok[n + k]:
+            dl.add_line(p, ImVec2(float(px[n + k, 0]), float(px[n + k, 1])), edge, 2.0)
+        dl.add_circle_filled(p, 7.0, m["colors"][k])
+        dl.add_circle(p, 8.0, edge, 0, 3.0 if sel else 1.5)
+        name = m["names"][k]
+        if name:  # on a dark plate: readable on bright surfaces too
+            size = imgui.calc_text_size(name)
             dl.add_rect_filled(
                 ImVec2(p.x + 8, p.y - 9), ImVec2(p.x + 12 + size.x, p.y - 5 + size.y), plate, 3.0
             )
-            dl.add_text(ImVec2(p.x + 10, p.y - 7), edge if sel else white, lt.name)
+            dl.add_text(ImVec2(p.x + 10, p.y - 7), edge if sel else white, name)
 
 
 def sun_compass(state: AppState, dl, radius: float = 26.0) -> None:

@@ -17,6 +17,7 @@ with the time-of-day slider). Plus the menus, the error window and the HUD's lin
 
 from __future__ import annotations
 
+import functools
 import shutil
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from iat.bake.flatten import METHODS
 from iat.io.load import SUPPORTED_EXTENSIONS
 from viewer.bake_worker import snap_scale
 from viewer.daylight import sun_label
+from viewer.eta import JobEta
 from viewer.lights import new_light_intensity, new_light_position
 from viewer.navigation import paths_file
 from viewer.state import MODE_LABELS, MODES, AppState
@@ -35,6 +37,7 @@ RED = ImVec4(0.85, 0.2, 0.2, 1.0)
 GREEN = ImVec4(0.3, 0.75, 0.35, 1.0)
 DIM = ImVec4(0.65, 0.65, 0.65, 1.0)
 MB = float(1 << 20)
+OPEN_ETA, DAY_ETA = JobEta(), JobEta()  # time left while opening a model / solving the day cycle
 MODEL_FILTERS = [
     "Models and solutions",
     " ".join(f"*{e}" for e in (*SUPPORTED_EXTENSIONS, ".npz")),
@@ -43,8 +46,10 @@ MODEL_FILTERS = [
 ]
 
 
+@functools.lru_cache(maxsize=1)
 def has_native_dialogs() -> bool:
-    """portable_file_dialogs needs zenity, kdialog, matedialog or qarma on Linux."""
+    """portable_file_dialogs needs zenity, kdialog, matedialog or qarma on Linux (looked up once: the
+    menus ask every frame, and four PATH searches cost 0.7 ms)."""
     import sys
 
     if sys.platform != "linux":
@@ -291,7 +296,7 @@ def stats_panel(state: AppState) -> None:
         imgui.table_setup_column("triangles")
         imgui.table_setup_column("draw calls")
         imgui.table_headers_row()
-        rows = [("Mesh", state.model.mesh_triangles, 1 if state.model.loaded else 0)]
+        rows = [("Mesh", state.model.mesh_triangles, state.model.mesh_draw_calls)]
         if mem:
             rows.append(("IAT", state.model.iat_triangles, mem.get("draw_calls", 0)))
             rows.append(
@@ -322,6 +327,12 @@ def stats_panel(state: AppState) -> None:
         _help(
             "The 3D view is drawn only when camera, mode, exposure, bake or blend change;\n"
             "else its last image is copied."
+        )
+    if st.panel_skips:
+        imgui.text_colored(DIM, f"panels drawn {st.panel_draws:,} times, kept {st.panel_skips:,}")
+        _help(
+            "A panel is drawn when it changed (at once while you use it, else at most five times\n"
+            "a second); else the window keeps its last pixels."
         )
     if rs:
         imgui.push_style_color(imgui.Col_.text, DIM)
@@ -378,7 +389,7 @@ def stats_panel(state: AppState) -> None:
     job = state.jobs.open_job
     if job is not None and not job.done:
         imgui.separator()
-        eta = job.eta
+        eta = OPEN_ETA.update(job, job.fraction)
         imgui.text(f"Opening {Path(job.path).name}: {job.message}")
         _bar(job.fraction, f"{100 * job.fraction:.0f} %  ETA {_seconds(eta) if eta is not None else '...'}")
         if imgui.button("Cancel"):
@@ -535,7 +546,9 @@ def day_cycle_panel(state: AppState) -> None:
     imgui.text_colored(DIM, ", ".join(names))
     job = state.lighting.set_job
     if job is not None and not job.done:
-        _bar(job.fraction, f"{100 * job.fraction:.0f} %  {job.message[:40]}")
+        eta = DAY_ETA.update(job, job.fraction)
+        left = f"{_seconds(eta)} left" if eta is not None else "measuring..."
+        _bar(job.fraction, f"{100 * job.fraction:.0f} %  {left}  {job.message[:40]}")
         if imgui.button("Cancel##day"):
             job.cancel()
         return

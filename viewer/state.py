@@ -111,6 +111,7 @@ class ModelState:
     solve_seconds: float = 0.0
     from_cache: str = ""
     _deepest: tuple[Any, int] | None = field(default=None, init=False, repr=False, compare=False)
+    _mesh_calls: tuple[Any, int] | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def loaded(self) -> bool:
@@ -131,6 +132,23 @@ class ModelState:
         """The shown bake's :class:`~iat.bake.memory.MemoryReport` as a dict ({} when none); a day-cycle
         set's counts every state's texture layers (``solutions``)."""
         return self.baked.memory.to_dict() if self.baked is not None else {}
+
+    @property
+    def mesh_draw_calls(self) -> int:
+        """Draw calls of mesh mode: one, plus one per detail material (:mod:`iat.render.mesh_detail`)."""
+        if self.solution is None:
+            return 0
+        if self._mesh_calls is None or self._mesh_calls[0] is not self.solution:
+            from iat.render.mesh_detail import scene_details
+
+            details = scene_details(self.scene) if self.scene is not None else None
+            albedo = np.asarray(self.solution.patch_albedo).reshape(-1, 3)
+            n = 1
+            if details is not None and len(details["detail"]) == len(albedo):
+                on = details["detail"] & (albedo > 1e-4).all(axis=1)
+                n = len(np.unique(np.asarray(self.solution.patch_material)[on])) + int(not on.all())
+            self._mesh_calls = (self.solution, max(n, 1))
+        return self._mesh_calls[1]
 
     @property
     def mesh_triangles(self) -> int:
@@ -321,6 +339,8 @@ class FrameStats:
     lod: dict = field(default_factory=dict)  # Renderer.lod_info() of the last frame ({} without LOD)
     view_redraws: int = 0  # frames that drew the 3D view (viewer.view3d)
     view_copies: int = 0  # frames that copied the last image of it
+    panel_draws: int = 0  # frames that drew the docked panels (viewer.panel_cache)
+    panel_skips: int = 0  # frames that kept their last pixels
 
     def add_frame_time(self, ms: float, work_ms: float | None = None, idle: bool = False) -> None:
         k = self.frames % FRAME_HISTORY

@@ -43,8 +43,9 @@ def solution_key(model: str | os.PathLike, options) -> str:
     return h.hexdigest()[:16]
 
 
-def solution_cache_path(model: str | os.PathLike, options,
-                        directory: str | os.PathLike | None = None) -> Path:
+def solution_cache_path(
+    model: str | os.PathLike, options, directory: str | os.PathLike | None = None
+) -> Path:
     """The cache file of ``model`` solved with ``options``, in ``directory`` (default :func:`cache_dir`)."""
     directory = cache_dir() if directory is None else Path(directory)
     return directory / f"{Path(model).stem}-{solution_key(model, options)}.npz"

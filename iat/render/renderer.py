@@ -65,6 +65,7 @@ from iat.render import gl
 from iat.render.buffers import Geometry, upload_buffer
 from iat.render.gl import Registry
 from iat.render.lod import LodDrawer
+from iat.render.mesh_detail import mesh_detail, scene_details
 from iat.render.pages import PageTexture, gpu_pages
 
 MODES = ("preview", "mesh", "iat", "split", "diff")
@@ -130,8 +131,9 @@ class Renderer:
         # texture that is also the render target (a feedback loop in diff mode)
         self._white = self._reg.add(ctx.texture((1, 1), 4, np.ones(4, np.float32).tobytes(), dtype="f4"))
         mesh, iat, preview = self._programs["mesh"], self._programs["iat"], self._programs["preview"]
-        self._solution = Geometry(mesh, [("position", 3), ("color", 3), ("color_b", 3)])
-        self._baked_mesh = Geometry(mesh, [("position", 3), ("color", 3), ("color_b", 3)])
+        mesh_attrs = [("position", 3), ("color", 3), ("color_b", 3), ("detail_uv", 2), ("detail", 1)]
+        self._solution, self._baked_mesh = Geometry(mesh, mesh_attrs), Geometry(mesh, mesh_attrs)
+        self._scene_details = None  # the scene's detail patches, for mesh mode (iat.render.mesh_detail)
         self._baked_tex = Geometry(
             iat, [("position", 3), ("uv", 2), ("layer", 1), ("detail_uv", 2), ("detail", 1)]
         )
@@ -262,6 +264,7 @@ class Renderer:
         tri_mat = mat[tri_patch]
         tri_key = np.where(np.isin(tri_mat, detail_mat), tri_mat, -1)
         self._set_details("preview", details)
+        self._scene_details = scene_details(scene)
         self._preview.upload(
             self.ctx,
             self._reg,
@@ -304,6 +307,8 @@ class Renderer:
         _check_indices(tris, len(key), "solution tri_vertices")
         drawn = drawn_mesh(solution)  # panel cells' triangles cut to their surface
         pos, tris = drawn.position, drawn.triangles
+        md = mesh_detail(solution, drawn, self._scene_details)  # detail vertices hold incoming light
+        duv, dflag, divisor, tri_key = md or (np.zeros((len(pos), 2)), np.zeros(len(pos)), 1.0, None)
         colors = []
         for k, sol in enumerate(solutions):
             rad = _vec(sol.vert_radiance, 3, "vert_radiance")
@@ -314,12 +319,11 @@ class Renderer:
                 or not np.array_equal(np.asarray(sol.tri_vertices).reshape(-1, 3), solution.tri_vertices)
             ):
                 raise RenderError(f"solution {k} of the set is not on the same mesh as solution 0")
-            colors.append(np.ascontiguousarray(drawn.radiance(rad)))
+            colors.append(np.ascontiguousarray(drawn.radiance(rad) * divisor, dtype=np.float32))
         self._colors["mesh"] = colors
         a, b = self._pair("mesh")
-        self._solution.upload(
-            self.ctx, self._reg, {"position": pos, "color": colors[a], "color_b": colors[b]}, tris
-        )
+        arrays = {"position": pos, "color": colors[a], "color_b": colors[b], "detail_uv": duv}
+        self._solution.upload(self.ctx, self._reg, {**arrays, "detail": dflag}, tris, tri_key)
         self._colors_pair["mesh"] = (a, b)
         self._has["mesh"] = True
         self._set_glass(solution)
@@ -500,9 +504,9 @@ class Renderer:
         self._iat_states, self._iat_pages = int(n_states), max(int(per_state), 1)
         self._colors["iat"] = colors
         a, b = self._pair("iat")
-        self._baked_mesh.upload(
-            self.ctx, self._reg, {"position": mpos, "color": colors[a], "color_b": colors[b]}, midx
-        )
+        n = len(colors[a])  # the mesh part holds radiance: no detail
+        arrays = {"position": mpos, "color": colors[a], "color_b": colors[b], "detail_uv": np.zeros((n, 2))}
+        self._baked_mesh.upload(self.ctx, self._reg, {**arrays, "detail": np.zeros(n)}, midx)
         self._colors_pair["iat"] = (a, b)
         if len(tidx):
             tuv = self._page_tex.scale_uv(tuv)
@@ -579,8 +583,11 @@ class Renderer:
             g = self._solution if mode == "mesh" else self._baked_mesh
             pa, pb = self._pair(mode)
             if g.n_triangles:
-                self._uniforms(g.program, {**common, "blend": w if pa != pb else 0.0})
-                for _, first, count in g.calls():
+                self._uniforms(g.program, {**common, "blend": w if pa != pb else 0.0, "detail": 1})
+                for key, first, count in g.calls():  # mesh mode: one call per detail material
+                    tex = self._detail["preview"].get(key) if mode == "mesh" else None
+                    (tex if tex is not None else self._white).use(1)
+                    self._uniforms(g.program, {"use_detail": tex is not None})
                     g.render_range(first, count)
                     tris, calls = tris + count // 3, calls + 1
         if mode == "iat" and self._lod.active:
