@@ -94,3 +94,29 @@ def test_an_exported_bake_opens_as_baked(tmp_path, monkeypatch, gui_child):
     assert np.percentile(lum, 99) < 255  # exposed as iat render exposes: not white
     assert got["half"].astype(np.float64).mean() < 0.85 * img.astype(np.float64).mean()
     assert got["export_after"] is None  # a model opened afterwards is drawn by the renderer again
+
+
+@pytest.mark.gui
+def test_an_exported_bake_plays_its_camera_path(tmp_path):
+    """``iat view OUT.glb --play default``: the export keeps the model's camera paths, and the player
+    does not wait for a bake an export never has."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    glb = exported_cornell(tmp_path / "cornell-iat.glb")
+    iat = str(Path(sys.executable).with_name("iat"))
+    env = {**os.environ, "IAT_CACHE_DIR": str(tmp_path / "cache")}
+    r = subprocess.run(
+        [iat, "view", str(glb), "--play", "default", "--frames", "4", "--modes", "iat", "--json"],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=600,
+        cwd=tmp_path,
+    )
+    assert r.returncode == 0, r.stderr[-3000:]
+    res = json.loads(r.stdout)
+    assert res["path"] == "default" and res["error"] is None
+    assert res["modes"]["iat"]["frames"] == 4

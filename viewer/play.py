@@ -104,7 +104,8 @@ class _Script:
             w = s.jobs.bake_worker
             warming = w is not None and w.warming  # the slider neighbours' bakes after an open
             busy = s.jobs.opening or s.jobs.rebaking or warming or app.pending_relit is not None
-            if s.model.baked is None or busy:
+            shown = s.model.baked is not None or app.view3d.export is not None  # a bake, or an exported one
+            if not shown or busy:
                 return
             choice = None
             try:
