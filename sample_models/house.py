@@ -156,7 +156,19 @@ def daylight_states() -> dict[str, dict]:
         else:
             st["sky"] = {"kind": "uniform", "radiance": list(DUSK_SKY)}
             st["lights"], st["emission"] = LAMPS_ON, {"lamp_panel": 1.0}
-    return states
+    return _rounded(states)
+
+
+def _rounded(x):
+    """``x`` with every float to 12 significant digits: the file's bytes then do not depend on the
+    last bit of a numpy build's exp and pow (the sun's colour and place)."""
+    if isinstance(x, float):
+        return float(f"{x:.12g}")
+    if isinstance(x, dict):
+        return {k: _rounded(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_rounded(v) for v in x]
+    return x
 
 
 def _door_box(kind: str, c: float) -> tuple[tuple, tuple]:
