@@ -62,12 +62,18 @@ def _solution_not_a_model(args, path) -> None:
 
 
 def _load(args, path, max_edge=None):
-    """:func:`iat.io.load.load_scene` with a progress bar (``--no-panels`` honoured)."""
+    """:func:`iat.io.load.load_scene` with a progress bar (``--no-panels``, ``--discontinuity`` honoured)."""
     from iat.io.load import load_scene
 
     _solution_not_a_model(args, path)
     with _progress_bar(args, f"load {Path(path).name}") as bar:
-        return load_scene(path, max_edge=max_edge, progress=bar, panels=not getattr(args, "no_panels", False))
+        return load_scene(
+            path,
+            max_edge=max_edge,
+            progress=bar,
+            panels=not getattr(args, "no_panels", False),
+            discontinuity=getattr(args, "discontinuity", False),
+        )
 
 
 def _solve_options(args):
@@ -80,6 +86,8 @@ def _solve_options(args):
             kw[name] = v
     if getattr(args, "no_panels", False):
         kw["panels"] = False
+    if getattr(args, "discontinuity", False):
+        kw["discontinuity"] = True
     return SolveOptions.preset(getattr(args, "quality", None) or "default", **kw)
 
 
@@ -548,6 +556,11 @@ def build_parser() -> argparse.ArgumentParser:
             action="store_true",
             dest="no_panels",
             help="keep coplanar triangles as roots of their own (default: panels)",
+        )
+        sp.add_argument(
+            "--discontinuity",
+            action="store_true",
+            help="cut patches along the hard shadows of the model's point, spot and sun lights",
         )
 
     def set_flags(sp):

@@ -7,7 +7,8 @@
 - Vertices are welded (:data:`iat.geometry.mesh.WELD_REL_TOL`), zero-area triangles
   dropped, and coplanar same-material triangle pairs merged into convex quads
   (:func:`iat.geometry.mesh.merge_quads`); ``max_edge`` pre-splits big patches
-  (:func:`iat.geometry.mesh.split_patches`).
+  (:func:`iat.geometry.mesh.split_patches`); ``discontinuity`` cuts roots along the hard shadows
+  of the file's lights, last (:func:`iat.geometry.discontinuity.split_discontinuities`).
 - Materials: ``albedo = baseColorFactor x mean(baseColorTexture)`` (texture
   decoded sRGB -> linear), ``emission = emissiveFactor x emissiveStrength``;
   OBJ: ``Kd`` (x mean of ``map_Kd``) and ``Ke``. ``Material.detail`` is the
@@ -36,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from iat.errors import Cancelled, IATWarning, LoadError, OptionError
+from iat.geometry.discontinuity import split_discontinuities
 from iat.geometry.mesh import compact_vertices, degenerate_faces, merge_quads, split_patches, weld_vertices
 from iat.geometry.panels import make_panels
 from iat.io.dae import dae_frame
@@ -289,7 +291,7 @@ _MAX_NAMED = 5  # materials named in the clamped-albedo warning
 
 # fraction of load_scene's progress reached at the end of each stage (measured on a 1 M-triangle STL:
 # parse 0.6 s, placing 1.7 s, weld 1.8 s, quad merge 2.9 s)
-_STAGES = {"parse": 0.1, "collect": 0.33, "weld": 0.58, "merge": 0.95, "split": 0.98}
+_STAGES = {"parse": 0.1, "collect": 0.33, "weld": 0.58, "merge": 0.95, "split": 0.98, "lights": 0.99}
 
 
 def _clamp_albedo(materials: list[Material], path: Path) -> None:
@@ -321,7 +323,11 @@ def _clamp_albedo(materials: list[Material], path: Path) -> None:
 
 
 def load_scene(
-    path: str | Path, max_edge: float | None = None, progress: Progress | None = None, panels: bool = True
+    path: str | Path,
+    max_edge: float | None = None,
+    progress: Progress | None = None,
+    panels: bool = True,
+    discontinuity: bool = False,
 ) -> Scene:
     """Load a model file (glTF/GLB, OBJ+MTL, PLY, STL, OFF) into a :class:`Scene`.
 
@@ -336,6 +342,9 @@ def load_scene(
       (:func:`split_patches`); None keeps the root patches as they are.
     panels : group coplanar patches that hold triangles into panels, rectangle roots cut to the
       surface (:func:`iat.geometry.panels.make_panels`; cells no longer than ``max_edge``).
+    discontinuity : cut the roots along the hard shadow boundaries of the file's point, spot and
+      directional lights (:func:`iat.geometry.discontinuity.split_discontinuities`; last, after
+      the lights are read).
     progress : ``progress(fraction, message) -> bool``, called at the start of each
       stage (parse, weld, quad merge, pre-split) and with 1.0 at the end, fractions
       non-decreasing; returning False raises :class:`iat.errors.Cancelled`.
@@ -417,6 +426,9 @@ def load_scene(
         scene.cameras = gl.cameras(world, scene)
         scene.camera_paths = gl.camera_paths()
         scene.sky = gl.sky()
+    if discontinuity:
+        report(_STAGES["lights"], "cutting along shadow boundaries")
+        scene = split_discontinuities(scene)
     report(1.0, "loaded")
     log.info(
         "%s: %d triangles -> %d patches (%d quads), %d materials, %d lights, %d cameras",

@@ -115,6 +115,10 @@ class SolveOptions:
         itself takes the scene as it is.
     panels : bool, default True. Recorded for the loader too (``load_scene(panels=...)``):
         coplanar patches holding triangles become panels (:mod:`iat.geometry.panels`).
+    discontinuity : bool, default False. Recorded for the loader too
+        (``load_scene(discontinuity=...)``): roots are cut along the hard shadow boundaries of the
+        model's point, spot and sun lights (:mod:`iat.geometry.discontinuity`), so element edges
+        follow the shadows instead of stair-stepping across them.
     seed : int, default 0. Seed of the sample jitter; a solve is deterministic.
     criterion : "interpolation" (default), "variation" or "uniform". What ``tolerance`` bounds:
         "interpolation" splits on the largest gap between a probe and the value the
@@ -142,6 +146,7 @@ class SolveOptions:
     max_shots: int = 20000
     max_edge: float | None = None
     panels: bool = True
+    discontinuity: bool = False
     seed: int = 0
     criterion: str = "interpolation"
     refine_indirect: bool = True
@@ -188,6 +193,8 @@ class SolveOptions:
             bad("ambient", "must be True or False")
         if not isinstance(self.panels, bool | np.bool_):
             bad("panels", "must be True or False")
+        if not isinstance(self.discontinuity, bool | np.bool_):
+            bad("discontinuity", "must be True or False")
         if self.criterion not in ("variation", "interpolation", "uniform"):
             bad("criterion", 'must be "variation", "interpolation" or "uniform"')
         return self
@@ -199,12 +206,21 @@ class SolveOptions:
 
     def load_kwargs(self) -> dict:
         """The loader's keywords these options record (``load_scene(path, **opts.load_kwargs())``)."""
-        return {"max_edge": self.max_edge, "panels": bool(self.panels)}
+        return {
+            "max_edge": self.max_edge,
+            "panels": bool(self.panels),
+            "discontinuity": bool(self.discontinuity),
+        }
 
     @staticmethod
     def recorded_load_kwargs(d: dict) -> dict:
-        """:meth:`load_kwargs` of a solution's recorded options (solved before panels: none)."""
-        return {"max_edge": d.get("max_edge"), "panels": bool(d.get("panels", False))}
+        """:meth:`load_kwargs` of a solution's recorded options (solved before panels or discontinuity
+        meshing: none)."""
+        return {
+            "max_edge": d.get("max_edge"),
+            "panels": bool(d.get("panels", False)),
+            "discontinuity": bool(d.get("discontinuity", False)),
+        }
 
     @classmethod
     def preset(cls, quality: str = "default", **overrides) -> SolveOptions:
