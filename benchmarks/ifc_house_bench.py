@@ -61,16 +61,23 @@ def child_load(path: Path, panels: bool) -> dict:
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     return {
-        "load_s": load_s, "trace_peak_mib": peak / MIB, "max_rss_mib": max_rss_mib(), "base_rss_mib": base,
-        "patches": int(scene.n_patches), "quads": int(scene.patch_is_quad.sum()),
-        "clipped": int(scene.patch_clipped.sum()), "clip_triangles": int(len(scene.clip_patch)),
-        "panels": int(find_panels(scene).n_panels), "slivers": int(sliver_count(scene)),
+        "load_s": load_s,
+        "trace_peak_mib": peak / MIB,
+        "max_rss_mib": max_rss_mib(),
+        "base_rss_mib": base,
+        "patches": int(scene.n_patches),
+        "quads": int(scene.patch_is_quad.sum()),
+        "clipped": int(scene.patch_clipped.sum()),
+        "clip_triangles": int(len(scene.clip_patch)),
+        "panels": int(find_panels(scene).n_panels),
+        "slivers": int(sliver_count(scene)),
         "world_triangles": int(len(scene.world_triangles())),
     }
 
 
-def child_solve(path: Path, panels: bool, depth: int | None, lights_per_storey: int, storeys: int,
-                rooms: int) -> dict:
+def child_solve(
+    path: Path, panels: bool, depth: int | None, lights_per_storey: int, storeys: int, rooms: int
+) -> dict:
     from iat.io.load import load_scene
     from iat.io.scene import Light
     from iat.radiosity import SolveOptions, solve
@@ -78,8 +85,11 @@ def child_solve(path: Path, panels: bool, depth: int | None, lights_per_storey: 
 
     scene = load_scene(path, panels=panels)
     for p in large_ifc.light_positions(storeys, rooms, lights_per_storey):
-        scene.lights.append(Light(kind="point", position=rm.ifc_to_yup(p), intensity=rm.IFC_LIGHT_INTENSITY,
-                                  name="bench lamp"))
+        scene.lights.append(
+            Light(
+                kind="point", position=rm.ifc_to_yup(p), intensity=rm.IFC_LIGHT_INTENSITY, name="bench lamp"
+            )
+        )
     opts = {"panels": panels} | ({"max_depth": depth} if depth is not None else {})
     base = rss_now_mib()
     t0 = time.perf_counter()
@@ -87,10 +97,16 @@ def child_solve(path: Path, panels: bool, depth: int | None, lights_per_storey: 
     solve_s = time.perf_counter() - t0
     st = sol.stats
     return {
-        "solve_s": solve_s, "max_rss_mib": max_rss_mib(), "base_rss_mib": base, "lights": len(scene.lights),
-        "elements": int(st["elements"]), "vertices": int(st.get("vertices", len(sol.vert_key))),
-        "shots": int(st.get("shots", -1)), "rays": int(st.get("rays", -1)),
-        "unshot": float(st.get("unshot_fraction", float("nan"))), "max_depth": int(sol.max_depth),
+        "solve_s": solve_s,
+        "max_rss_mib": max_rss_mib(),
+        "base_rss_mib": base,
+        "lights": len(scene.lights),
+        "elements": int(st["elements"]),
+        "vertices": int(st.get("vertices", len(sol.vert_key))),
+        "shots": int(st.get("shots", -1)),
+        "rays": int(st.get("rays", -1)),
+        "unshot": float(st.get("unshot_fraction", float("nan"))),
+        "max_depth": int(sol.max_depth),
     }
 
 
@@ -171,8 +187,10 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         large_ifc.large_ifc_house(path, a.storeys, a.rooms, a.windows)
         gen_s = time.perf_counter() - t0
-        print(f"{path.name}: {a.storeys} storeys, {a.rooms} x {a.rooms} rooms, {a.windows} windows per room "
-              f"and facade; {path.stat().st_size / MIB:.2f} MiB, generated in {gen_s:.1f} s\n")
+        print(
+            f"{path.name}: {a.storeys} storeys, {a.rooms} x {a.rooms} rooms, {a.windows} windows per room "
+            f"and facade; {path.stat().st_size / MIB:.2f} MiB, generated in {gen_s:.1f} s\n"
+        )
         loads = {}
         for panels in (False, True):
             name = "panels" if panels else "no panels"
