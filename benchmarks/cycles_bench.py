@@ -284,22 +284,14 @@ def run_cycles(job: dict, settings, work: Path) -> tuple[list[dict], dict]:
 
 
 def run_ours(cb, repeats: int) -> list[dict]:
-    from solver_bench import timed_solve
+    from solver_bench import preset_solves
 
     from iat.bake.baker import Baker
     from iat.measure.metrics import reference_errors
     from iat.measure.reference import box_filtered_render
-    from iat.radiosity import SolveOptions
-    from iat.radiosity.options import QUALITY_PRESETS
 
-    timed_solve(cb.scene, SolveOptions(max_depth=2))  # kernels loaded before the first timing
     rows = []
-    for level in QUALITY_PRESETS:
-        opts = SolveOptions.preset(level)
-        best = None
-        for _ in range(repeats):
-            sol, dt = timed_solve(cb.scene, opts)
-            best = dt if best is None else min(best, dt)
+    for level, sol, best in preset_solves(cb.scene, repeats):
         t0 = time.perf_counter()
         baked = Baker(sol, cb.scene).bake()
         bake_s = time.perf_counter() - t0

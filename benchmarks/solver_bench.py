@@ -524,19 +524,26 @@ def run_cornell(options: dict | None = None, repeats: int = 2) -> dict:
     return res
 
 
-def run_quality(repeats: int = 2) -> list[dict]:
-    """Each ``--quality`` level on the Cornell box against the Mitsuba reference (best of ``repeats``)."""
+def preset_solves(scene, repeats: int = 2):
+    """``(level, solution, best time)`` of each ``--quality`` level on ``scene``, best of ``repeats``
+    (the kernels loaded before the first timing)."""
     from iat.radiosity.options import QUALITY_PRESETS
 
-    cb = Cornell(spp=4096, seed=3)
-    timed_solve(cb.scene, SolveOptions(max_depth=2))  # the kernels loaded before the first timing
-    rows = []
+    timed_solve(scene, SolveOptions(max_depth=2))
     for level in QUALITY_PRESETS:
         opts = SolveOptions.preset(level)
         best = None
         for _ in range(repeats):
-            sol, dt = timed_solve(cb.scene, opts)
+            sol, dt = timed_solve(scene, opts)
             best = dt if best is None else min(best, dt)
+        yield level, sol, best
+
+
+def run_quality(repeats: int = 2) -> list[dict]:
+    """Each ``--quality`` level on the Cornell box against the Mitsuba reference (best of ``repeats``)."""
+    cb = Cornell(spp=4096, seed=3)
+    rows = []
+    for level, sol, best in preset_solves(cb.scene, repeats):
         rows.append({"quality": level, "time_s": best, "vertices": len(sol.vert_key), **cb.errors(sol)})
         print(rows[-1], flush=True)
     cb.renderer.release()
@@ -547,7 +554,6 @@ def run_quality_daylit(repeats: int = 2) -> list[dict]:
     """Each ``--quality`` level on the daylit room of ``tests/test_daylight.py`` (sun and sky through
     a window) against its 4096-spp reference, on the pixels wholly on the model (the sky left out)."""
     from iat.measure.reference import SUPERSAMPLE, box_filtered_render, render_reference_cached
-    from iat.radiosity.options import QUALITY_PRESETS
     from iat.render.renderer import Renderer
     from tests.support.daylight import CAMERA, daylit_room
 
@@ -560,12 +566,7 @@ def run_quality_daylit(repeats: int = 2) -> list[dict]:
     ref = np.where(surface[..., None], ref, 0.0)
     mask = smooth_lit_mask(ref) & surface
     rows = []
-    for level in QUALITY_PRESETS:
-        opts = SolveOptions.preset(level)
-        best = None
-        for _ in range(repeats):
-            sol, dt = timed_solve(scene, opts)
-            best = dt if best is None else min(best, dt)
+    for level, sol, best in preset_solves(scene, repeats):
         r.set_solution(sol)
         e = reference_errors(box_filtered_render(r, CAMERA, size, "mesh"), ref, mask)
         rows.append({"quality": level, "time_s": best, "vertices": len(sol.vert_key), **e})
@@ -577,6 +578,18 @@ def run_quality_daylit(repeats: int = 2) -> list[dict]:
 # -- output -------------------------------------------------------------------------------------
 def _f(x, nd=3):
     return "-" if x is None else (f"{x:.{nd}f}" if isinstance(x, float) else str(x))
+
+
+def _quality_table(rows: list[dict]) -> list[str]:
+    head = [
+        "| quality | solve (best of 2) | vertices | per pixel | 8 x 8 blocks | bias |",
+        "|---|---|---|---|---|---|",
+    ]
+    return head + [
+        f"| {r['quality']} | {r['time_s']:.2f} s | {r['vertices']:,} | {r['rel_smooth']:.4f} | "
+        f"{r['rel_blocks']:.4f} | {r['bias']:+.1%} |"
+        for r in rows
+    ]
 
 
 def format_md(res: dict) -> str:
@@ -684,26 +697,14 @@ def format_md(res: dict) -> str:
             "",
             f"Run {q['date']}, load {q['load']}; against the 4096-spp reference of the tests.",
             "",
-            "| quality | solve (best of 2) | vertices | per pixel | 8 x 8 blocks | bias |",
-            "|---|---|---|---|---|---|",
-        ]
-        lines += [
-            f"| {r['quality']} | {r['time_s']:.2f} s | {r['vertices']:,} | {r['rel_smooth']:.4f} | "
-            f"{r['rel_blocks']:.4f} | {r['bias']:+.1%} |"
-            for r in q["rows"]
+            *_quality_table(q["rows"]),
         ]
         if q.get("daylit"):
             lines += [
                 "",
                 "The daylit room of `tests/test_daylight.py` (sun and sky through a window; 96 x 72):",
                 "",
-                "| quality | solve (best of 2) | vertices | per pixel | 8 x 8 blocks | bias |",
-                "|---|---|---|---|---|---|",
-            ]
-            lines += [
-                f"| {r['quality']} | {r['time_s']:.2f} s | {r['vertices']:,} | {r['rel_smooth']:.4f} | "
-                f"{r['rel_blocks']:.4f} | {r['bias']:+.1%} |"
-                for r in q["daylit"]
+                *_quality_table(q["daylit"]),
             ]
         lines.append("")
     return "\n".join(lines)
