@@ -20,6 +20,8 @@ from embreex.mesh_construction import TriangleMesh
 
 #: rays per embreex call
 CHUNK = 1 << 16
+#: environment variable: the worker threads of ray queries when none are given (default min(2, cores))
+RAY_THREADS_ENV = "IAT_RAY_THREADS"
 
 
 class Visibility:
@@ -27,7 +29,7 @@ class Visibility:
 
     triangles : (T, 3, 3) float64 world triangles
     transmission : (T,) float transmittance of each triangle (glass), or None (all opaque)
-    threads : worker threads for large queries (default: min(2, CPU count))
+    threads : worker threads for large queries (default: ``$IAT_RAY_THREADS``, else min(2, CPU count))
 
     ``rays`` counts the rays traced so far and ``seconds`` the time spent tracing them.
     Transmissive triangles do not occlude; :meth:`visible` multiplies by the transmittance
@@ -57,7 +59,9 @@ class Visibility:
             verts = np.ascontiguousarray(tris.reshape(-1, 3))
             faces = np.arange(len(verts), dtype=np.int32).reshape(-1, 3)
             self._mesh = TriangleMesh(self._scene, verts, faces)
-        self.threads = max(1, int(threads if threads is not None else min(2, os.cpu_count() or 1)))
+        if threads is None:
+            threads = int(os.environ.get(RAY_THREADS_ENV, "0") or 0) or min(2, os.cpu_count() or 1)
+        self.threads = max(1, int(threads))
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
         self._lock = threading.Lock()
         self.rays = 0
