@@ -168,11 +168,7 @@ class Baker:
         self._patch_uv = np.zeros((P, 4, 2), dtype=np.float32)
         if scene is not None:
             self._patch_uv = np.asarray(scene.patch_uv, dtype=np.float32)
-            mats = scene.materials
-            has = np.array([m.detail is not None and not np.any(m.emission > 0) for m in mats], dtype=bool)
-            ok_m = self._material < len(mats)
-            detail_ok[ok_m] = has[self._material[ok_m]]
-            detail_ok &= (albedo > 1e-4).all(axis=1)
+            detail_ok = scene.detail_patches(albedo)
         self._detail_ok = detail_ok
         self._emissive = np.zeros(0, bool)  # unknown without a scene
         if scene is not None:

@@ -151,6 +151,9 @@ class Sky:
         }
 
 
+#: albedo at or below which a patch takes no detail texture (:meth:`Scene.detail_patches`)
+DETAIL_ALBEDO_FLOOR = 1e-4
+
 #: the keys of a sky's JSON spec (:meth:`Sky.from_spec`)
 SKY_SPEC_KEYS = ("kind", "radiance", "sun_direction", "turbidity", "ground")
 
@@ -278,6 +281,18 @@ class Scene:
     def patch_emission(self) -> np.ndarray:
         """(p, 3) float64 emitted radiance per patch."""
         return np.array([m.emission for m in self.materials])[self.patch_material]
+
+    def detail_patches(self, albedo) -> np.ndarray:
+        """(p,) bool the patches drawn as incoming light x their material's detail texture: the
+        material has one and emits nothing, and the patch's ``albedo`` ((p, 3), the solver's) is
+        above ``DETAIL_ALBEDO_FLOOR`` in every channel (the light is divided by it)."""
+        mats = self.materials
+        has = np.array([m.detail is not None and not np.any(m.emission > 0) for m in mats] or [False])
+        mat = np.asarray(self.patch_material, dtype=np.int64).reshape(-1)
+        ok = (mat >= 0) & (mat < len(mats))
+        out = np.zeros(len(mat), dtype=bool)
+        out[ok] = has[mat[ok]]
+        return out & (np.asarray(albedo, dtype=np.float64).reshape(-1, 3) > DETAIL_ALBEDO_FLOOR).all(axis=1)
 
     @property
     def has_light_sources(self) -> bool:

@@ -5,8 +5,8 @@ IAT mode's texels on a patch whose material has a detail texture hold the incomi
 Mesh mode does the same per vertex: :func:`mesh_detail` gives, for each vertex of the drawn mesh
 (:func:`iat.radiosity.solution.drawn_mesh`), the detail texture's uv (the patch's corner uvs
 interpolated as the lattice places the vertex: the same drawn mesh with the uvs as corners), whether
-it is on such a patch (the Baker's rule: a detail texture, no emission, albedo > 0 in every
-channel) and the divisor that turns its radiance into incoming light; ``mesh.glsl`` multiplies.
+it is on such a patch (:meth:`iat.io.scene.Scene.detail_patches`, the Baker's rule) and the divisor
+that turns its radiance into incoming light; ``mesh.glsl`` multiplies.
 """
 
 from __future__ import annotations
@@ -29,35 +29,23 @@ _DRAWN_FIELDS = (
 )
 
 
-def scene_details(scene) -> dict | None:
-    """What :func:`mesh_detail` needs of a Scene: ``{"patch_uv" (P, 4, 2), "detail" (P,) bool}``
-    (patches whose material has a detail texture and no emission), or None when none has."""
-    mats = scene.materials
-    has = np.array([getattr(m, "detail", None) is not None and not np.any(m.emission > 0) for m in mats])
-    if not has.any() or scene.patch_uv is None:
-        return None
-    pm = np.asarray(scene.patch_material, dtype=np.int64).reshape(-1)
-    ok = (pm >= 0) & (pm < len(mats))
-    detail = np.zeros(len(pm), dtype=bool)
-    detail[ok] = has[pm[ok]]
-    return {"patch_uv": np.asarray(scene.patch_uv, dtype=np.float64).reshape(-1, 4, 2), "detail": detail}
-
-
-def mesh_detail(solution, drawn, details: dict | None):
+def mesh_detail(solution, drawn, scene):
     """``(detail_uv (N, 2) float32, detail (N,) float32 0/1, divisor (N, 3) float32, tri_key (T,))``
     for the N vertices and T triangles of ``drawn`` (the solution's drawn mesh); ``tri_key`` is the
-    material of a detail triangle, else -1. None when ``details`` (:func:`scene_details`) is None or
-    belongs to another model (patch counts differ)."""
+    material of a detail triangle, else -1. None when ``scene`` (the Scene shown) is None, belongs to
+    another model (patch counts differ) or has no detail patch
+    (:meth:`~iat.io.scene.Scene.detail_patches`, the Baker's rule)."""
     corners = np.asarray(solution.patch_corners).reshape(-1, 4, 3)
-    if details is None or len(details["patch_uv"]) != len(corners):
+    if scene is None or scene.patch_uv is None or scene.n_patches != len(corners):
         return None
     if getattr(solution, "patch_albedo", None) is None or getattr(solution, "patch_material", None) is None:
         return None
     albedo = np.asarray(solution.patch_albedo, dtype=np.float64).reshape(-1, 3)
-    on = details["detail"] & (albedo > 1e-4).all(axis=1)
+    on = scene.detail_patches(albedo)
     if not on.any():
         return None
-    uv3 = np.concatenate([details["patch_uv"], np.zeros((len(corners), 4, 1))], axis=2)
+    patch_uv = np.asarray(scene.patch_uv, dtype=np.float64).reshape(-1, 4, 2)
+    uv3 = np.concatenate([patch_uv, np.zeros((len(corners), 4, 1))], axis=2)
     fields = [k for k in _DRAWN_FIELDS if hasattr(solution, k)]
     as_uv = SimpleNamespace(patch_corners=uv3, **{k: getattr(solution, k) for k in fields})
     duv = drawn_mesh(as_uv).position[:, :2].astype(np.float32)

@@ -65,7 +65,7 @@ from iat.render import gl
 from iat.render.buffers import Geometry, upload_buffer
 from iat.render.gl import Registry
 from iat.render.lod import LodDrawer
-from iat.render.mesh_detail import mesh_detail, scene_details
+from iat.render.mesh_detail import mesh_detail
 from iat.render.pages import PageTexture, gpu_pages
 
 MODES = ("preview", "mesh", "iat", "split", "diff")
@@ -133,7 +133,7 @@ class Renderer:
         mesh, iat, preview = self._programs["mesh"], self._programs["iat"], self._programs["preview"]
         mesh_attrs = [("position", 3), ("color", 3), ("color_b", 3), ("detail_uv", 2), ("detail", 1)]
         self._solution, self._baked_mesh = Geometry(mesh, mesh_attrs), Geometry(mesh, mesh_attrs)
-        self._scene_details = None  # the scene's detail patches, for mesh mode (iat.render.mesh_detail)
+        self._scene = None  # the scene shown: its detail patches, for mesh mode (iat.render.mesh_detail)
         self._baked_tex = Geometry(
             iat, [("position", 3), ("uv", 2), ("layer", 1), ("detail_uv", 2), ("detail", 1)]
         )
@@ -264,7 +264,7 @@ class Renderer:
         tri_mat = mat[tri_patch]
         tri_key = np.where(np.isin(tri_mat, detail_mat), tri_mat, -1)
         self._set_details("preview", details)
-        self._scene_details = scene_details(scene)
+        self._scene = scene
         self._preview.upload(
             self.ctx,
             self._reg,
@@ -307,7 +307,7 @@ class Renderer:
         _check_indices(tris, len(key), "solution tri_vertices")
         drawn = drawn_mesh(solution)  # panel cells' triangles cut to their surface
         pos, tris = drawn.position, drawn.triangles
-        md = mesh_detail(solution, drawn, self._scene_details)  # detail vertices hold incoming light
+        md = mesh_detail(solution, drawn, self._scene)  # detail vertices hold incoming light
         duv, dflag, divisor, tri_key = md or (np.zeros((len(pos), 2)), np.zeros(len(pos)), 1.0, None)
         colors = []
         for k, sol in enumerate(solutions):

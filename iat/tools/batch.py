@@ -1,10 +1,10 @@
 """Batch solves, bakes and renders as Dask tasks (``iat batch JOBS.toml``).
 
 Independent solves run as tasks on a :class:`distributed.LocalCluster` (processes, one thread each,
-their kernels and rays too: :data:`WORKER_ENV`; as many workers as cores) or on an existing cluster (``scheduler="tcp://host:8786"``). Results come
-back to the client, which writes them atomically (:func:`iat.fsutil.atomic_write`,
-:meth:`Solution.save`) into one output folder: the workers need the model files (they load them),
-never the output folder.
+their kernels and rays too: :data:`WORKER_ENV`; as many workers as cores) or on an existing cluster
+(``scheduler="tcp://host:8786"``). Results come back to the client, which writes them atomically
+(:func:`iat.fsutil.atomic_write`, :meth:`Solution.save`) into one output folder: the workers need
+the model files (they load them), never the output folder.
 
 Job file (TOML; relative paths are relative to the job file)::
 
