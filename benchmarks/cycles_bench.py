@@ -100,14 +100,7 @@ def scene_job(scene) -> tuple[dict, np.ndarray]:
 def camera_rays(camera, size, k: int = K) -> tuple[np.ndarray, np.ndarray]:
     """Unit directions (h k, w k, 3) through the centres of a (w k) x (h k) grid (row 0 at the top,
     column 0 at the left, as the renderer's read-back and the reference), and the eye."""
-    w, h = int(size[0]) * k, int(size[1]) * k
-    v = camera.view_from_world()
-    s, u, f = v[0, :3], v[1, :3], -v[2, :3]
-    t = math.tan(math.radians(camera.yfov) / 2.0)
-    x = ((np.arange(w) + 0.5) / w * 2.0 - 1.0) * t * (w / h)
-    y = (1.0 - (np.arange(h) + 0.5) / h * 2.0) * t
-    d = f[None, None, :] + x[None, :, None] * s[None, None, :] + y[:, None, None] * u[None, None, :]
-    return d / np.linalg.norm(d, axis=2, keepdims=True), camera.eye.copy()
+    return camera.pixel_rays(size, k), camera.eye.copy()
 
 
 def ray_cast(tris: np.ndarray, eye: np.ndarray, dirs: np.ndarray):

@@ -57,6 +57,19 @@ class Camera:
         m[:3, 3] = -m[:3, :3] @ self.eye
         return m
 
+    def pixel_rays(self, size: tuple[int, int], k: int = 1) -> np.ndarray:
+        """(h k, w k, 3) float64 unit directions through the centres of a (w k) x (h k) grid over a
+        ``size`` (w, h) image: row 0 at the top, column 0 at the left, as the renderer's read-back
+        (:meth:`clip_from_world` of aspect w / h). Rays start at :attr:`eye`."""
+        w, h = int(size[0]) * int(k), int(size[1]) * int(k)
+        v = self.view_from_world()
+        s, u, f = v[0, :3], v[1, :3], -v[2, :3]
+        t = np.tan(np.radians(self.yfov) / 2.0)
+        x = ((np.arange(w) + 0.5) / w * 2.0 - 1.0) * t * (w / h)
+        y = (1.0 - (np.arange(h) + 0.5) / h * 2.0) * t
+        d = f[None, None, :] + x[None, :, None] * s[None, None, :] + y[:, None, None] * u[None, None, :]
+        return d / np.linalg.norm(d, axis=2, keepdims=True)
+
     def clip_from_view(self, aspect: float) -> np.ndarray:
         """(4, 4) float64 OpenGL perspective projection for width/height ``aspect``."""
         t = 1.0 / np.tan(np.radians(self.yfov) / 2.0)

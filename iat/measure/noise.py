@@ -26,20 +26,11 @@ __all__ = ["patch_image", "wall_noise"]
 def patch_image(scene, camera: Camera, size: tuple[int, int]) -> np.ndarray:
     """(h, w) int64 the patch seen through each pixel's centre (-1: none), by one ray a pixel.
 
-    size : (w, h) pixels; the camera's vertical ``yfov`` and aspect w / h, as the renderer uses."""
+    size : (w, h) pixels (:meth:`iat.camera.Camera.pixel_rays`)."""
     from iat.radiosity.visibility import Visibility
 
     w, h = int(size[0]), int(size[1])
-    f = np.asarray(camera.forward, dtype=np.float64)
-    right = np.cross(f, camera.up)
-    right /= np.linalg.norm(right)
-    up = np.cross(right, f)
-    t = np.tan(np.radians(camera.yfov) / 2)
-    ys, xs = np.mgrid[0:h, 0:w]
-    px = ((xs + 0.5) / w * 2 - 1) * t * (w / h)
-    py = (1 - (ys + 0.5) / h * 2) * t
-    d = (f + px[..., None] * right + py[..., None] * up).reshape(-1, 3)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d = camera.pixel_rays((w, h)).reshape(-1, 3)
     with Visibility.of_scene(scene) as vis:
         tri = vis.first_hit(np.broadcast_to(camera.eye, d.shape), d, np.full(len(d), 1e30))
         tri_patch = scene.world_triangle_patch()[vis.opaque]
