@@ -139,13 +139,10 @@ class ModelState:
         if self.solution is None:
             return 0
         if self._mesh_calls is None or self._mesh_calls[0] is not self.solution:
-            from iat.render.mesh_detail import scene_details
-
-            details = scene_details(self.scene) if self.scene is not None else None
             albedo = np.asarray(self.solution.patch_albedo).reshape(-1, 3)
-            n = 1
-            if details is not None and len(details["detail"]) == len(albedo):
-                on = details["detail"] & (albedo > 1e-4).all(axis=1)
+            sc, n = self.scene, 1
+            if sc is not None and sc.n_patches == len(albedo) and sc.patch_uv is not None:  # as mesh_detail
+                on = sc.detail_patches(albedo)
                 n = len(np.unique(np.asarray(self.solution.patch_material)[on])) + int(not on.all())
             self._mesh_calls = (self.solution, max(n, 1))
         return self._mesh_calls[1]
