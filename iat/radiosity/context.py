@@ -5,7 +5,9 @@ spot lights (with the element-integrated correction of :mod:`.pointlight`)."""
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,7 +16,7 @@ from iat.color import LUMINANCE_WEIGHTS
 from iat.geometry import quadtree as qt
 from iat.geometry.clip import clamp_into, coverage_grid
 from iat.radiosity.formfactor import point_polygon
-from iat.radiosity.kernels import gather_finish, gather_rays, patch_form_factors
+from iat.radiosity.kernels import gather_finish, gather_rays, one_thread, patch_form_factors
 from iat.radiosity.options import (
     CULL_RAYS,
     DIRECT_SAMPLE_FACTOR,
@@ -29,6 +31,7 @@ from iat.radiosity.options import (
     RAY_EPS_PATCH,
     SHOOTER_COVERAGE,
     SKY_SAMPLES,
+    SPLIT_RECEIVERS,
     SUN_SAMPLES,
     SolveOptions,
 )
@@ -48,6 +51,25 @@ from iat.radiosity.visibility import Visibility
 
 class SolveCancelled(Exception):
     """Internal: the progress callback asked to stop."""
+
+
+_END = object()
+_TASKS: ThreadPoolExecutor | None = None
+_TASKS_LOCK = threading.Lock()
+_IN_TASK = threading.local()
+
+
+def _task_pool(n: int) -> ThreadPoolExecutor:
+    """The process's pool of gather threads (made once, ``n`` threads; shared by all solves)."""
+    global _TASKS
+    with _TASKS_LOCK:
+        if _TASKS is None or _TASKS._max_workers < n:
+            _TASKS = ThreadPoolExecutor(n, thread_name_prefix="iat-gather")
+        return _TASKS
+
+
+def _no_check() -> None:
+    pass
 
 
 @dataclass
@@ -141,7 +163,8 @@ class Context:
         self._valid_corner = np.arange(4)[None, :] < self.n_corners[:, None]
         self._shooters: dict[int, Shooter] = {}
         self._patterns: dict[tuple[int, int, int], np.ndarray] = {}
-        self._buffers: tuple[np.ndarray, ...] | None = None
+        self._buffers = threading.local()  # per thread: the gathers' scratch (:meth:`_scratch`)
+        self._lock = threading.Lock()  # form-factor caches and cull counts, shared by gather threads
         self._cand: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         # per shooter: rays traced to each receiver patch and how many were unoccluded
         self._vis_rays: dict[int, np.ndarray] = {}
@@ -211,15 +234,15 @@ class Context:
     def pattern(self, s: int, m: int, shot: int) -> np.ndarray:
         """(m*m, 2) stratified jittered (u, v) in [0, 1)^2 for patch s (fixed per seed, patch, shot)."""
         key = (int(s), int(m), int(shot))
-        if key not in self._patterns:  # a shot gathers at the mesh and at coarse grids: made once
+        pat = self._patterns.get(key)
+        if pat is None:  # a shot gathers at the mesh and at coarse grids: made once
             if len(self._patterns) >= 64:
                 self._patterns.clear()
             rng = np.random.default_rng([self.opts.seed, int(s), int(shot), int(m)])
             a, b = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
-            self._patterns[key] = np.stack(
-                [(a.ravel() + rng.random(m * m)) / m, (b.ravel() + rng.random(m * m)) / m], axis=1
-            )
-        return self._patterns[key]
+            pat = np.stack([(a.ravel() + rng.random(m * m)) / m, (b.ravel() + rng.random(m * m)) / m], axis=1)
+            self._patterns[key] = pat
+        return pat
 
     def shooter(self, s: int) -> Shooter:
         if s not in self._shooters:
@@ -234,17 +257,59 @@ class Context:
         return self._shooters[s]
 
     # -- kernels --------------------------------------------------------------
+    def imap(self, fn: Callable, items: Iterable, check: Callable[[], None]) -> Iterator:
+        """``fn(item)`` for each item, in order, up to :attr:`Visibility.threads` at once: a gather
+        spends most of its time in kernels and rays that release the GIL, so two of them keep
+        both cores busy where one leaves a core idle during its Python. Results do not depend on
+        the thread count. ``check()`` is polled while waiting; when it raises, the tasks not
+        started are dropped, the running ones finish, and the exception propagates. Inside a
+        task (or with one thread) it runs in the calling thread."""
+        threads = self.vis.threads
+        if threads <= 1 or getattr(_IN_TASK, "active", False):
+            for item in items:
+                yield fn(item)
+                check()
+            return
+        pool, pending, it = _task_pool(threads), [], iter(items)
+        try:
+            while True:
+                while len(pending) < 2 * threads:
+                    item = next(it, _END)
+                    if item is _END:
+                        break
+                    pending.append(pool.submit(self._task, fn, item))
+                if not pending:
+                    return
+                while not wait(pending[:1], timeout=0.05).done:
+                    check()
+                yield pending.pop(0).result()
+        finally:
+            for f in pending:
+                f.cancel()
+            wait(pending)
+
+    def _task(self, fn: Callable, item):
+        """``fn(item)`` on a gather thread: its kernels and rays run on this thread alone (the
+        other tasks have the other cores), and it runs any :meth:`imap` of its own in order."""
+        _IN_TASK.active = True
+        try:
+            with one_thread(), self.vis.on_this_thread():
+                return fn(item)
+        finally:
+            _IN_TASK.active = False
+
     def _scratch(self, n: int) -> tuple[np.ndarray, ...]:
-        """The gathers' buffers for n samples (:func:`.kernels.gather_rays`), kept between calls."""
-        if self._buffers is None or self._buffers[0].shape[1] < n:
+        """The calling thread's buffers for n samples (:func:`.kernels.gather_rays`), kept between calls."""
+        buf = getattr(self._buffers, "arrays", None)
+        if buf is None or buf[0].shape[1] < n:
             n = max(n, 2 * GATHER_BLOCK * 64)
-            self._buffers = (
+            buf = self._buffers.arrays = (
                 np.empty((6, n)),
                 np.empty((n, 3), dtype=np.float32),
                 np.empty((n, 3), dtype=np.float32),
                 np.empty(n, dtype=np.float32),
             )
-        return self._buffers
+        return buf
 
     def candidates(self, s: int) -> tuple[np.ndarray, np.ndarray]:
         """(P,) bool ``full, part``: receiver patches that can see the front of patch s, entirely
@@ -296,13 +361,14 @@ class Context:
         times on the same mesh; the oldest shooters go first when the cache is full."""
         ok = self.allowed(s, cull, patches)
         cache = geo.cache
-        entry = None if cache is None else cache.get(s)
-        if cache is not None and entry is None:
-            entry = cache[s] = [
-                np.zeros(0, dtype=np.int64),
-                np.zeros(0, dtype=np.float32),
-                np.zeros(self.n_patches, dtype=bool),
-            ]
+        with self._lock:  # gathers of other shooters may share the cache (:meth:`imap`)
+            entry = None if cache is None else cache.get(s)
+            if cache is not None and entry is None:
+                entry = cache[s] = [
+                    np.zeros(0, dtype=np.int64),
+                    np.zeros(0, dtype=np.float32),
+                    np.zeros(self.n_patches, dtype=bool),
+                ]
         need = ok if entry is None else (~entry[2] if ok is None else ok & ~entry[2])
         if entry is None or need.any():
             idx = self.receivers(s, geo, need)
@@ -314,11 +380,12 @@ class Context:
             entry[0] = np.concatenate([entry[0], idx])
             entry[1] = np.concatenate([entry[1], f.astype(np.float32)])
             entry[2] |= True if need is None else need
-            size = cache.get("_size", 0) + len(idx)
-            while size > FF_CACHE_ENTRIES and len(cache) > 2:
-                old = next(k for k in cache if k not in ("_size", s))
-                size -= len(cache.pop(old)[0])
-            cache["_size"] = size
+            with self._lock:
+                size = cache.get("_size", 0) + len(idx)
+                while size > FF_CACHE_ENTRIES and len(cache) > 2:
+                    old = next(k for k in cache if k not in ("_size", s))
+                    size -= len(cache.pop(old)[0])
+                cache["_size"] = size
         idx, f = entry[0], entry[1]
         if ok is not None:
             sel = ok[geo.patch[idx]]
@@ -410,13 +477,13 @@ class Context:
         # a field of one sign gives results of that sign
         clamp_lo = has_field and float(flat.min()) >= 0
         clamp_hi = has_field and float(flat.max()) <= 0
-        rays_p = np.zeros(self.n_patches)
-        seen_p = np.zeros(self.n_patches)
         origin32 = geo.origin32()
-        for a in range(0, len(idx), GATHER_BLOCK):
-            ii = idx[a : a + GATHER_BLOCK]
-            near = f[a : a + GATHER_BLOCK] >= F_DIRECTION  # direction samples too
-            fb = np.ascontiguousarray(f[a : a + GATHER_BLOCK], dtype=np.float64)
+
+        def block(sl: slice):
+            """One block of receivers: (its rows' values, rays and rays seen per receiver patch)."""
+            ii = idx[sl]
+            near = f[sl] >= F_DIRECTION  # direction samples too
+            fb = np.ascontiguousarray(f[sl], dtype=np.float64)
             b = len(ii)
             x, nr = geo.ff[ii], geo.normal[ii]
             rot = hash_uniform(np.zeros(1, dtype=np.int64) if correlated else geo.key[ii], salt, 4)
@@ -433,20 +500,37 @@ class Context:
                 ka["has_mask"], ka["t32"], ka["half_eps"], *self._scratch(2 * b * len(pat)),
             )  # fmt: skip
             if len(w) == 0:
-                continue
+                return None
             vis = self.vis.visible(o, d, tfar)
             val, seen = gather_finish(
                 off, w, vis, u, v, fb, wsum, has_field, flat, nl, x, ka["geom"], ka["uvc"],
                 ka["linear_uv"], ka["is_quad"], ka["para"], mean, clamp_lo, clamp_hi,
             )  # fmt: skip
-            rays_p += np.bincount(rp, weights=np.diff(off), minlength=self.n_patches)
-            seen_p += np.bincount(rp, weights=seen, minlength=self.n_patches)
-            out[ii] = val if has_field else val[:, 0]
-        if s in self._vis_rays:
-            self._vis_rays[s] += rays_p
-            self._vis_seen[s] += seen_p
-        else:
-            self._vis_rays[s], self._vis_seen[s] = rays_p, seen_p
+            rays = np.bincount(rp, weights=np.diff(off), minlength=self.n_patches)
+            return (
+                val if has_field else val[:, 0],
+                rays,
+                np.bincount(rp, weights=seen, minlength=self.n_patches),
+            )
+
+        # blocks of at most GATHER_BLOCK receivers; a large gather in as many as there are threads
+        size = GATHER_BLOCK
+        if len(idx) >= SPLIT_RECEIVERS:
+            size = min(size, -(-len(idx) // self.vis.threads))
+        blocks = [slice(a, a + size) for a in range(0, len(idx), size)]
+        rays_p = np.zeros(self.n_patches)
+        seen_p = np.zeros(self.n_patches)
+        for sl, res in zip(blocks, self.imap(block, blocks, _no_check), strict=True):
+            if res is not None:
+                out[idx[sl]] = res[0]
+                rays_p += res[1]
+                seen_p += res[2]
+        with self._lock:
+            if s in self._vis_rays:
+                self._vis_rays[s] += rays_p
+                self._vis_seen[s] += seen_p
+            else:
+                self._vis_rays[s], self._vis_seen[s] = rays_p, seen_p
         return out
 
     def light_kernel(self, light, geo: ReceiverGeometry) -> tuple[np.ndarray, np.ndarray]:
@@ -536,9 +620,9 @@ class Context:
             return out
         geo = self.geometry(keys) if geo is None else geo
         incoming = np.zeros((len(keys), 3))  # radiance-weighted: rho * incoming = reflected
-        for e in self.emitters:
-            incoming += self.emitter_gather(e, geo)[:, None] * self.emission[e]
-            check()
+        gathers = self.imap(lambda e: self.emitter_gather(e, geo), self.emitters, check)
+        for e, g in zip(self.emitters, gathers, strict=True):
+            incoming += g[:, None] * self.emission[e]
         for light in self.lights:
             incoming += self.light_irradiance(light, geo) / np.pi
             check()

@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -29,11 +31,23 @@ import numpy as np
 # cores from embree's threads between two kernels (and from other processes on a shared machine)
 os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
-from numba import njit, prange  # noqa: E402
+from numba import get_num_threads, njit, prange, set_num_threads  # noqa: E402
 
 _PI = math.pi
 #: receivers per parallel task of the form-factor kernels (one set of scratch arrays each)
 _CHUNK = 256
+
+
+@contextmanager
+def one_thread() -> Iterator[None]:
+    """The kernels this thread calls inside run on it alone (numba's thread count is the
+    calling thread's): for callers that run several kernels at once on their own threads."""
+    before = get_num_threads()
+    set_num_threads(1)
+    try:
+        yield
+    finally:
+        set_num_threads(before)
 
 
 # -- form factors -------------------------------------------------------------------------

@@ -20,6 +20,8 @@ RAY_EPS_PATCH = 0.02
 FF_EPS = 1e-6
 #: receivers per vectorised gather block, a count (bounds the memory of the (n, samples) temporaries)
 GATHER_BLOCK = 8192
+#: a gather from one shooter to at least this many receivers is split into a block per thread
+SPLIT_RECEIVERS = 1024
 #: ``min_element_size=None``: this fraction of sqrt(scene surface area) (ends subdivision along hard shadows)
 MIN_ELEMENT_FRACTION = 1.0 / 600.0
 #: elements longer than this fraction of sqrt(scene surface area) split on BIG_TOLERANCE (0: none; else dark)

@@ -325,18 +325,25 @@ class SolveRun:
         ctx, mesh = self.ctx, self.mesh
         shot = int(self.shot_index[s])
         lvl = self.receiver_levels(s, field_mean)
-        g = ctx.gather(
-            s, mesh["geo"], m, shot, field, field_mean, correlated=False, cull=True, patches=lvl < 0
-        )
-        dv = mesh["rho"] * g
+        # the vertices, then each coarse grid with patches at its level (disjoint receiver
+        # patches, so the gathers' culling does not depend on their order: run at once)
+        parts = [(mesh["geo"], lvl < 0, mesh["rho"], None, None)]
         for level, (c, w) in enumerate(zip(self.coarse or [], mesh["coarse_w"], strict=True)):
-            sel = lvl == level
-            if sel.any():
-                gc = c["rho"] * ctx.gather(
-                    s, c["geo"], m, shot, field, field_mean, correlated=False, cull=True, patches=sel
-                )
-                c["acc"] += gc
-                dv += w @ gc
+            if (lvl == level).any():
+                parts.append((c["geo"], lvl == level, c["rho"], c, w))
+
+        def gather(part):
+            geo, sel, rho = part[:3]
+            g = ctx.gather(s, geo, m, shot, field, field_mean, correlated=False, cull=True, patches=sel)
+            return rho * g
+
+        dv = None
+        for (_, _, _, c, w), g in zip(parts, ctx.imap(gather, parts, self.check), strict=True):
+            if c is None:
+                dv = g
+            else:
+                c["acc"] += g
+                dv += w @ g
         return dv
 
     def refine_total(self, label: str, span) -> None:
@@ -383,16 +390,22 @@ class SolveRun:
                 for level, c in enumerate(self.coarse or []):
                     out += coarse_weights(new, c["keys"], ctx.is_quad, level, ctx.n) @ c["acc"]
                 # and a gather of what each source shot at the vertices of these patches
+                calls = []
                 for p in sources:
                     p = int(p)
                     fine = self.levels[p] < 0 if p in self.levels else None
-                    if fine is not None and not (fine & on).any():
-                        continue
+                    if fine is None or (fine & on).any():
+                        calls.append((p, fine))
+
+                def gather(call):
+                    p, fine = call
                     jitter = int(self.shot_index[p]) + 1_000_000 * (1 + n_pass)
-                    out += rho * ctx.gather(
+                    return ctx.gather(
                         p, geo, m_src[p], jitter, grids[p], means[p], correlated=True, cull=True, patches=fine
                     )
-                    self.check()
+
+                for g in ctx.imap(gather, calls, self.check):
+                    out += rho * g
             return out
 
         old_keys = keys

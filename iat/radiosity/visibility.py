@@ -12,7 +12,9 @@ from __future__ import annotations
 import os
 import threading
 import time
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 
 import numpy as np
 from embreex import rtcore_scene as rtcs
@@ -64,6 +66,7 @@ class Visibility:
         self.threads = max(1, int(threads))
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
         self._lock = threading.Lock()
+        self._local = threading.local()
         self.rays = 0
         self.seconds = 0.0
 
@@ -90,6 +93,16 @@ class Visibility:
     def __exit__(self, *exc):
         self.close()
 
+    @contextmanager
+    def on_this_thread(self) -> Iterator[None]:
+        """Queries made by this thread inside are traced on it, not spread over the threads (for
+        callers that trace from several threads at once)."""
+        self._local.serial = True
+        try:
+            yield
+        finally:
+            self._local.serial = False
+
     def occluded_chunk(self, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> np.ndarray:
         """embreex's raw answer for one chunk of rays, on the calling thread and not counted in
         ``rays``: (n,) int, 0 where something lies before ``t``. o, d : (n, 3) float32 contiguous;
@@ -111,7 +124,7 @@ class Visibility:
         t0 = time.perf_counter()
         c = max(4096, min(CHUNK, -(-n // self.threads)))
         bounds = list(range(0, n, c))
-        if self._pool is None or len(bounds) == 1:
+        if self._pool is None or len(bounds) == 1 or getattr(self._local, "serial", False):
             for a in bounds:
                 out[a : a + c] = query(o[a : a + c], d[a : a + c], t[a : a + c])
         else:
