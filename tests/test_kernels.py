@@ -171,3 +171,34 @@ def test_results_do_not_depend_on_the_thread_count():
     for a, b in zip(one, many, strict=True):
         np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(ff1, ffn)
+
+
+def test_block_inputs_hash_as_hash_uniform():
+    """The compiled per-row inputs: the rotations are hash_uniform's (bit for bit), the rest rows
+    of the receiver arrays; correlated rows all take key 0's rotation."""
+    from iat.radiosity.sampling import hash_uniform
+
+    rng = np.random.default_rng(7)
+    n, P = 50, 4
+    key = rng.integers(0, 2**62, n)
+    ff, normal = rng.random((n, 3)), rng.random((n, 3))
+    patch = rng.integers(0, P, n)
+    tangent = rng.random((P, 2, 3))
+    origin32 = rng.random((n, 3)).astype(np.float32)
+    ii = np.array([3, 0, 49, 7])
+    f = np.array([0.01, 0.5, 0.02, 0.0])
+    salt = (1 << 64) - 12345
+    rot, x, nr, t1, t2, near, o32, rp = kernels.block_inputs(
+        ii, key, np.uint64(salt), False, ff, normal, patch, tangent, f, 0.02, origin32
+    )
+    np.testing.assert_array_equal(rot, hash_uniform(key[ii], salt, 4))
+    np.testing.assert_array_equal(x, ff[ii])
+    np.testing.assert_array_equal(nr, normal[ii])
+    np.testing.assert_array_equal(t1, tangent[patch[ii], 0])
+    np.testing.assert_array_equal(t2, tangent[patch[ii], 1])
+    np.testing.assert_array_equal(o32, origin32[ii])
+    np.testing.assert_array_equal(near, [False, True, True, False])
+    np.testing.assert_array_equal(rp, patch[ii])
+    args = (ff, normal, patch, tangent, f, 0.02, origin32)
+    rot_c = kernels.block_inputs(ii, key, np.uint64(salt), True, *args)[0]
+    np.testing.assert_array_equal(rot_c, np.repeat(hash_uniform(np.zeros(1, np.int64), salt, 4), 4, axis=0))

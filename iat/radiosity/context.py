@@ -16,7 +16,7 @@ from iat.color import LUMINANCE_WEIGHTS
 from iat.geometry import quadtree as qt
 from iat.geometry.clip import clamp_into, coverage_grid
 from iat.radiosity.formfactor import point_polygon
-from iat.radiosity.kernels import gather_finish, gather_rays, one_thread, patch_form_factors
+from iat.radiosity.kernels import block_inputs, gather_finish, gather_rays, one_thread, patch_form_factors
 from iat.radiosity.options import (
     CULL_RAYS,
     DIRECT_SAMPLE_FACTOR,
@@ -54,6 +54,7 @@ class SolveCancelled(Exception):
 
 
 _END = object()
+_MASK64 = (1 << 64) - 1
 _TASKS: ThreadPoolExecutor | None = None
 _TASKS_LOCK = threading.Lock()
 _IN_TASK = threading.local()
@@ -469,7 +470,7 @@ class Context:
             return out
         ka = self.shooter(s).kernel_args()
         pat = self.pattern(s, m, shot)
-        salt = (int(self.opts.seed) * 1_000_003 + int(s)) * 1_000_003 + int(shot)
+        salt = np.uint64(((int(self.opts.seed) * 1_000_003 + int(s)) * 1_000_003 + int(shot)) & _MASK64)
         has_field = field is not None
         flat = np.zeros((1, 3)) if field is None else field.astype(np.float64).reshape(-1, 3)
         nl = 0 if field is None else field.shape[0] - 1
@@ -481,23 +482,19 @@ class Context:
 
         def block(sl: slice):
             """One block of receivers: (its rows' values, rays and rays seen per receiver patch)."""
-            ii = idx[sl]
-            near = f[sl] >= F_DIRECTION  # direction samples too
             fb = np.ascontiguousarray(f[sl], dtype=np.float64)
-            b = len(ii)
-            x, nr = geo.ff[ii], geo.normal[ii]
-            rot = hash_uniform(np.zeros(1, dtype=np.int64) if correlated else geo.key[ii], salt, 4)
-            if correlated:  # one pattern for all receivers
-                rot = np.repeat(rot, b, axis=0)
-            rp = geo.patch[ii]
-            tan = self.tangent[rp]
+            # per row: its rotation (one for all when correlated), point, normal, tangents, whether
+            # it takes direction samples too, ray origin, patch
+            rot, x, nr, t1, t2, near, o32, rp = block_inputs(
+                idx[sl], geo.key, salt, correlated, geo.ff, geo.normal, geo.patch, self.tangent, fb,
+                F_DIRECTION, origin32,
+            )  # fmt: skip
             # the samples' weights and rays (float32, as embreex takes them: origins and targets
             # are off the surfaces by at least 32 float32 steps, so the rounding never crosses one)
             off, wsum, w, u, v, o, d, tfar = gather_rays(
-                pat, rot, x, nr, np.ascontiguousarray(tan[:, 0]), np.ascontiguousarray(tan[:, 1]),
-                near, origin32[ii], ka["geom"], ka["uvc"], ka["poly_n"], ka["poly_o"],
+                pat, rot, x, nr, t1, t2, near, o32, ka["geom"], ka["uvc"], ka["poly_n"], ka["poly_o"],
                 ka["tol"], ka["is_quad"], ka["para"], ka["linear_uv"], ka["area"], ka["mask"],
-                ka["has_mask"], ka["t32"], ka["half_eps"], *self._scratch(2 * b * len(pat)),
+                ka["has_mask"], ka["t32"], ka["half_eps"], *self._scratch(2 * len(fb) * len(pat)),
             )  # fmt: skip
             if len(w) == 0:
                 return None

@@ -425,6 +425,55 @@ def gather_rays(pat, rot, x, nr, t1, t2, near, origin32, geom, uvc, poly_n, poly
     return off, wsum, ws, us, vs, ro[:k], rd[:k], rt[:k]
 
 
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_MIX1 = np.uint64(0xBF58476D1CE4E5B9)
+_MIX2 = np.uint64(0x94D049BB133111EB)
+
+
+@njit(cache=True, error_model="numpy")
+def _hash_row(key, salt, out, i):
+    """``out[i, :]`` = :func:`iat.radiosity.sampling.hash_uniform` of one key (splitmix64)."""
+    z = np.uint64(key) * _GOLDEN
+    z ^= salt
+    for j in range(out.shape[1]):
+        z = z + _GOLDEN
+        x = (z ^ (z >> np.uint64(30))) * _MIX1
+        x = (x ^ (x >> np.uint64(27))) * _MIX2
+        x = x ^ (x >> np.uint64(31))
+        out[i, j] = np.float64(x >> np.uint64(11)) * (1.0 / 9007199254740992.0)
+
+
+@njit(cache=True, parallel=True, nogil=True, error_model="numpy")
+def block_inputs(ii, key, salt, correlated, ff, normal, patch, tangent, f, f_direction, origin32):
+    """The per-receiver inputs of :func:`gather_rays` for the rows ``ii`` (b,) of a receiver set:
+    ``rot`` (b, 4) the rows' pattern rotations (:func:`iat.radiosity.sampling.hash_uniform` of
+    their keys (n,) int64 with ``salt`` uint64; of key 0 for every row when ``correlated``),
+    their points ``x`` and normals ``nr`` (b, 3) (rows of ff, normal (n, 3)), the tangents
+    ``t1, t2`` (b, 3) of their patches (patch (n,), tangent (P, 2, 3)), ``near`` (b,) bool
+    (form factor f (b,) at least f_direction), ``o32`` (b, 3) float32 (rows of origin32) and
+    ``rp`` (b,) their patches."""
+    b = ii.shape[0]
+    rot = np.empty((b, 4))
+    x, nr = np.empty((b, 3)), np.empty((b, 3))
+    t1, t2 = np.empty((b, 3)), np.empty((b, 3))
+    o32 = np.empty((b, 3), dtype=np.float32)
+    near = np.empty(b, dtype=np.bool_)
+    rp = np.empty(b, dtype=np.int64)
+    for i in prange(b):
+        r = ii[i]
+        p = patch[r]
+        rp[i] = p
+        _hash_row(0 if correlated else key[r], salt, rot, i)
+        for c in range(3):
+            x[i, c] = ff[r, c]
+            nr[i, c] = normal[r, c]
+            t1[i, c] = tangent[p, 0, c]
+            t2[i, c] = tangent[p, 1, c]
+            o32[i, c] = origin32[r, c]
+        near[i] = f[i] >= f_direction
+    return rot, x, nr, t1, t2, near, o32, rp
+
+
 @njit(cache=True, error_model="numpy")
 def _sample_lattice(flat, n, u, v, c):
     """Channel c of the piecewise-linear lattice field flat ((N+1)**2, 3) at (u, v)
