@@ -27,7 +27,7 @@ machine shared with other work, wall-clock rates show the load, CPU time the wor
 
 The house is solved once (cached, content-keyed) and the viewer opens that solution file, so a
 solver change made meanwhile does not start a new solve in the middle of the run.
-Writes ``benchmarks/viewer_bench.json``; prints a Markdown summary.
+Writes ``benchmarks/viewer_bench.json`` (``--out``: elsewhere); prints a Markdown summary.
 """
 
 from __future__ import annotations
@@ -280,6 +280,7 @@ def main(argv=None) -> int:
     p.add_argument("--size", default="698x779")
     p.add_argument("--msaa", type=int, default=0)
     p.add_argument("--msaa8", action="store_true", help="also the empty windows at 8 samples")
+    p.add_argument("--out", default=str(OUT), help="where the results go (JSON)")
     a = p.parse_args(argv)
     if a.child:
         if a.child == "offscreen":
@@ -347,7 +348,7 @@ def main(argv=None) -> int:
     result["profile_house"] = child(me + ["--child", "profile", "--solution", str(sol), "--frames", "60"])
     result["profile_empty"] = child(me + ["--child", "profile", "--frames", "60"])
     result["machine"]["loadavg_end"] = list(os.getloadavg())
-    OUT.write_text(json.dumps(result, indent=1))
+    Path(a.out).write_text(json.dumps(result, indent=1))
     print(summary(result))
     return 0
 

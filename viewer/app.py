@@ -670,7 +670,10 @@ class ViewerApp:
         if mode is not None and vp is not None and cam is not None and s.requests.auto_exposure:
             s.requests.auto_exposure = False
             auto_exposure(s, self.view3d, cam, mode, vp)
-        self.view3d.draw(s, mode, vp, cam)
+        keep = None  # the empty view keeps its pixels while only its label lies over it
+        if self.panel_cache.keeps_view and not s.model.loaded:
+            keep = overlay.empty_label(s)
+        self.view3d.draw(s, mode, vp, cam, keep=keep)
         if mode is None or vp is None or cam is None:
             return
         self.frames_drawn += 1

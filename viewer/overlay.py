@@ -41,8 +41,8 @@ def _view_overlay(state: AppState, dl) -> None:
         dl.add_text(ImVec2(px + 8, y + 8), white, text)
 
     if not state.model.loaded:
-        job = state.jobs.open_job
-        label(x, f"opening {Path(job.path).name}: {job.message}" if job and not job.done else "nothing open")
+        if not state.view.kept:  # (a kept view still shows it)
+            label(x, empty_label(state))
         return
     shown = state.view.mode
     if state.view.mode == "split":
@@ -73,6 +73,12 @@ def _view_overlay(state: AppState, dl) -> None:
         dl.add_text(ImVec2(x + w - 60, y + 8), imgui.get_color_u32(RED), "REC")
     if state.paths.player is not None:
         dl.add_text(ImVec2(x + w - 60, y + 8), white, "PLAY")
+
+
+def empty_label(state: AppState) -> str:
+    """The text over the 3D view while no model is shown."""
+    job = state.jobs.open_job
+    return f"opening {Path(job.path).name}: {job.message}" if job and not job.done else "nothing open"
 
 
 _BOUNDS: list = [None, None]  # [scene, {home: (lo, hi)}]: the last scene's boxes

@@ -4,7 +4,8 @@ On llvmpipe a frame's cost is mostly pixels: imgui drawing the docked panels (th
 background and about 0.5 Mpixel of blended, textured quads and text) took 6-9 ms of CPU in a
 frame, as much as drawing the house. The window's back buffer keeps its pixels across a buffer
 swap there (the swap copies it to the X window), so what looks as in the last frame need not be
-drawn again: the 3D view (its rectangle, rewritten every frame: drawn or copied) and any floating
+drawn again: the 3D view (its rectangle, rewritten every frame: drawn or copied; with nothing
+open kept too while nothing was drawn over it, :attr:`PanelCache.keeps_view`) and any floating
 window are drawn, the panels' pixels stay. :class:`PanelCache` decides just before
 ``ImGui::Render``, per part of the window: each docked panel, and the frame around them (the
 dock space's host with its tab bars and splitters, the menu bar):
@@ -13,8 +14,9 @@ dock space's host with its tab bars and splitters, the menu bar):
   vertices); the frame changed: everything is drawn;
 - everything is drawn for a few frames after the layout changed (window or view size, a docked
   window's place or size, a floating window's), and while a floating window (error, tooltip, a
-  window undocked) reaches outside the 3D view (it blends over the panels: drawn over their kept
-  pixels it would darken a little more every frame);
+  window undocked) reaches outside the 3D view or imgui draws the mouse cursor itself (the test
+  engine's): each blends over the panels, and drawn over their kept pixels it would darken a
+  little more every frame;
 - else the part's draw lists are emptied: imgui still ran its widgets (inputs, layout, the test
   engine's item queries), nothing is drawn.
 
@@ -84,6 +86,7 @@ class PanelCache:
         self._lean = (-1, False)  # (imgui frame, this frame's panels run no widgets)
         self._sizes: dict[str, tuple[float, float]] = {}  # each panel's content size when it last ran
         self._display = None
+        self._overlaid = True  # the last frame drew windows (or a software cursor) anywhere
 
     # -- the back buffer check ---------------------------------------------------------------------------
     def frame_start(self, ctx) -> None:
@@ -138,12 +141,22 @@ class PanelCache:
             self.skipped_frames += 1
         return full
 
+    @property
+    def keeps_view(self) -> bool:
+        """The window keeps its pixels and the last frame drew nothing over the 3D view but the
+        app's own overlay (no floating window, no software cursor): an unchanged empty view need
+        not be cleared (:meth:`viewer.view3d.View3D.draw`)."""
+        return bool(self.enabled and self.preserved and not self._overlaid)
+
     def _decide(self, view_rect, dock_space_id) -> bool:
         self._quiet = False
-        if not self.enabled or not self.preserved:
+        self._overlaid = True
+        # a software cursor (the imgui test engine's) is drawn over kept pixels every frame
+        if not self.enabled or not self.preserved or imgui.get_io().mouse_draw_cursor:
             return True
         g = imgui.get_current_context()
         panels, floating = _windows(g, dock_space_id)
+        self._overlaid = bool(floating)
         roots = [w for n, w in panels.items() if w.root_window.name == n]
         layout = tuple((w.name, w.pos.x, w.pos.y, w.size.x, w.size.y) for w in roots)
         io = imgui.get_io()

@@ -179,6 +179,8 @@ class ViewState:
     walls : walls stop the walk (:mod:`viewer.collision`)
     rect : the 3D view's rectangle in window pixels (x, y from the top left, w, h), updated every
       frame from the central dock node; framebuffer_scale : framebuffer pixels per window pixel
+    kept : with nothing shown, the view's rectangle kept last frame's pixels, label included
+      (:meth:`viewer.view3d.View3D.draw`): nothing is drawn over it
     """
 
     mode: str = "iat"
@@ -193,6 +195,7 @@ class ViewState:
     camera_index: int = 0
     rect: tuple[int, int, int, int] = (0, 0, 0, 0)
     framebuffer_scale: tuple[float, float] = (1.0, 1.0)
+    kept: bool = False
 
 
 @dataclass

@@ -9,7 +9,10 @@ uploads a scene, solution, bake or blend). While the key changes (the camera mov
 the first frame the key stays the same it draws once more into an offscreen image, and from then
 on that image is copied to the window (``glBlitFramebuffer``: one copy of the view's pixels).
 Panels, sliders and menus that change nothing in the view therefore cost no 3D drawing, and a
-moving camera pays nothing for the cache.
+moving camera pays nothing for the cache. (Drawing the moving view offscreen too and copying it,
+as ``iat bench`` draws, was measured slower here: the copy costs more than the window's scissored
+clear it saves; ``docs/benchmarks.md``.) With nothing to show, the empty rectangle is cleared
+only when it or its label changed, or something was drawn over it (see :meth:`View3D.draw`).
 
 A GLB that ``iat bake`` wrote is drawn as the file stores it (:meth:`View3D.show_export`: a
 :class:`~iat.render.glb_view.GlbView` on the window's context), whatever the mode.
@@ -72,6 +75,7 @@ class View3D:
         self._size = (0, 0)
         self._clear_frames = 3  # clear the whole window for a few frames after a layout change
         self._rect = None
+        self._empty = None  # (viewport, text) of the empty view last cleared and labelled
         i, u = ctypes.c_int, ctypes.c_uint
         self._blit = _gl_function("glBlitFramebuffer", i, i, i, i, i, i, i, i, u, u)
         self._bind = _gl_function("glBindFramebuffer", u, u)
@@ -142,8 +146,14 @@ class View3D:
         )
 
     # -- per frame -----------------------------------------------------------------------------
-    def draw(self, state: AppState, mode: str | None, vp, cam) -> bool:
-        """Show the view for this frame; True when it was drawn anew (False: copied or nothing)."""
+    def draw(self, state: AppState, mode: str | None, vp, cam, keep: str | None = None) -> bool:
+        """Show the view for this frame; True when it was drawn anew (False: copied or nothing).
+
+        keep : with nothing to show, the text drawn over the empty view; while it and the view's
+          rectangle stay the same, the rectangle keeps last frame's pixels (``state.view.kept``: the
+          text is not drawn again). None (the default): cleared every frame; the caller passes it
+          only when nothing else was drawn over the view last frame (a floating window, a software
+          cursor) and the window keeps its pixels across a swap (:mod:`viewer.panel_cache`)."""
         ctx = self.ctx
         fw, fh = glfw.get_framebuffer_size(glfw.get_current_context())
         ctx.screen.use()
@@ -151,16 +161,22 @@ class View3D:
         rect = (tuple(state.view.rect), (fw, fh))
         if rect != self._rect:
             self._rect, self._clear_frames = rect, 3
-        if self._clear_frames > 0 or vp is None:  # the panels cover the rest once laid out
+        cleared = self._clear_frames > 0 or vp is None
+        if cleared:  # the panels cover the rest once laid out
             self._clear_frames = max(self._clear_frames - 1, 0)
             ctx.clear(*BACKGROUND)
+        state.view.kept = False
         if mode is None or vp is None or cam is None:
-            if vp is not None:  # nothing to show: only the view's rectangle is cleared
+            empty = (tuple(vp) if vp is not None else None, keep)
+            state.view.kept = keep is not None and not cleared and empty == self._empty
+            if vp is not None and not state.view.kept:  # only the view's rectangle is cleared
                 ctx.scissor = tuple(int(v) for v in vp)
                 ctx.clear(*BACKGROUND)
                 ctx.scissor = None
+            self._empty = empty
             self._dirty = False
             return False
+        self._empty = None
         x, y, w, h = (int(v) for v in vp)
         fbo = self._target(w, h)
         key = self.key(state, cam, mode, vp, self.generation, self.renderer.blend)
