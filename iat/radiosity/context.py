@@ -351,7 +351,7 @@ class Context:
             idx_full = np.flatnonzero(full[geo.patch])
             idx_part = np.flatnonzero(part[geo.patch])
         front = (geo.ff[idx_part] - self.centre[s]) @ self.normal[s] > 0.1 * self.eps_ff
-        return np.sort(np.concatenate([idx_full, idx_part[front]]))
+        return np.sort(np.concatenate([idx_full, idx_part[front]]), kind="stable")  # two sorted runs: merged
 
     def form_factors(
         self, s: int, geo: ReceiverGeometry, cull: bool = False, patches: np.ndarray | None = None

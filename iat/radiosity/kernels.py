@@ -425,6 +425,23 @@ def gather_rays(pat, rot, x, nr, t1, t2, near, origin32, geom, uvc, poly_n, poly
     return off, wsum, ws, us, vs, ro[:k], rd[:k], rt[:k]
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def add_rows_product(out, indptr, indices, data, x, rows):
+    """``out[r] += (A @ x)[r]`` for the rows ``rows`` (k,) of the CSR matrix A (indptr, indices,
+    data), x (m, 3), out (n, 3): what ``out += A @ x`` does to them (the same sums in the same
+    order as scipy's), for a product whose other rows are zero."""
+    for r in rows:
+        t0 = t1 = t2 = 0.0
+        for q in range(indptr[r], indptr[r + 1]):
+            j, a = indices[q], data[q]
+            t0 += a * x[j, 0]
+            t1 += a * x[j, 1]
+            t2 += a * x[j, 2]
+        out[r, 0] += t0
+        out[r, 1] += t1
+        out[r, 2] += t2
+
+
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)

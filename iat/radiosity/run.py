@@ -11,7 +11,8 @@ import time
 import numpy as np
 
 from iat.geometry import quadtree as qt
-from iat.radiosity.context import Context, SolveCancelled
+from iat.radiosity.context import Context, SolveCancelled, ranges_of
+from iat.radiosity.kernels import add_rows_product
 from iat.radiosity.meshing import (
     VertexCache,
     averaging_matrix,
@@ -128,6 +129,7 @@ class SolveRun:
                         "npts": np.diff(cgeo.start),
                         "rho": ctx.albedo[cgeo.patch],
                         "acc": np.zeros((len(ck), 3)),
+                        "level": level,
                     }
                 )
         mesh["coarse_w"] = [
@@ -341,9 +343,10 @@ class SolveRun:
         for (_, _, _, c, w), g in zip(parts, ctx.imap(gather, parts, self.check), strict=True):
             if c is None:
                 dv = g
-            else:
+            else:  # the vertices of the patches at this level take what their grid received
                 c["acc"] += g
-                dv += w @ g
+                rows = ranges_of(mesh["start"], np.flatnonzero(lvl == c["level"]))
+                add_rows_product(dv, w.indptr, w.indices, w.data, g, rows)
         return dv
 
     def refine_total(self, label: str, span) -> None:
