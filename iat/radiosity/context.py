@@ -656,16 +656,17 @@ class Context:
         m = pattern_side(SUN_SAMPLES)
         pat = self.pattern(self.n_patches, m, 1)
         half = math.tan(0.5 * max(float(sun.angular_diameter), 0.0))
-        frac = np.zeros(len(lit))
-        for a in range(0, len(lit), GATHER_BLOCK // 4):
-            idx = lit[a : a + GATHER_BLOCK // 4]
+
+        def block(idx: np.ndarray) -> np.ndarray:  # the fraction of the disc each vertex sees
             rot = hash_uniform(geo.key[idx], int(self.opts.seed) * 7919 + 17, 2)
             dx, dy = rotated_disk(pat, rot[:, :1], rot[:, 1:2])
             d = to_sun + half * (dx[..., None] * t1 + dy[..., None] * t2)
             d /= np.linalg.norm(d, axis=-1, keepdims=True)
-            frac[a : a + len(idx)] = self._escape(geo, idx, d).mean(axis=1)
-            check()
-        out[lit] = (cos[lit] * frac)[:, None] * sun.radiant_intensity[None, :]
+            return self._escape(geo, idx, d).mean(axis=1)
+
+        blocks = [lit[a : a + GATHER_BLOCK // 4] for a in range(0, len(lit), GATHER_BLOCK // 4)]
+        for idx, frac in zip(blocks, self.imap(block, blocks, check), strict=True):
+            out[idx] = (cos[idx] * frac)[:, None] * sun.radiant_intensity[None, :]
         return out
 
     def sky_irradiance(self, geo: ReceiverGeometry, check: Callable[[], None]) -> np.ndarray:
@@ -675,9 +676,9 @@ class Context:
         out = np.zeros((len(geo.key), 3))
         m = pattern_side(SKY_SAMPLES)
         pat = self.pattern(self.n_patches, m, 2)
-        block = max(1, GATHER_BLOCK * 16 // (m * m))
-        for a in range(0, len(geo.key), block):
-            idx = np.arange(a, min(a + block, len(geo.key)))
+        size = max(1, GATHER_BLOCK * 16 // (m * m))
+
+        def block(idx: np.ndarray) -> np.ndarray:  # the irradiance at these vertices
             rot = hash_uniform(geo.key[idx], int(self.opts.seed) * 7919 + 29, 2)
             dx, dy = rotated_disk(pat, rot[:, :1], rot[:, 1:2])
             dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
@@ -689,8 +690,11 @@ class Context:
             )
             free = self._escape(geo, idx, w)
             L = sky_radiance(self.sky, w.reshape(-1, 3)).reshape(len(idx), m * m, 3)
-            out[idx] = np.pi * np.einsum("ks,ksc->kc", free, L) / (m * m)
-            check()
+            return np.pi * np.einsum("ks,ksc->kc", free, L) / (m * m)
+
+        blocks = [np.arange(a, min(a + size, len(geo.key))) for a in range(0, len(geo.key), size)]
+        for idx, e in zip(blocks, self.imap(block, blocks, check), strict=True):
+            out[idx] = e
         return out
 
     def max_mean_reflected(self) -> float:
