@@ -263,13 +263,17 @@ class Context:
         spends most of its time in kernels and rays that release the GIL, so two of them keep
         both cores busy where one leaves a core idle during its Python. Results do not depend on
         the thread count. ``check()`` is polled while waiting; when it raises, the tasks not
-        started are dropped, the running ones finish, and the exception propagates. Inside a
-        task (or with one thread) it runs in the calling thread."""
+        started are dropped, the running ones finish, and the exception propagates. With one
+        item or one thread, or inside a task, it runs in the calling thread (whose kernels and
+        rays may then use every thread)."""
         threads = self.vis.threads
-        if threads <= 1 or getattr(_IN_TASK, "active", False):
+        items = list(items)
+        in_task = getattr(_IN_TASK, "active", False)
+        if threads <= 1 or len(items) <= 1 or in_task:
             for item in items:
                 yield fn(item)
-                check()
+                if not in_task:  # (progress is reported from the solve's thread only)
+                    check()
             return
         pool, pending, it = _task_pool(threads), [], iter(items)
         try:
@@ -617,9 +621,9 @@ class Context:
             return out
         geo = self.geometry(keys) if geo is None else geo
         incoming = np.zeros((len(keys), 3))  # radiance-weighted: rho * incoming = reflected
-        gathers = self.imap(lambda e: self.emitter_gather(e, geo), self.emitters, check)
-        for e, g in zip(self.emitters, gathers, strict=True):
-            incoming += g[:, None] * self.emission[e]
+        for e in self.emitters:
+            incoming += self.emitter_gather(e, geo)[:, None] * self.emission[e]
+            check()
         for light in self.lights:
             incoming += self.light_irradiance(light, geo) / np.pi
             check()

@@ -129,7 +129,6 @@ class SolveRun:
                         "npts": np.diff(cgeo.start),
                         "rho": ctx.albedo[cgeo.patch],
                         "acc": np.zeros((len(ck), 3)),
-                        "level": level,
                     }
                 )
         mesh["coarse_w"] = [
@@ -327,26 +326,21 @@ class SolveRun:
         ctx, mesh = self.ctx, self.mesh
         shot = int(self.shot_index[s])
         lvl = self.receiver_levels(s, field_mean)
-        # the vertices, then each coarse grid with patches at its level (disjoint receiver
-        # patches, so the gathers' culling does not depend on their order: run at once)
-        parts = [(mesh["geo"], lvl < 0, mesh["rho"], None, None)]
+        g = ctx.gather(
+            s, mesh["geo"], m, shot, field, field_mean, correlated=False, cull=True, patches=lvl < 0
+        )
+        dv = mesh["rho"] * g
         for level, (c, w) in enumerate(zip(self.coarse or [], mesh["coarse_w"], strict=True)):
-            if (lvl == level).any():
-                parts.append((c["geo"], lvl == level, c["rho"], c, w))
-
-        def gather(part):
-            geo, sel, rho = part[:3]
-            g = ctx.gather(s, geo, m, shot, field, field_mean, correlated=False, cull=True, patches=sel)
-            return rho * g
-
-        dv = None
-        for (_, _, _, c, w), g in zip(parts, ctx.imap(gather, parts, self.check), strict=True):
-            if c is None:
-                dv = g
-            else:  # the vertices of the patches at this level take what their grid received
-                c["acc"] += g
-                rows = ranges_of(mesh["start"], np.flatnonzero(lvl == c["level"]))
-                add_rows_product(dv, w.indptr, w.indices, w.data, g, rows)
+            sel = lvl == level
+            if sel.any():
+                gc = c["rho"] * ctx.gather(
+                    s, c["geo"], m, shot, field, field_mean, correlated=False, cull=True, patches=sel
+                )
+                c["acc"] += gc
+                # the vertices of the patches at this level take what their grid received
+                add_rows_product(
+                    dv, w.indptr, w.indices, w.data, gc, ranges_of(mesh["start"], np.flatnonzero(sel))
+                )
         return dv
 
     def refine_total(self, label: str, span) -> None:
