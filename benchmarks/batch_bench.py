@@ -3,13 +3,15 @@
 1. A 6-state day cycle of the house (its 3 lighting states and the same 3 at half strength) on
    one merged mesh: :func:`iat.lighting.solution_set.solve_set` in this process against the batch
    engine on a ``LocalCluster`` of 2 workers (processes, one thread each); the solutions are
-   compared bit for bit.
+   compared bit for bit. ``--rounds N`` alternates the two N times (the load average is noted at
+   each round's start and end); the tasks' own time, summed, shows how much slower a solve runs in
+   a worker beside another than alone in this process, and the workers' idle time what is left.
 2. The engine's overhead per task: 20 tiny jobs (a lit square, milliseconds to solve) through the
    engine, wall time against the tasks' own time.
 3. What it costs to get the Scene to a worker: pickling it against loading it again there.
 
-    .venv/bin/python benchmarks/batch_bench.py [--workers 2] [--max-depth 3] [--samples 4]
-                                               [--convergence 0.2] [--json OUT.json]
+    .venv/bin/python benchmarks/batch_bench.py [--workers 2] [--rounds 1] [--max-depth 3]
+                                               [--samples 4] [--convergence 0.2] [--json OUT.json]
 
 Prints a Markdown table.
 """
@@ -18,7 +20,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import pickle
+import statistics
 import sys
 import tempfile
 import time
@@ -85,13 +89,19 @@ def _job_file(folder: Path, jobs: list[str], options: dict) -> Path:
     return p
 
 
+def _load() -> float:
+    return round(os.getloadavg()[0], 2)
+
+
 def bench_day_cycle(client, workers: int, options: dict) -> dict:
+    """One round: the serial path, then the batch."""
     from iat.io.load import load_scene
     from iat.lighting.solution_set import solve_set
     from iat.radiosity import Solution, SolveOptions
     from iat.tools.batch import parse_jobs, run_batch
 
     states = day_cycle_states(HOUSE)
+    load_start = _load()
     t0 = time.perf_counter()
     scene = load_scene(HOUSE)
     serial = solve_set(scene, states, SolveOptions(**options))
@@ -117,6 +127,8 @@ def bench_day_cycle(client, workers: int, options: dict) -> dict:
         "batch_s": batch_s,
         "speedup": serial_s / batch_s,
         "task_s": task_s,
+        "idle_s": workers * batch_s - task_s,
+        "load": [load_start, _load()],
         "identical": identical,
         "failed": failed,
         "vertices": int(len(serial.first.vert_key)),
@@ -165,17 +177,26 @@ def bench_scene_transfer() -> dict:
 
 
 def format_table(r: dict) -> str:
-    d, o, s = r["day_cycle"], r["overhead"], r["scene"]
+    rounds, o, s = r["day_cycle"], r["overhead"], r["scene"]
+    d = rounds[0]
     opts = ", ".join(f"{k}={v}" for k, v in r["options"].items())
     rows = [
         f"Day cycle: house, {d['states']} states on one merged mesh ({d['tasks']} tasks, "
         f"{d['vertices']} vertices; {opts}), {d['workers']} workers",
         "",
-        "| | wall s | speed-up | bit-identical |",
-        "|---|---:|---:|---|",
-        f"| serial `solve_set` | {d['serial_s']:.1f} | 1.00 | |",
-        f"| `iat batch` ({d['workers']} workers) | {d['batch_s']:.1f} | {d['speedup']:.2f} | "
-        f"{'yes' if d['identical'] else 'NO'} |",
+        "| round | load | serial `solve_set` s | `iat batch` s | speed-up | tasks' own s | workers idle s "
+        "| bit-identical |",
+        "|---|---|---:|---:|---:|---:|---:|---|",
+    ]
+    for k, d in enumerate(rounds, 1):
+        rows.append(
+            f"| {k} | {d['load'][0]:.1f}-{d['load'][1]:.1f} | {d['serial_s']:.1f} | {d['batch_s']:.1f} | "
+            f"{d['speedup']:.2f} | {d['task_s']:.1f} | {d['idle_s']:.1f} | "
+            f"{'yes' if d['identical'] else 'NO'} |"
+        )
+    if len(rounds) > 1:
+        rows.append(f"\nMedian speed-up: {statistics.median(d['speedup'] for d in rounds):.2f}")
+    rows += [
         "",
         "| engine overhead | |",
         "|---|---:|",
@@ -196,6 +217,7 @@ def format_table(r: dict) -> str:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--rounds", type=int, default=1, help="serial and batch, alternated this many times")
     ap.add_argument("--max-depth", type=int, default=3)
     ap.add_argument("--samples", type=int, default=4)
     ap.add_argument("--convergence", type=float, default=0.2)
@@ -210,7 +232,7 @@ def main(argv=None) -> int:
     result["cluster_start_s"] = time.perf_counter() - t0
     try:
         result["overhead"] = bench_overhead(client, a.workers)
-        result["day_cycle"] = bench_day_cycle(client, a.workers, options)
+        result["day_cycle"] = [bench_day_cycle(client, a.workers, options) for _ in range(a.rounds)]
     finally:
         client.close()
         cluster.close()

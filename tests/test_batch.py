@@ -4,6 +4,7 @@ task is reported on one line while the others finish; a rerun skips what is done
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -14,9 +15,10 @@ from iat.errors import LoadError
 from iat.io.load import load_scene
 from iat.lighting.solution_set import solve_set
 from iat.radiosity import Solution, SolveOptions, solve
-from iat.tools.batch import LOG_NAME, parse_jobs, run_batch
+from iat.tools.batch import LOG_NAME, WORKER_ENV, WORKER_MALLOC_ENV, parse_jobs, run_batch, start_client
 
 distributed = pytest.importorskip("distributed")
+dask = pytest.importorskip("dask")
 
 CORNELL = Path(__file__).resolve().parent.parent / "sample_models" / "cornell_box.glb"
 DEPTH = 3
@@ -62,7 +64,17 @@ def test_four_variants_match_serial_and_a_bad_file_fails_alone(client, tmp_path)
     seeds = [0, 1, 2, 3]
     batch = parse_jobs(_jobs(tmp_path, _seed_jobs(seeds) + BAD))
     seen = []
-    report = run_batch(batch, client=client, on_result=seen.append)
+    with distributed.get_task_stream(client) as stream:
+        report = run_batch(batch, client=client, on_result=seen.append)
+    solves = sorted(
+        (s["start"], s["stop"], t["worker"])
+        for t in stream.data
+        if t["key"].startswith("seed")
+        for s in t["startstops"]
+        if s["action"] == "compute"
+    )
+    # the first two start at once, one on each worker (Dask alone would queue both where the Scene is)
+    assert solves[1][0] < solves[0][1] and solves[0][2] != solves[1][2]
     by = {r.name: r for r in report.results}
     assert [r.name for r in report.results] == [f"seed{k}" for k in seeds] + ["bad"]
     assert all(by[f"seed{k}"].status == "ok" for k in seeds)
@@ -103,6 +115,61 @@ def test_states_job_matches_solve_set(client, tmp_path):
         got = Solution.load(tmp_path / "out" / f"box-{name}.npz")
         _same(got, serial)
         assert got.stats["lighting_state"] == name
+
+
+def test_tasks_after_a_failed_one_are_reported_not_run(client, tmp_path):
+    """A states job on a bad file: its own solves fail with the file's error; the merge and the states
+    on it are not run, each naming a failed task it waited for."""
+    states = "".join(f"{k} = {{ emission = {{ light = 1.0 }} }}\n" for k in ("a", "b"))
+    report = run_batch(parse_jobs(_jobs(tmp_path, BAD + f"[job.states]\n{states}")), client=client)
+    got = {r.name: r.error for r in report.results}
+    assert list(got) == ["bad.own-a", "bad.own-b", "bad.mesh", "bad-a", "bad-b"]
+    assert all(got[f"bad.own-{k}"].endswith("empty.obj: empty file") for k in "ab")
+    assert got["bad.mesh"] in ("not run: bad.own-a failed", "not run: bad.own-b failed")  # the first to fail
+    assert got["bad-a"] == got["bad-b"] == "not run: bad.mesh failed"
+    assert all(r.status == "failed" and r.user_error for r in report.results)
+
+
+def test_ready_tasks_go_longest_expected_first():
+    """Before any is timed, the state setting more lights and emitters on goes first; once its own
+    solve is timed, a state's task goes by that time."""
+    from iat.tools.batch import Job, Task, expected_order
+
+    states = {
+        "off": {"lights": {"x": 0.0}, "emission": {"w": [0, 0, 0]}},
+        "one": {"emission": {"w": 1.0, "v": 0.0}},
+        "three": {"lights": {"x": 2.0, "y": {"intensity": 1.0}}, "emission": {"w": [0, 0, 0.5]}},
+    }
+    job = Job("h", CORNELL, SolveOptions(), states=states)
+    own = [Task(f"h.own-{s}", "own", job, s) for s in states]
+
+    def order(took):
+        return [t.state for t in sorted(own, key=lambda t: expected_order(t, took, {"h": states}))]
+
+    assert order({}) == ["three", "one", "off"]
+    assert order({("h", "one"): 5.0, ("h", "three"): 1.0}) == ["one", "three", "off"]
+
+
+def test_start_client_sets_up_its_workers():
+    """A LocalCluster of start_client: one thread for the kernels and rays, glibc's malloc as in a
+    plain process (not Dask's trim threshold), no sampling profiler."""
+    client, cluster = start_client(1)
+    try:
+        (env, profiling), *_ = client.run(
+            lambda: (
+                {k: os.environ.get(k) for k in [*WORKER_MALLOC_ENV, *WORKER_ENV]},
+                dask.config.get("distributed.worker.profile.enabled"),
+            )
+        ).values()
+    finally:
+        client.close()
+        cluster.close()
+    assert env == {
+        "MALLOC_MMAP_THRESHOLD_": str(32 << 20),
+        "MALLOC_TRIM_THRESHOLD_": str(64 << 20),
+        **WORKER_ENV,
+    }
+    assert profiling is False
 
 
 def test_job_file_errors_name_the_file(tmp_path):

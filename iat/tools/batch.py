@@ -1,36 +1,20 @@
 """Batch solves, bakes and renders as Dask tasks (``iat batch JOBS.toml``).
 
 Independent solves run as tasks on a :class:`distributed.LocalCluster` (processes, one thread each,
-their kernels and rays too: :data:`WORKER_ENV`; as many workers as cores) or on an existing cluster
-(``scheduler="tcp://host:8786"``). Results come back to the client, which writes them atomically
+their kernels and rays too: :data:`WORKER_ENV`; glibc's malloc as in a plain process and no
+profiler: :data:`WORKER_MALLOC_ENV`, :data:`WORKER_CONFIG`; as many workers as cores) or on an
+existing cluster (``scheduler="tcp://host:8786"``). The client hands each worker its next task as it
+frees up, the longest expected first. Results come back to the client, which writes them atomically
 (:func:`iat.fsutil.atomic_write`, :meth:`Solution.save`) into one output folder: the workers need
 the model files (they load them), never the output folder.
 
-Job file (TOML; relative paths are relative to the job file)::
-
-    output = "out/batch"          # folder for the results (required)
-    [defaults]                    # SolveOptions fields for every job (optional)
-    max_depth = 5
-    [[job]]
-    name = "cornell"              # unique; letters, digits, "-", "_", "."; names the outputs
-    model = "sample_models/cornell_box.glb"
-    options = { seed = 1 }        # optional: SolveOptions fields over [defaults]
-    bake = { threshold = 2 }      # optional: also bake (BakePolicy fields), written as <name>.glb
-    render = { size = "320x240", mode = "iat", camera = 0, exposure = 1.0 }
-                                  # optional: a PNG <name>.png (mode mesh | iat | preview; camera: the
-                                  # file's K-th camera, default its first or the default camera)
-    [[job]]
-    name = "house-day"
-    model = "sample_models/house.glb"
-    states = true                 # the model's lighting states (or a list of their names, or a table
-                                  # {name = {state...}} of states of its own, iat.lighting.states)
-    states_mesh = "merge"         # "merge" (default, as solve_set), "union" or "first"
-
-A plain job is one task writing ``<name>.npz`` (and ``.glb``, ``.png``). A ``states`` job is the
-task graph of :func:`iat.lighting.solution_set.solve_set`: for ``merge`` each state's own adaptive
-solve (``<name>.own-<state>.npz``, in parallel), then their merged mesh (``<name>.mesh.npz``), then
-every state on that mesh (``<name>-<state>.npz``, in parallel, each with its bake and render); for
-``union`` one solve of all the sources at once is the mesh; for ``first`` the first state's solve is.
+The job file's format is :mod:`iat.tools.jobfile`'s. A plain job is one task writing ``<name>.npz``
+(and ``.glb``, ``.png``). A ``states`` job is the task graph of
+:func:`iat.lighting.solution_set.solve_set`: for ``merge`` each state's own adaptive solve
+(``<name>.own-<state>.npz``, in parallel), then their merged mesh (``<name>.mesh.npz``), then every
+state on that mesh (``<name>-<state>.npz``, in parallel, each with its bake and render); for
+``union`` one solve of all the sources at once is the mesh; for ``first`` the first state's solve
+is.
 
 Every task records its inputs in ``<output>/.batch/<task>.json`` once its outputs are written: the
 key hashes the model's bytes and the solve options (:func:`iat.radiosity.cache.solution_key`, with
@@ -52,17 +36,16 @@ import hashlib
 import json
 import logging
 import os
-import re
 import sys
 import tempfile
 import time
-import tomllib
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from iat.errors import IATError, OptionError
+from iat.tools.jobfile import NAME, Batch, Job, parse_jobs
 
 #: per-task records of a batch's output folder
 RECORD_DIR = ".batch"
@@ -72,9 +55,13 @@ LOG_NAME = "batch.log"
 #: the numba kernels and the ray queries too, so two workers do not fight over two cores with four
 #: threads (the house's day cycle on 2 workers: batch 68-73 s -> 58.5-58.9 s)
 WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "IAT_RAY_THREADS": "1"}
-_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
-_JOB_KEYS = {"name", "model", "options", "bake", "render", "states", "states_mesh"}
-_RENDER_KEYS = {"size", "mode", "camera", "exposure"}
+#: glibc's malloc settings for a LocalCluster's worker processes: those of a plain process. Dask's
+#: ``MALLOC_TRIM_THRESHOLD_=65536`` turns off glibc's growing mmap threshold, so every array over
+#: 128 KiB is mapped and faulted in afresh (a house solve: 1.0 M page faults, 6.2 s of CPU against 4.4 s)
+WORKER_MALLOC_ENV = {"MALLOC_MMAP_THRESHOLD_": str(32 << 20), "MALLOC_TRIM_THRESHOLD_": str(64 << 20)}
+#: Dask settings of a LocalCluster's workers: no sampling profiler (it takes the GIL 100 times a
+#: second: 4 % of a solve's CPU)
+WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
 
 __all__ = [
     "Batch",
@@ -89,137 +76,6 @@ __all__ = [
     "run_batch",
     "start_client",
 ]
-
-
-# -- the job file ----------------------------------------------------------------
-@dataclass
-class Job:
-    """One ``[[job]]`` of a job file, checked."""
-
-    name: str
-    model: Path
-    options: object  # SolveOptions
-    bake: dict | None = None
-    render: dict | None = None
-    states: object = None  # None, True, [names] or {name: state}
-    states_mesh: str = "merge"
-
-
-@dataclass
-class Batch:
-    """A parsed job file: the output folder and its jobs."""
-
-    output: Path
-    jobs: list[Job]
-    source: Path | None = None
-
-
-def _bad(where, why):
-    from iat.errors import LoadError
-
-    raise LoadError(why, where)
-
-
-def _checked(cls, table: dict, where, what: str):
-    """``cls(**table).validate()`` after naming any key that is not one of its fields."""
-    unknown = set(table) - {f.name for f in dataclasses.fields(cls)}
-    if unknown:
-        _bad(where, f"unknown {what} option(s) {', '.join(sorted(unknown))}")
-    return cls(**table).validate()
-
-
-def _solve_options(table: dict, where):
-    from iat.radiosity import SolveOptions
-
-    return _checked(SolveOptions, table, where, "solve")
-
-
-def _bake_policy(table: dict, where):
-    from iat.bake.policy import BakePolicy
-
-    return _checked(BakePolicy, table, where, "bake")
-
-
-def parse_jobs(path, data: dict | None = None) -> Batch:
-    """The :class:`Batch` of a job file (see the module docstring), every field checked.
-
-    data : the parsed TOML itself (then ``path`` only names it and anchors relative paths).
-    Raises :class:`~iat.errors.LoadError` naming the file and the cause.
-    """
-    path = Path(path)
-    if data is None:
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            _bad(path, "file not found")
-        except (OSError, UnicodeDecodeError) as e:
-            _bad(path, f"cannot read: {e}")
-        except tomllib.TOMLDecodeError as e:
-            _bad(path, f"not a valid TOML job file: {e}")
-    base = Path(os.path.abspath(path)).parent  # absolute: the workers may run elsewhere
-    unknown = set(data) - {"output", "defaults", "job"}
-    if unknown:
-        _bad(path, f"unknown key(s) {', '.join(sorted(unknown))} (output, defaults, [[job]])")
-    if not isinstance(data.get("output"), str) or not data["output"]:
-        _bad(path, 'needs output = "FOLDER"')
-    defaults = data.get("defaults", {})
-    if not isinstance(defaults, dict):
-        _bad(path, "[defaults] must be a table of solve options")
-    jobs_in = data.get("job", [])
-    if not isinstance(jobs_in, list) or not jobs_in:
-        _bad(path, "needs at least one [[job]]")
-    jobs, seen = [], set()
-    for k, j in enumerate(jobs_in):
-        where = f"{path} job {k + 1}"
-        if not isinstance(j, dict):
-            _bad(where, "must be a table")
-        name = j.get("name")
-        where = f"{path} job {name!r}" if isinstance(name, str) else where
-        if set(j) - _JOB_KEYS:
-            _bad(where, f"unknown key(s) {', '.join(sorted(set(j) - _JOB_KEYS))}")
-        if not isinstance(name, str) or not _NAME.fullmatch(name):
-            _bad(where, "needs a name of letters, digits, '-', '_' and '.'")
-        if name in seen:
-            _bad(where, "the name is used twice")
-        seen.add(name)
-        if not isinstance(j.get("model"), str):
-            _bad(where, 'needs model = "PATH"')
-        try:
-            options = _solve_options({**defaults, **j.get("options", {})}, where)
-            bake = j.get("bake")
-            if bake is not None:
-                bake = dataclasses.asdict(_bake_policy(bake, where))
-            render = j.get("render")
-            if render is not None:
-                render = _render_spec(render, where)
-        except (TypeError, ValueError) as e:
-            _bad(where, str(e))
-        except OptionError as e:
-            _bad(where, str(e))
-        states = j.get("states")
-        if states is False:
-            states = None
-        if not (states is None or states is True or isinstance(states, list | dict)):
-            _bad(where, "states must be true, a list of state names or a table of states")
-        mesh = j.get("states_mesh", "merge")
-        if mesh not in ("merge", "union", "first"):
-            _bad(where, f'states_mesh must be "merge", "union" or "first", got {mesh!r}')
-        jobs.append(Job(name, base / j["model"], options, bake, render, states, mesh))
-    return Batch(base / data["output"], jobs, path)
-
-
-def _render_spec(r: dict, where) -> dict:
-    if not isinstance(r, dict) or set(r) - _RENDER_KEYS:
-        _bad(where, f"render takes {', '.join(sorted(_RENDER_KEYS))}")
-    size = re.fullmatch(r"(\d+)x(\d+)", str(r.get("size", "320x240")).lower())
-    if not size or not all(1 <= int(x) <= 16384 for x in size.groups()):
-        _bad(where, f"render size must be WxH, got {r.get('size')!r}")
-    out = {"size": [int(x) for x in size.groups()], "mode": r.get("mode", "iat")}
-    if out["mode"] not in ("mesh", "iat", "preview"):
-        _bad(where, f'render mode must be "mesh", "iat" or "preview", got {out["mode"]!r}')
-    out["camera"] = None if r.get("camera") is None else int(r["camera"])
-    out["exposure"] = None if r.get("exposure") is None else float(r["exposure"])
-    return out
 
 
 # -- the task graph --------------------------------------------------------------
@@ -266,7 +122,7 @@ def _job_states(job: Job) -> dict[str, dict]:
 
 
 def _named(states: dict[str, dict], job: Job) -> dict[str, dict]:
-    bad = [s for s in states if not _NAME.fullmatch(s)]
+    bad = [s for s in states if not NAME.fullmatch(s)]
     if bad:
         raise OptionError(f"job {job.name!r}: state name(s) {bad} cannot name files")
     return states
@@ -493,6 +349,7 @@ def start_client(workers: int | None = None, scheduler: str | None = None):
     """``(client, cluster)``: a Client of the cluster at ``scheduler``, or of a new LocalCluster of
     ``workers`` processes with one thread each (default: as many as cores; ``cluster`` None when
     connecting to an existing one). Raises OptionError when the cluster cannot be reached."""
+    import dask
     from distributed import Client, LocalCluster
 
     if scheduler:
@@ -503,15 +360,19 @@ def start_client(workers: int | None = None, scheduler: str | None = None):
     if workers is not None and int(workers) < 1:
         raise OptionError(f"--workers must be >= 1, got {workers}")
     n = int(workers or os.cpu_count() or 1)
+    # inherited by the worker processes; set here as Dask sets its own (which a cluster started before
+    # in this process left in its environment, and which would win over its configuration)
+    os.environ.update(WORKER_MALLOC_ENV)
     try:
-        cluster = LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            silence_logs=logging.CRITICAL,
-            env=WORKER_ENV,
-        )
+        with dask.config.set(WORKER_CONFIG):
+            cluster = LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.CRITICAL,
+                env=WORKER_ENV,
+            )
     except (OSError, RuntimeError) as e:
         raise OptionError(f"cannot start a local Dask cluster of {n} workers: {one_line(e)}") from None
     return Client(cluster), cluster
@@ -647,90 +508,158 @@ def run_batch(
 
 
 def _run_on(client, folder, tasks, todo, report, progress, n_workers, n_total, n_done) -> None:
-    """Submit ``todo`` (in dependency order) to ``client``; write and report each as it finishes."""
+    """Run ``todo`` (in dependency order) on ``client``'s workers; write and report each task as it
+    finishes.
+
+    The client places the tasks itself: a task is submitted once its inputs are done, to the least
+    busy worker, never more at a time than the workers have threads, the longest expected first
+    (:func:`expected_order`). Left to Dask, a task goes where its inputs are (the Scene on the worker that
+    loaded it) and the other workers wait for work stealing: seconds idle per phase of the house's
+    day cycle."""
+    import itertools
     import uuid
+    from collections import Counter
 
     from distributed import as_completed
 
     by_name = {t.name: t for t in tasks}
     run = uuid.uuid4().hex[:8]
-    futures: dict[str, object] = {}
-    status: dict[str, str] = {}
+    waiting = list(todo)
+    users = {t.name: {u.name for u in todo if t.name in u.deps} for t in todo}  # who needs a result
+    futures: dict[str, object] = {}  # running, or finished and still needed
+    where: dict[str, str] = {}  # running task -> its worker
+    computed: set[str] = set()
     failures: dict[str, TaskResult] = {}
+    took: dict[tuple, float] = {}  # (job, state) -> seconds of its finished task
     scenes: dict[tuple, object] = {}
-    states_of: dict[str, dict] = {}
-    users: dict[str, set] = {t.name: set() for t in todo}  # the unfinished tasks that need a result
+    loads = itertools.count()
+    scene_need = Counter(_scene_key(t) for t in todo)
+    jobs = {t.job.name: t.job for t in todo}
+    states_of = {name: _job_states(job) for name, job in jobs.items() if job.states is not None}
     warned: set[str] = set()  # each warning reported once (a model's load warnings come with each task)
-    for t in todo:
-        job = t.job
-        if job.states is not None and job.name not in states_of:
-            states_of[job.name] = _job_states(job)
-        deps = []
-        for d in t.deps:
-            if d in futures:
-                deps.append(futures[d])
-                users[d].add(t.name)
-            else:  # done in an earlier run: read here, sent once
-                from iat.radiosity.solution import Solution
-
-                deps.append(client.scatter(Solution.load(folder / f"{d}.npz")))
-        scene = None
-        if not (t.kind == "mesh" and t.deps):
-            lk = job.options.load_kwargs()
-            sk = (str(job.model), json.dumps(lk, sort_keys=True))
-            if sk not in scenes:
-                key = f"load-{job.model.stem}-{len(scenes)}-{run}"
-                scenes[sk] = client.submit(load_model, str(job.model), lk, key=key, pure=False)
-            scene = scenes[sk]
-        futures[t.name] = client.submit(
-            run_task,
-            t.kind,
-            scene,
-            job.options,
-            states_of.get(job.name),
-            t.state,
-            job.bake,
-            job.render,
-            *deps,
-            key=f"{t.name}-{t.key}-{run}",
-            pure=False,
-        )
-    scenes.clear()  # the tasks hold them now: each Scene is freed after its last task
+    pending = as_completed()
+    names: dict[str, str] = {}
     eta = _Eta(todo, n_workers)
-    names = {f.key: n for n, f in futures.items()}
     done = n_done
-    for fut in as_completed(list(futures.values())):
-        name = names[fut.key]
-        task = by_name[name]
-        if fut.status == "error":
-            failed_dep = next((d for d in task.deps if d in failures), None)
-            if failed_dep:
-                r = TaskResult(name, "failed", error=f"not run: {failed_dep} failed")
-                r.user_error = failures[failed_dep].user_error
-            else:
-                r = _failed(name, fut.exception())
-        else:
-            try:
-                res = fut.result()
-                r = TaskResult(name, "ok", res["seconds"], outputs=_write_outputs(folder, task, res))
-                r.warnings = [w for w in res.get("warnings", []) if w not in warned]
-                warned.update(r.warnings)
-                del res
-            except Exception as e:  # a result that cannot be written is that task's failure
-                r = _failed(name, e)
-        del fut
-        status[name] = r.status
+
+    def finish(r: TaskResult, task: Task) -> None:
+        nonlocal done
         if r.status == "failed":
-            failures[name] = r
-        eta.done(name, r.seconds if r.status == "ok" else None)
-        for n in (name, *task.deps):  # results no unfinished task needs are freed on the cluster
-            users.get(n, set()).discard(name)
-            if n in futures and n in status and not users.get(n):
+            failures[r.name] = r
+        eta.done(r.name, r.seconds if r.status == "ok" else None)
+        for n in (r.name, *task.deps):  # results no unfinished task needs are freed on the cluster
+            users.get(n, set()).discard(r.name)
+            if n in futures and not users.get(n):
                 futures.pop(n)
         done += 1
         report(r)
         if progress is not None:
-            progress(done / n_total, f"{done}/{n_total} eta {_fmt_s(eta.remaining_s())} {name}")
+            progress(done / n_total, f"{done}/{n_total} eta {_fmt_s(eta.remaining_s())} {r.name}")
+
+    def submit(t: Task, worker: str) -> None:
+        job, sk = t.job, _scene_key(t)
+        scene = None
+        if sk is not None:
+            if sk not in scenes:
+                key = f"load-{job.model.stem}-{next(loads)}-{run}"
+                lk = job.options.load_kwargs()
+                scenes[sk] = client.submit(load_model, str(job.model), lk, key=key, pure=False)
+            scene = scenes[sk]
+            scene_need[sk] -= 1
+            if not scene_need[sk]:  # its tasks hold it now: the Scene is freed after the last
+                del scenes[sk]
+        deps = []
+        for d in t.deps:
+            if d in futures:
+                deps.append(futures[d])
+            else:  # done in an earlier run: read here, sent once
+                from iat.radiosity.solution import Solution
+
+                deps.append(client.scatter(Solution.load(folder / f"{d}.npz")))
+        args = (t.kind, scene, job.options, states_of.get(job.name), t.state, job.bake, job.render)
+        key = f"{t.name}-{t.key}-{run}"
+        fut = client.submit(
+            run_task, *args, *deps, key=key, pure=False, workers=[worker], allow_other_workers=True
+        )
+        futures[t.name], where[t.name], names[fut.key] = fut, worker, t.name
+        pending.add(fut)
+
+    def dispatch() -> None:
+        """Report the tasks whose inputs failed (not computed); submit the ready ones to free threads."""
+        for t in list(waiting):
+            bad = next((d for d in t.deps if d in failures and d not in computed), None)
+            if bad:
+                waiting.remove(t)
+                r = TaskResult(t.name, "failed", error=f"not run: {bad} failed")
+                r.user_error = failures[bad].user_error
+                finish(r, t)
+        ready = [t for t in waiting if all(d in computed or d not in users for d in t.deps)]
+        if not ready:
+            return
+        threads = client.nthreads()
+        if not threads and not where:
+            client.wait_for_workers(1)
+            threads = client.nthreads()
+        busy = Counter(where.values())
+        for t in sorted(ready, key=lambda t: expected_order(t, took, states_of)):
+            free = [w for w in threads if busy[w] < threads[w]]
+            if not free:
+                break
+            w = min(free, key=lambda w: busy[w] / threads[w])
+            busy[w] += 1
+            waiting.remove(t)
+            submit(t, w)
+
+    dispatch()
+    for fut in pending:
+        name = names.pop(fut.key)
+        task = by_name[name]
+        del where[name]
+        res, err = None, None
+        if fut.status == "error":
+            err = fut.exception()
+        else:
+            try:
+                res = fut.result()
+            except Exception as e:
+                err = e
+        del fut
+        if res is None:
+            finish(_failed(name, err), task)
+            dispatch()
+            continue
+        computed.add(name)
+        took[(task.job.name, task.state)] = res["seconds"]
+        dispatch()  # before writing: the workers need not wait for it
+        try:
+            r = TaskResult(name, "ok", res["seconds"], outputs=_write_outputs(folder, task, res))
+            r.warnings = [w for w in res.get("warnings", []) if w not in warned]
+            warned.update(r.warnings)
+        except Exception as e:  # a result that cannot be written is that task's failure
+            r = _failed(name, e)
+        del res
+        finish(r, task)
+
+
+def expected_order(t: Task, took: dict, states_of: dict) -> tuple:
+    """Sort key of a ready task, the longest expected first: the time its state's task took already
+    (its own solve, for a state on the shared mesh), else how many lights and emitters its state
+    sets on (each is shot: on the house's day cycle the two noon states, two windows, are the
+    shortest own solves). Equal keys keep the plan's order."""
+    state = states_of[t.job.name][t.state] if t.state is not None else {}
+    on = 0
+    for part in ("lights", "emission"):
+        for v in state.get(part, {}).values():
+            v = v.get("intensity", 1.0) if isinstance(v, dict) else v
+            on += any(float(x) != 0.0 for x in (v if isinstance(v, list) else [v]))
+    return -took.get((t.job.name, t.state), 0.0), -on
+
+
+def _scene_key(t: Task) -> tuple | None:
+    """``(model, load options as JSON)`` of the Scene a task needs (None for a merge of its inputs)."""
+    if t.kind == "mesh" and t.deps:
+        return None
+    return str(t.job.model), json.dumps(t.job.options.load_kwargs(), sort_keys=True)
 
 
 def presolve(pairs, directory, *, workers=None, scheduler=None, client=None, progress=None):
@@ -746,7 +675,7 @@ def presolve(pairs, directory, *, workers=None, scheduler=None, client=None, pro
         path = solution_cache_path(model, options, directory)
         if path.is_file() or path.stem in seen:
             continue
-        if not _NAME.fullmatch(path.stem):
+        if not NAME.fullmatch(path.stem):
             raise OptionError(
                 f"{model}: this file name cannot name a batch task (letters, digits, '-', '_', '.')"
             )
