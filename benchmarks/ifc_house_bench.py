@@ -11,7 +11,9 @@ the process's peak RSS is that step's):
 - solve: each scene with one point light per storey (``light_positions``, the intensity of
   ``tests/support/real_models.py``'s IFC lamp), ``solve(scene, SolveOptions(...))``: time,
   elements, vertices, shots, rays and max RSS. ``--depth`` sets ``max_depth`` (default: the
-  solver's), ``--solve-timeout`` bounds each solve (a solve past it is reported as such).
+  solver's), ``--solve-timeout`` bounds each solve (a solve past it is reported as such),
+  ``--min-element-size`` sets ``min_element_size`` (the default grows with the building's area, so
+  more storeys alone do not make more elements) and ``--only`` keeps one of the two loads.
 
     .venv/bin/python benchmarks/ifc_house_bench.py [--out FILE.ifc] [--depth 5] [--no-solve]
 """
@@ -76,7 +78,13 @@ def child_load(path: Path, panels: bool) -> dict:
 
 
 def child_solve(
-    path: Path, panels: bool, depth: int | None, lights_per_storey: int, storeys: int, rooms: int
+    path: Path,
+    panels: bool,
+    depth: int | None,
+    lights_per_storey: int,
+    storeys: int,
+    rooms: int,
+    min_element_size: float | None = None,
 ) -> dict:
     from iat.io.load import load_scene
     from iat.io.scene import Light
@@ -91,6 +99,8 @@ def child_solve(
             )
         )
     opts = {"panels": panels} | ({"max_depth": depth} if depth is not None else {})
+    if min_element_size is not None:
+        opts["min_element_size"] = min_element_size
     base = rss_now_mib()
     t0 = time.perf_counter()
     sol = solve(scene, SolveOptions(**opts))
@@ -170,6 +180,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--windows", type=int, default=4, help="windows per room on each facade")
     ap.add_argument("--lights", type=int, default=1, help="point lights per storey")
     ap.add_argument("--depth", type=int, default=None, help="SolveOptions.max_depth (default: the solver's)")
+    ap.add_argument(
+        "--min-element-size",
+        type=float,
+        default=None,
+        help="SolveOptions.min_element_size in metres (default: the solver's, 1/600 of the square root "
+        "of the surface area, so more storeys alone do not make more elements)",
+    )
+    ap.add_argument("--only", choices=("panels", "no-panels"), help="load and solve one way only")
     ap.add_argument("--no-solve", action="store_true")
     ap.add_argument("--solve-timeout", type=float, default=1200.0, help="seconds per solve")
     ap.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
@@ -179,7 +197,7 @@ def main(argv: list[str] | None = None) -> int:
         if kind == "load":
             res = child_load(path, panels)
         else:
-            res = child_solve(path, panels, a.depth, a.lights, a.storeys, a.rooms)
+            res = child_solve(path, panels, a.depth, a.lights, a.storeys, a.rooms, a.min_element_size)
         print(json.dumps(res))
         return 0
     with tempfile.TemporaryDirectory(prefix="iat-ifc-house-") as tmp:
@@ -191,8 +209,9 @@ def main(argv: list[str] | None = None) -> int:
             f"{path.name}: {a.storeys} storeys, {a.rooms} x {a.rooms} rooms, {a.windows} windows per room "
             f"and facade; {path.stat().st_size / MIB:.2f} MiB, generated in {gen_s:.1f} s\n"
         )
+        ways = [p for p in (False, True) if a.only is None or a.only == ("panels" if p else "no-panels")]
         loads = {}
-        for panels in (False, True):
+        for panels in ways:
             name = "panels" if panels else "no panels"
             loads[name] = run_child(["load", str(int(panels)), str(path)], None)
             print(f"load ({name}) done", file=sys.stderr)
@@ -201,8 +220,10 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         extra = ["--depth", str(a.depth)] if a.depth is not None else []
         extra += ["--lights", str(a.lights), "--storeys", str(a.storeys), "--rooms", str(a.rooms)]
+        if a.min_element_size is not None:
+            extra += ["--min-element-size", str(a.min_element_size)]
         solves = {}
-        for panels in (False, True):
+        for panels in ways:
             name = "panels" if panels else "no panels"
             solves[name] = run_child(["solve", str(int(panels)), str(path), *extra], a.solve_timeout)
             print(f"solve ({name}) done: {solves[name]}", file=sys.stderr)
