@@ -467,11 +467,26 @@ class Context:
         far receivers use the area samples alone. All kernel terms are computed from
         per-receiver scalars (no (n, samples, 3) arrays).
         """
-        n_geo = len(geo.key)
-        out = np.zeros(n_geo if field is None else (n_geo, 3))
-        idx, f = self.form_factors(s, geo, cull, patches)
-        if len(idx) == 0:
-            return out
+        return self.gathers(
+            s, [(geo, patches)], m, shot, field, field_mean, correlated=correlated, cull=cull
+        )[0]
+
+    def gathers(
+        self,
+        s: int,
+        parts: list[tuple[ReceiverGeometry, np.ndarray | None]],
+        m: int,
+        shot: int = 0,
+        field: np.ndarray | None = None,
+        field_mean: np.ndarray | None = None,
+        *,
+        correlated: bool = False,
+        cull: bool = False,
+    ) -> list[np.ndarray]:
+        """:meth:`gather` from s to several receiver sets at once: ``parts`` is a list of ``(geo,
+        patches)`` on disjoint patches (a shot's mesh vertices and its coarse grids), and their
+        blocks of receivers run together on the threads. The same values as one :meth:`gather` per
+        part in order (their culling sees only their own patches)."""
         ka = self.shooter(s).kernel_args()
         pat = self.pattern(s, m, shot)
         salt = np.uint64(((int(self.opts.seed) * 1_000_003 + int(s)) * 1_000_003 + int(shot)) & _MASK64)
@@ -482,16 +497,18 @@ class Context:
         # a field of one sign gives results of that sign
         clamp_lo = has_field and float(flat.min()) >= 0
         clamp_hi = has_field and float(flat.max()) <= 0
-        origin32 = geo.origin32()
+        sets = [(geo, *self.form_factors(s, geo, cull, patches)) for geo, patches in parts]
 
-        def block(sl: slice):
+        def block(job: tuple[int, slice]):
             """One block of receivers: (its rows' values, rays and rays seen per receiver patch)."""
+            geo, idx, f = sets[job[0]]
+            sl = job[1]
             fb = np.ascontiguousarray(f[sl], dtype=np.float64)
             # per row: its rotation (one for all when correlated), point, normal, tangents, whether
             # it takes direction samples too, ray origin, patch
             rot, x, nr, t1, t2, near, o32, rp = block_inputs(
                 idx[sl], geo.key, salt, correlated, geo.ff, geo.normal, geo.patch, self.tangent, fb,
-                F_DIRECTION, origin32,
+                F_DIRECTION, geo.origin32(),
             )  # fmt: skip
             # the samples' weights and rays (float32, as embreex takes them: origins and targets
             # are off the surfaces by at least 32 float32 steps, so the rounding never crosses one)
@@ -514,25 +531,31 @@ class Context:
                 np.bincount(rp, weights=seen, minlength=self.n_patches),
             )
 
-        # blocks of at most GATHER_BLOCK receivers; a large gather in as many as there are threads
-        size = GATHER_BLOCK
-        if len(idx) >= SPLIT_RECEIVERS:
-            size = min(size, -(-len(idx) // self.vis.threads))
-        blocks = [slice(a, a + size) for a in range(0, len(idx), size)]
-        rays_p = np.zeros(self.n_patches)
-        seen_p = np.zeros(self.n_patches)
-        for sl, res in zip(blocks, self.imap(block, blocks, _no_check), strict=True):
+        # blocks of at most GATHER_BLOCK receivers; a large set in as many as there are threads
+        jobs = []
+        for k, (_, idx, _) in enumerate(sets):
+            size = GATHER_BLOCK
+            if len(idx) >= SPLIT_RECEIVERS:
+                size = min(size, -(-len(idx) // self.vis.threads))
+            jobs += [(k, slice(a, a + size)) for a in range(0, len(idx), size)]
+        outs = [np.zeros(len(geo.key) if field is None else (len(geo.key), 3)) for geo, _, _ in sets]
+        rays_p = [np.zeros(self.n_patches) for _ in sets]
+        seen_p = [np.zeros(self.n_patches) for _ in sets]
+        for (k, sl), res in zip(jobs, self.imap(block, jobs, _no_check), strict=True):
             if res is not None:
-                out[idx[sl]] = res[0]
-                rays_p += res[1]
-                seen_p += res[2]
+                outs[k][sets[k][1][sl]] = res[0]
+                rays_p[k] += res[1]
+                seen_p[k] += res[2]
         with self._lock:
-            if s in self._vis_rays:
-                self._vis_rays[s] += rays_p
-                self._vis_seen[s] += seen_p
-            else:
-                self._vis_rays[s], self._vis_seen[s] = rays_p, seen_p
-        return out
+            for k, (_, idx, _) in enumerate(sets):
+                if len(idx) == 0:
+                    continue
+                if s in self._vis_rays:
+                    self._vis_rays[s] += rays_p[k]
+                    self._vis_seen[s] += seen_p[k]
+                else:
+                    self._vis_rays[s], self._vis_seen[s] = rays_p[k], seen_p[k]
+        return outs
 
     def light_kernel(self, light, geo: ReceiverGeometry) -> tuple[np.ndarray, np.ndarray]:
         """(n,) ``cos * att * vis / r^2`` at the vertices of ``geo`` for a point or spot light (the

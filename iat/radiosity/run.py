@@ -326,21 +326,18 @@ class SolveRun:
         ctx, mesh = self.ctx, self.mesh
         shot = int(self.shot_index[s])
         lvl = self.receiver_levels(s, field_mean)
-        g = ctx.gather(
-            s, mesh["geo"], m, shot, field, field_mean, correlated=False, cull=True, patches=lvl < 0
-        )
-        dv = mesh["rho"] * g
-        for level, (c, w) in enumerate(zip(self.coarse or [], mesh["coarse_w"], strict=True)):
-            sel = lvl == level
-            if sel.any():
-                gc = c["rho"] * ctx.gather(
-                    s, c["geo"], m, shot, field, field_mean, correlated=False, cull=True, patches=sel
-                )
-                c["acc"] += gc
-                # the vertices of the patches at this level take what their grid received
-                add_rows_product(
-                    dv, w.indptr, w.indices, w.data, gc, ranges_of(mesh["start"], np.flatnonzero(sel))
-                )
+        # the vertices of the patches it lights noticeably, and a coarse grid per level of the others
+        levels = [k for k in range(len(self.coarse or [])) if (lvl == k).any()]
+        parts = [(mesh["geo"], lvl < 0)] + [(self.coarse[k]["geo"], lvl == k) for k in levels]
+        got = ctx.gathers(s, parts, m, shot, field, field_mean, correlated=False, cull=True)
+        dv = mesh["rho"] * got[0]
+        for k, g in zip(levels, got[1:], strict=True):
+            c, w = self.coarse[k], mesh["coarse_w"][k]
+            gc = c["rho"] * g
+            c["acc"] += gc
+            # the vertices of the patches at this level take what their grid received
+            rows = ranges_of(mesh["start"], np.flatnonzero(lvl == k))
+            add_rows_product(dv, w.indptr, w.indices, w.data, gc, rows)
         return dv
 
     def refine_total(self, label: str, span) -> None:
