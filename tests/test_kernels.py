@@ -173,10 +173,33 @@ def test_results_do_not_depend_on_the_thread_count():
     np.testing.assert_array_equal(ff1, ffn)
 
 
-def test_block_inputs_hash_as_hash_uniform():
-    """The compiled per-row inputs: the rotations are hash_uniform's (bit for bit), the rest rows
-    of the receiver arrays; correlated rows all take key 0's rotation."""
+def splitmix64_uniform(keys, salt, k):
+    """The definition :func:`kernels.hash_keys` compiles: k splitmix64 hashes of (key, salt), numpy."""
+    z = np.asarray(keys, dtype=np.int64).astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+    z ^= np.uint64(salt & 0xFFFFFFFFFFFFFFFF)
+    out = []
+    for _ in range(k):
+        z = z + np.uint64(0x9E3779B97F4A7C15)
+        x = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        x = x ^ (x >> np.uint64(31))
+        out.append((x >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53)))
+    return np.stack(out, axis=1)
+
+
+@pytest.mark.parametrize("salt", [0, 17, 1234567891234567, (1 << 64) - 5])
+def test_hash_uniform_is_splitmix64(salt):
     from iat.radiosity.sampling import hash_uniform
+
+    keys = np.array([0, 1, 5, 123456789012345, 2**62 + 7], dtype=np.int64)
+    np.testing.assert_array_equal(hash_uniform(keys, salt, 4), splitmix64_uniform(keys, salt, 4))
+    assert hash_uniform(keys, salt).shape == (5, 2)
+
+
+def test_block_inputs_hash_as_hash_uniform():
+    """The compiled per-row inputs: the rotations are splitmix64's (bit for bit), the rest rows
+    of the receiver arrays; correlated rows all take key 0's rotation."""
+    hash_uniform = splitmix64_uniform
 
     rng = np.random.default_rng(7)
     n, P = 50, 4

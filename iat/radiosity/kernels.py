@@ -449,7 +449,7 @@ _MIX2 = np.uint64(0x94D049BB133111EB)
 
 @njit(cache=True, error_model="numpy")
 def _hash_row(key, salt, out, i):
-    """``out[i, :]`` = :func:`iat.radiosity.sampling.hash_uniform` of one key (splitmix64)."""
+    """``out[i, :]``: ``out.shape[1]`` splitmix64 hashes of (key, salt) as uniform numbers in [0, 1)."""
     z = np.uint64(key) * _GOLDEN
     z ^= salt
     for j in range(out.shape[1]):
@@ -460,11 +460,20 @@ def _hash_row(key, salt, out, i):
         out[i, j] = np.float64(x >> np.uint64(11)) * (1.0 / 9007199254740992.0)
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def hash_keys(keys, salt, k):
+    """(n, k) float64 in [0, 1): k splitmix64 hashes of each of keys (n,) int64 with salt (uint64)."""
+    out = np.empty((keys.shape[0], k))
+    for i in range(keys.shape[0]):
+        _hash_row(keys[i], salt, out, i)
+    return out
+
+
 @njit(cache=True, parallel=True, nogil=True, error_model="numpy")
 def block_inputs(ii, key, salt, correlated, ff, normal, patch, tangent, f, f_direction, origin32):
     """The per-receiver inputs of :func:`gather_rays` for the rows ``ii`` (b,) of a receiver set:
-    ``rot`` (b, 4) the rows' pattern rotations (:func:`iat.radiosity.sampling.hash_uniform` of
-    their keys (n,) int64 with ``salt`` uint64; of key 0 for every row when ``correlated``),
+    ``rot`` (b, 4) the rows' pattern rotations (:func:`hash_keys` of their keys (n,) int64 with
+    ``salt`` uint64; of key 0 for every row when ``correlated``),
     their points ``x`` and normals ``nr`` (b, 3) (rows of ff, normal (n, 3)), the tangents
     ``t1, t2`` (b, 3) of their patches (patch (n,), tangent (P, 2, 3)), ``near`` (b,) bool
     (form factor f (b,) at least f_direction), ``o32`` (b, 3) float32 (rows of origin32) and

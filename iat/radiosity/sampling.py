@@ -9,21 +9,13 @@ import numpy as np
 
 from iat.color import LUMINANCE_WEIGHTS
 from iat.geometry import quadtree as qt
+from iat.radiosity.kernels import hash_keys
 
 
 def hash_uniform(keys: np.ndarray, salt: int, k: int = 2) -> np.ndarray:
-    """(n, k) float64 in [0, 1): k splitmix64 hashes of (key, salt)."""
-    z = np.asarray(keys, dtype=np.int64).astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
-    z ^= np.uint64(salt & 0xFFFFFFFFFFFFFFFF)
-    out = []
-    for _ in range(k):
-        z = z + np.uint64(0x9E3779B97F4A7C15)
-        x = z.copy()
-        x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-        x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-        x = x ^ (x >> np.uint64(31))
-        out.append((x >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53)))
-    return np.stack(out, axis=1)
+    """(n, k) float64 in [0, 1): k splitmix64 hashes of (key, salt) (:func:`.kernels.hash_keys`)."""
+    keys = np.ascontiguousarray(keys, dtype=np.int64).reshape(-1)
+    return hash_keys(keys, np.uint64(int(salt) & 0xFFFFFFFFFFFFFFFF), int(k))
 
 
 def concentric_disk(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
