@@ -53,20 +53,18 @@ class SolveCancelled(Exception):
     """Internal: the progress callback asked to stop."""
 
 
-_END = object()
 _MASK64 = (1 << 64) - 1
-_TASKS: ThreadPoolExecutor | None = None
+_TASKS: dict[int, ThreadPoolExecutor] = {}
 _TASKS_LOCK = threading.Lock()
 _IN_TASK = threading.local()
 
 
 def _task_pool(n: int) -> ThreadPoolExecutor:
-    """The process's pool of gather threads (made once, ``n`` threads; shared by all solves)."""
-    global _TASKS
+    """The process's pool of ``n`` gather threads (made once per ``n``, shared by all solves)."""
     with _TASKS_LOCK:
-        if _TASKS is None or _TASKS._max_workers < n:
-            _TASKS = ThreadPoolExecutor(n, thread_name_prefix="iat-gather")
-        return _TASKS
+        if n not in _TASKS:
+            _TASKS[n] = ThreadPoolExecutor(n, thread_name_prefix="iat-gather")
+        return _TASKS[n]
 
 
 def _no_check() -> None:
@@ -275,16 +273,11 @@ class Context:
                 if not in_task:  # (progress is reported from the solve's thread only)
                     check()
             return
-        pool, pending, it = _task_pool(threads), [], iter(items)
+        pool, pending, queued = _task_pool(threads), [], items[::-1]
         try:
-            while True:
-                while len(pending) < 2 * threads:
-                    item = next(it, _END)
-                    if item is _END:
-                        break
-                    pending.append(pool.submit(self._task, fn, item))
-                if not pending:
-                    return
+            while pending or queued:
+                while queued and len(pending) < 2 * threads:
+                    pending.append(pool.submit(self._task, fn, queued.pop()))
                 while not wait(pending[:1], timeout=0.05).done:
                     check()
                 yield pending.pop(0).result()
