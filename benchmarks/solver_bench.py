@@ -61,7 +61,7 @@ sys.path.insert(0, os.environ.get("IAT_BENCH_TREE", str(ROOT)))
 
 from iat.io.load import load_scene  # noqa: E402
 from iat.measure.metrics import reference_errors, smooth_lit_mask  # noqa: E402
-from iat.radiosity import SolveOptions, solve  # noqa: E402
+from iat.radiosity import Solution, SolveOptions, solve  # noqa: E402
 from iat.radiosity.visibility import CHUNK, Visibility  # noqa: E402
 
 OUT_JSON = ROOT / "benchmarks" / "solver.json"
@@ -130,12 +130,12 @@ def surface_values(sol, n_out: int = 256) -> np.ndarray:
     return np.concatenate(out), np.concatenate(weight), np.concatenate(patch)
 
 
-def surface_error(sol, ref_sol) -> float:
-    """Area-weighted L1 error of the radiance over all surfaces (luminance, sampled at 256 x 256
+def surface_error(sol, ref_sol, n_out: int = 256) -> float:
+    """Area-weighted L1 error of the radiance over all surfaces (luminance, sampled at n_out x n_out
     cell centres per patch, emitters excluded) relative to the reference's mean: shadow edges count here,
     unlike in the smooth-pixel image measure."""
-    a, w, pa = surface_values(sol)
-    b, _, _ = surface_values(ref_sol)
+    a, w, pa = surface_values(sol, n_out)
+    b, _, _ = surface_values(ref_sol, n_out)
     emitters = [int(row[0]) for row in ref_sol.stats.get("sources", {}).get("emitters", [])]
     w = np.where(np.isin(pa, emitters), 0.0, w)
     return float((np.abs(a - b) * w).sum() / (np.abs(b) * w).sum())
@@ -148,10 +148,10 @@ def timed_solve(scene, opts: SolveOptions):
 
 
 # -- adaptive against uniform -------------------------------------------------------------------
-def interp_elements(err: float, curve: list[tuple[float, float]]) -> float | None:
-    """Uniform element count at error ``err``: log-log interpolation between the two points of
-    ``curve`` ((error, elements), any order) that bracket it; None outside the curve."""
-    pts = sorted(curve, key=lambda p: -p[0])  # error decreasing, elements increasing
+def interp_at_error(err: float, curve: list[tuple[float, float]]) -> float | None:
+    """The cost (uniform elements, seconds) at error ``err``: log-log interpolation between the
+    two points of ``curve`` ((error, cost), any order) that bracket it; None outside the curve."""
+    pts = sorted(curve, key=lambda p: -p[0])  # error decreasing, cost increasing
     for (e0, n0), (e1, n1) in zip(pts, pts[1:], strict=False):
         if e1 <= err <= e0 and e0 > e1:
             t = (math.log(e0) - math.log(err)) / (math.log(e0) - math.log(e1))
@@ -212,7 +212,7 @@ def run_adaptive(depths=UNIFORM_DEPTHS, tolerances=ADAPTIVE_TOLERANCES) -> dict:
         for r in rows:
             if r["mesh"] != "adaptive":
                 continue
-            nu = interp_elements(r[measure], curve)
+            nu = interp_at_error(r[measure], curve)
             r[f"uniform_elements_at_{measure}"] = nu
             r[f"ratio_{measure}"] = (r[count] / nu) if nu else None
     cb.renderer.release()
@@ -284,7 +284,7 @@ def run_adaptive_surface(depths=(1, 2, 3, 4, 5, 6), ref_depth=7, tolerances=ADAP
     curve = [(r["surface_vs_uniform"], r["elements"]) for r in rows if r["mesh"] == "uniform"]
     for r in rows:
         if r["mesh"] == "adaptive":
-            nu = interp_elements(r["surface_vs_uniform"], curve)
+            nu = interp_at_error(r["surface_vs_uniform"], curve)
             r["uniform_elements_at_surface_vs_uniform"] = nu
             r["ratio_surface_vs_uniform"] = (r["elements"] / nu) if nu else None
     return {"model": "shadow_scene", "reference": f"uniform depth {ref_depth}", "rows": rows}
@@ -422,36 +422,36 @@ def run_rays(models=MODELS) -> dict:
     return out
 
 
-#: what one subprocess of ``speed`` runs: a default solve of a sample model with the ``iat`` on
-#: its PYTHONPATH, printing its wall and CPU seconds (all threads), and saving its radiance
+#: what one subprocess of ``speed`` (and ``equal_error.py``) runs: a solve of a sample model with the ``iat``
+#: on its PYTHONPATH and the options given (JSON), printing its wall and CPU seconds (all threads),
+#: and saving the solution
 SPEED_CHILD = """
 import json, sys, time
-import numpy as np
 from iat.io.load import load_scene
 from iat.radiosity import SolveOptions, solve
 scene = load_scene(sys.argv[1])
+opts = SolveOptions(**json.loads(sys.argv[4]))
 w, c = time.perf_counter(), time.process_time()
-sol = solve(scene, SolveOptions())
+sol = solve(scene, opts)
 w, c = time.perf_counter() - w, time.process_time() - c
 assert __import__("iat").__file__.startswith(sys.argv[3]), "iat imported from another tree"
-np.savez(sys.argv[2], key=np.asarray(sol.vert_key), rad=np.asarray(sol.vert_radiance))
+sol.save(sys.argv[2])
 print(json.dumps({"time_s": w, "cpu_s": c, "elements": sol.stats["elements"], "rays": sol.stats["rays"]}))
 """
 
 
-def _speed_child(tree: Path, model: str, out: Path, env_extra: dict | None = None) -> dict:
+def speed_child(
+    tree: Path, model: str, out: Path, env_extra: dict | None = None, options: dict | None = None
+) -> dict:
     import os
     import subprocess
 
     env = {**os.environ, "PYTHONPATH": str(tree), **(env_extra or {})}
     path = ROOT / "sample_models" / f"{model}.glb"
+    args = [str(path), str(out), str(Path(tree).resolve()), json.dumps(options or {})]
     # run from the output's folder: `python -c` puts the working directory first on sys.path
     run = subprocess.run(
-        [sys.executable, "-c", SPEED_CHILD, str(path), str(out), str(Path(tree).resolve())],
-        env=env,
-        capture_output=True,
-        text=True,
-        cwd=out.parent,
+        [sys.executable, "-c", SPEED_CHILD, *args], env=env, capture_output=True, text=True, cwd=out.parent
     )
     if run.returncode:
         raise RuntimeError(f"solve of {model} with {tree} failed:\n{run.stderr[-2000:]}")
@@ -469,16 +469,17 @@ def run_speed(before: Path, models=("cornell_box", "house"), repeats: int = 2) -
     import tempfile
 
     tmp = Path(tempfile.mkdtemp(prefix="iat-speed-"))
-    _speed_child(ROOT, "cornell_box", tmp / "warm.npz")  # compile (or load) the kernels first
+    speed_child(ROOT, "cornell_box", tmp / "warm.npz")  # compile (or load) the kernels first
     out = {}
     for name in models:
         rows = {"before": [], "after": []}
         for _ in range(repeats):
             for label, tree in (("before", before), ("after", ROOT)):
-                rows[label].append(_speed_child(tree, name, tmp / f"{name}-{label}.npz"))
-        a, b = np.load(tmp / f"{name}-before.npz"), np.load(tmp / f"{name}-after.npz")
-        same_mesh = a["key"].shape == b["key"].shape and bool(np.all(a["key"] == b["key"]))
-        diff = np.abs(a["rad"].astype(np.float64) - b["rad"]) if same_mesh else None
+                rows[label].append(speed_child(tree, name, tmp / f"{name}-{label}.npz"))
+        a, b = (Solution.load(tmp / f"{name}-{label}.npz") for label in ("before", "after"))
+        same_mesh = a.vert_key.shape == b.vert_key.shape and bool(np.all(a.vert_key == b.vert_key))
+        a_rad = np.asarray(a.vert_radiance, dtype=np.float64)
+        diff = np.abs(a_rad - b.vert_radiance) if same_mesh else None
         r = {
             label: {
                 "time_s": min(x["time_s"] for x in v),
@@ -493,13 +494,13 @@ def run_speed(before: Path, models=("cornell_box", "house"), repeats: int = 2) -
         r["same_mesh"] = same_mesh
         r["max_abs_radiance_diff"] = None if diff is None else float(diff.max())
         r["max_rel_radiance_diff"] = (
-            None if diff is None else float((diff / np.maximum(np.abs(a["rad"]), 1e-6)).max())
+            None if diff is None else float((diff / np.maximum(np.abs(a_rad), 1e-6)).max())
         )
         out[name] = r
         print(name, r, flush=True)
     with tempfile.TemporaryDirectory() as cold:
-        cold_s = _speed_child(ROOT, "cornell_box", tmp / "cold.npz", {"NUMBA_CACHE_DIR": cold})["time_s"]
-    warm_s = _speed_child(ROOT, "cornell_box", tmp / "warm.npz")["time_s"]
+        cold_s = speed_child(ROOT, "cornell_box", tmp / "cold.npz", {"NUMBA_CACHE_DIR": cold})["time_s"]
+    warm_s = speed_child(ROOT, "cornell_box", tmp / "warm.npz")["time_s"]
     out["compile_s"] = cold_s - warm_s
     out["load"] = round(os.getloadavg()[0], 2)
     return out
@@ -710,6 +711,10 @@ def format_md(res: dict) -> str:
     return "\n".join(lines)
 
 
+#: what ``main`` runs, by name
+PARTS = ("adaptive", "shadow", "rays", "cornell", "quality", "speed")
+
+
 def main(argv=None) -> None:
     import datetime
     import os
@@ -726,6 +731,9 @@ def main(argv=None) -> None:
         before = Path(argv[i + 1])
         del argv[i : i + 2]
     parts = argv or ["adaptive", "rays", "cornell"]
+    unknown = sorted(set(parts) - set(PARTS))
+    if unknown:
+        sys.exit(f"solver_bench.py: unknown part or option {', '.join(unknown)}\n{__doc__}")
     res = json.loads(OUT_JSON.read_text()) if OUT_JSON.exists() else {}
     meta = {
         "date": datetime.datetime.now().isoformat(timespec="minutes"),

@@ -460,9 +460,12 @@ class Context:
         far receivers use the area samples alone. All kernel terms are computed from
         per-receiver scalars (no (n, samples, 3) arrays).
         """
-        return self.gathers(
+        idx, val = self.gathers(
             s, [(geo, patches)], m, shot, field, field_mean, correlated=correlated, cull=cull
         )[0]
+        out = np.zeros((len(geo.key), *val.shape[1:]))
+        out[idx] = val
+        return out
 
     def gathers(
         self,
@@ -475,11 +478,13 @@ class Context:
         *,
         correlated: bool = False,
         cull: bool = False,
-    ) -> list[np.ndarray]:
+    ) -> list[tuple[np.ndarray, np.ndarray]]:
         """:meth:`gather` from s to several receiver sets at once: ``parts`` is a list of ``(geo,
         patches)`` on disjoint patches (a shot's mesh vertices and its coarse grids), and their
-        blocks of receivers run together on the threads. The same values as one :meth:`gather` per
-        part in order (their culling sees only their own patches)."""
+        blocks of receivers run together on the threads. Per part ``(idx, val)``: the indices into
+        ``geo`` of its receivers (k,) (distinct) and their values (k,) or (k, 3), the rows of what one
+        :meth:`gather` per part in order returns that can be nonzero (so that a shot costs its
+        receivers, not the mesh); each part's culling sees only its own patches."""
         ka = self.shooter(s).kernel_args()
         pat = self.pattern(s, m, shot)
         salt = np.uint64(((int(self.opts.seed) * 1_000_003 + int(s)) * 1_000_003 + int(shot)) & _MASK64)
@@ -531,12 +536,12 @@ class Context:
             if len(idx) >= SPLIT_RECEIVERS:
                 size = min(size, -(-len(idx) // self.vis.threads))
             jobs += [(k, slice(a, a + size)) for a in range(0, len(idx), size)]
-        outs = [np.zeros(len(geo.key) if field is None else (len(geo.key), 3)) for geo, _, _ in sets]
+        outs = [np.zeros(len(idx) if field is None else (len(idx), 3)) for _, idx, _ in sets]
         rays_p = [np.zeros(self.n_patches) for _ in sets]
         seen_p = [np.zeros(self.n_patches) for _ in sets]
         for (k, sl), res in zip(jobs, self.imap(block, jobs, _no_check), strict=True):
             if res is not None:
-                outs[k][sets[k][1][sl]] = res[0]
+                outs[k][sl] = res[0]
                 rays_p[k] += res[1]
                 seen_p[k] += res[2]
         with self._lock:
@@ -548,7 +553,7 @@ class Context:
                     self._vis_seen[s] += seen_p[k]
                 else:
                     self._vis_rays[s], self._vis_seen[s] = rays_p[k], seen_p[k]
-        return outs
+        return [(idx, out) for (_, idx, _), out in zip(sets, outs, strict=True)]
 
     def light_kernel(self, light, geo: ReceiverGeometry) -> tuple[np.ndarray, np.ndarray]:
         """(n,) ``cos * att * vis / r^2`` at the vertices of ``geo`` for a point or spot light (the

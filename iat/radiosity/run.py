@@ -12,7 +12,7 @@ import numpy as np
 
 from iat.geometry import quadtree as qt
 from iat.radiosity.context import Context, SolveCancelled, ranges_of
-from iat.radiosity.kernels import add_rows_product
+from iat.radiosity.kernels import add_at_rows, rows_product
 from iat.radiosity.meshing import (
     VertexCache,
     averaging_matrix,
@@ -256,9 +256,16 @@ class SolveRun:
         t0 = time.perf_counter()
         u_start = self.u_start
         span_log = math.log(u_start / target) if u_start > target > 0 else 1.0  # progress on a log scale
+        avg, vpatch = mesh["M"], mesh["geo"].patch
+        csr = (avg.indptr, avg.indices, avg.data)
+        # M @ |unshot| (P, 3) (what :meth:`patch_power` weighs), kept up to date by the shots' rows;
+        # a shot's dv (V, 3) is zero but at its rows: scattered into `dv_full` for M @ dv, then cleared
+        m_abs = avg @ np.abs(self.unshot)
+        dv_full = np.zeros_like(self.unshot)
+        reached = np.zeros(self.P, dtype=bool)
         try:
             while self.shots < opts.max_shots:
-                power = self.patch_power(self.unshot)
+                power = np.pi * luminance_of(m_abs) * ctx.area
                 total = float(power.sum())
                 if total <= target:
                     break
@@ -271,21 +278,31 @@ class SolveRun:
                 s = int(np.argmax(power))
                 a, b = mesh["start"][s], mesh["start"][s + 1]
                 field = mesh["lattice"].grid(s, self.unshot) * self.gain[s]
-                field_mean = np.ravel(mesh["M"][s] @ self.unshot) * self.gain[s]
+                field_mean = rows_product(*csr, self.unshot, np.array([s]), False)[0] * self.gain[s]
                 # fewer samples for faint shots: their noise matters less (sqrt keeps power / m flat-ish);
                 # more for a concentrated field (a sunlit patch on a floor), whose points must land in it
                 m_hi = SHOT_SAMPLE_FACTOR * self.m_side
                 share = float(power[s]) / (SHOT_FULL_SHARE * self.power_ref)
                 m = max(1, min(m_hi, round(m_hi * math.sqrt(share))))
                 m = round(m * peak_factor(field, PEAK_RATIO, PEAK_SAMPLE_LIMIT))
-                dv = self.shot_gather(s, m, field, field_mean)
+                rows, dv = self.shot_gather(s, m, field, field_mean)
                 self.shot_index[s] += 1
                 self.shot_power[s] += float(power[s])
                 self.shots += 1
                 self.unshot[a:b] = 0.0
-                self.reflected += dv
-                self.unshot += dv
-                received = np.pi * (ctx.area[:, None] * (mesh["M"] @ dv)).sum(axis=0)
+                add_at_rows(self.reflected, rows, dv)
+                add_at_rows(self.unshot, rows, dv)
+                # the rows of M @ dv and M @ |unshot| that changed: the patches it reached, and s
+                reached[vpatch[rows]] = True
+                reached[s] = True
+                touched = np.flatnonzero(reached)
+                reached[touched] = False
+                m_abs[touched] = rows_product(*csr, self.unshot, touched, True)
+                add_at_rows(dv_full, rows, dv)
+                m_dv = np.zeros((self.P, 3))
+                m_dv[touched] = rows_product(*csr, dv_full, touched, False)
+                dv_full[rows] = 0.0
+                received = np.pi * (ctx.area[:, None] * m_dv).sum(axis=0)
                 self.shot_log.append((np.pi * ctx.area[s] * field_mean, received))
         finally:
             self.timings["shooting_s"] += time.perf_counter() - t0
@@ -319,8 +336,11 @@ class SolveRun:
         self.levels[s] = lvl
         return lvl
 
-    def shot_gather(self, s: int, m: int, field: np.ndarray, field_mean: np.ndarray) -> np.ndarray:
-        """(V, 3) reflected radiance one shot from s adds at every vertex: gathered at the
+    def shot_gather(
+        self, s: int, m: int, field: np.ndarray, field_mean: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The reflected radiance one shot from s adds, ``(rows, dv)``: the vertices it reaches
+        (k,) (distinct) and what each gets (k, 3) (nothing at the others): gathered at the
         vertices of the patches it lights noticeably, interpolated from coarse grids on the
         others (whose gathered values are kept, per grid point, in the grids' ``acc``)."""
         ctx, mesh = self.ctx, self.mesh
@@ -329,16 +349,20 @@ class SolveRun:
         # the vertices of the patches it lights noticeably, and a coarse grid per level of the others
         levels = [k for k in range(len(self.coarse or [])) if (lvl == k).any()]
         parts = [(mesh["geo"], lvl < 0)] + [(self.coarse[k]["geo"], lvl == k) for k in levels]
-        got = ctx.gathers(s, parts, m, shot, field, field_mean, correlated=False, cull=True)
-        dv = mesh["rho"] * got[0]
-        for k, g in zip(levels, got[1:], strict=True):
+        (idx, g), *got = ctx.gathers(s, parts, m, shot, field, field_mean, correlated=False, cull=True)
+        rows, dv = [idx], [mesh["rho"][idx] * g]
+        for k, (ci, g) in zip(levels, got, strict=True):
             c, w = self.coarse[k], mesh["coarse_w"][k]
-            gc = c["rho"] * g
-            c["acc"] += gc
-            # the vertices of the patches at this level take what their grid received
-            rows = ranges_of(mesh["start"], np.flatnonzero(lvl == k))
-            add_rows_product(dv, w.indptr, w.indices, w.data, gc, rows)
-        return dv
+            gc = np.zeros_like(c["acc"])
+            gc[ci] = c["rho"][ci] * g
+            add_at_rows(c["acc"], ci, gc[ci])
+            # the vertices of the patches at this level whose grid received take what it received
+            # (a vertex interpolates its own patch's grid)
+            got_any = np.zeros(self.P, dtype=bool)
+            got_any[c["geo"].patch[ci]] = True
+            rows.append(ranges_of(mesh["start"], np.flatnonzero(got_any & (lvl == k))))
+            dv.append(rows_product(w.indptr, w.indices, w.data, gc, rows[-1], False))
+        return np.concatenate(rows), np.concatenate(dv)
 
     def refine_total(self, label: str, span) -> None:
         """Stage C: refine on the total radiance. New vertices get their direct light and a

@@ -1,0 +1,146 @@
+# ruff: noqa: E501
+"""Speed at equal error (issue 18): an old ``iat`` tree against this one on the sample models.
+
+    git archive 599fc3a^ iat | tar -x -C /tmp/issue18      # the tree when issue 18 was filed
+    .venv/bin/python benchmarks/equal_error.py --before /tmp/issue18 [--models a,b] [--repeats 2]
+
+writes ``benchmarks/equal_error.json`` and ``benchmarks/equal_error.md``. Per model the default
+solve with the old tree and this tree's ``EQUAL_LADDER`` (the draft preset and the defaults), each in
+its own process, alternating (best wall and CPU seconds of ``--repeats``); each solution's surface
+error (area-weighted L1 of the luminance, 64 x 64 cells a patch, emitters left out) against a
+reference solve (``EQUAL_REFERENCE``: the final preset with seed 1, cached in ``out/solver_refs``),
+on the Cornell box also the image error (smooth lit pixels) against the 4096-spp Mitsuba reference of
+``tests/test_reference_compare.py``; and this tree's time at the old tree's surface error,
+interpolated (log-log) between its ladder's solves.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import tempfile
+from pathlib import Path
+
+from solver_bench import ROOT, Cornell, interp_at_error, speed_child, surface_error
+
+from iat.radiosity import Solution
+
+OUT_JSON = ROOT / "benchmarks" / "equal_error.json"
+OUT_MD = ROOT / "benchmarks" / "equal_error.md"
+MODELS = ("cornell_box", "house", "cave", "lavapit", "pool")
+
+
+#: the reference of ``equal``: the "final" quality preset with another seed
+EQUAL_REFERENCE = {"convergence": 0.005, "tolerance": 0.05, "samples": 32, "seed": 1}
+#: the settings ``equal`` solves with this tree (its time at the old tree's error is interpolated
+#: between them): the "draft" quality preset and the defaults
+EQUAL_LADDER = {"draft": {"max_depth": 4, "samples": 8}, "default": {}}
+#: cells per patch side of ``equal``'s surface error (the models have hundreds of patches)
+EQUAL_CELLS = 64
+
+
+def run_equal(before: Path, models=MODELS, repeats: int = 2) -> dict:
+    """Speed at equal error (issue 18): per model, the default solve with the ``iat`` tree at
+    ``before`` and this tree's :data:`EQUAL_LADDER`, in alternating processes (best wall and CPU
+    seconds of ``repeats``), each solution's surface error against a reference solve of this
+    tree (:data:`EQUAL_REFERENCE`, cached in ``out/solver_refs``; any version of the solver
+    serves: it is several times more accurate than the solves it judges), on the Cornell box also
+    the image error against the 4096-spp Mitsuba reference of ``tests/test_reference_compare.py``;
+    and this tree's time at the old tree's surface error (log-log between its ladder's solves)."""
+    tmp = Path(tempfile.mkdtemp(prefix="iat-equal-"))
+    refs = ROOT / "out" / "solver_refs"
+    refs.mkdir(parents=True, exist_ok=True)
+    speed_child(ROOT, "cornell_box", tmp / "warm.npz")  # compile (or load) the kernels first
+    cb = Cornell(spp=4096, seed=3) if "cornell_box" in models else None
+    runs = [("before", before, {}), *((f"now {k}", ROOT, o) for k, o in EQUAL_LADDER.items())]
+    out = {}
+    for name in models:
+        ref_path = refs / f"{name}.npz"
+        if not ref_path.exists():
+            speed_child(ROOT, name, ref_path, options=EQUAL_REFERENCE)
+        ref = Solution.load(ref_path)
+        times: dict[str, list[dict]] = {label: [] for label, _, _ in runs}
+        for _ in range(repeats):
+            for label, tree, opts in runs:
+                times[label].append(speed_child(tree, name, tmp / f"{name}-{label}.npz", options=opts))
+        r: dict = {"reference": EQUAL_REFERENCE, "reference_elements": int(ref.stats["elements"])}
+        for label, _, opts in runs:
+            sol = Solution.load(tmp / f"{name}-{label}.npz")
+            r[label] = {
+                "options": opts,
+                "time_s": min(x["time_s"] for x in times[label]),
+                "cpu_s": min(x["cpu_s"] for x in times[label]),
+                "elements": times[label][0]["elements"],
+                "surface_error": surface_error(sol, ref, EQUAL_CELLS),
+            }
+            if cb is not None and name == "cornell_box":
+                r[label]["image_error"] = cb.errors(sol)["rel_smooth"]
+        b = r["before"]
+        curve = [(r[f"now {k}"]["surface_error"], r[f"now {k}"]["time_s"]) for k in EQUAL_LADDER]
+        t_eq = interp_at_error(b["surface_error"], curve)
+        r["time_at_before_error_s"] = t_eq
+        r["speedup_default"] = b["time_s"] / r["now default"]["time_s"]
+        r["speedup_at_equal_error"] = None if t_eq is None else b["time_s"] / t_eq
+        out[name] = r
+        print(name, json.dumps(r), flush=True)
+    if cb is not None:
+        cb.renderer.release()
+    out["meta"] = {
+        "date": datetime.datetime.now().isoformat(timespec="minutes"),
+        "load": round(os.getloadavg()[0], 2),
+        "before": str(before),
+    }
+    return out
+
+
+def format_md(eq: dict) -> str:
+    lines = [
+        "## Speed at equal error (issue 18): before / now, alternating processes",
+        "",
+        "Surface error: area-weighted L1 of the luminance against a reference solve (the final preset, "
+        "seed 1); image error (Cornell box): smooth lit pixels against the 4096-spp Mitsuba reference. "
+        "'now at that error': this tree's time interpolated (log-log) at the old tree's surface error "
+        "between its draft and default solves ('-' outside them).",
+        "",
+        "| model | before: s | surface error | now, draft: s | surface error | now, default: s | surface error | "
+        "speed-up at the defaults | now at that error: s | speed-up at equal error |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for name, r in eq.items():
+        if name == "meta":
+            continue
+        cells = [name]
+        for label in ("before", "now draft", "now default"):
+            x = r[label]
+            err = f"{x['surface_error']:.4f}"
+            if "image_error" in x:
+                err += f" (image {x['image_error']:.4f})"
+            cells += [f"{x['time_s']:.2f}", err]
+        t_eq, s_eq = r["time_at_before_error_s"], r["speedup_at_equal_error"]
+        cells += [
+            f"{r['speedup_default']:.2f}x",
+            "-" if t_eq is None else f"{t_eq:.2f}",
+            "-" if s_eq is None else f"{s_eq:.2f}x",
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    meta = eq["meta"]
+    lines += ["", f"Run {meta['date']}, old tree {meta['before']}, load at the end {meta['load']}.", ""]
+    return "\n".join(lines)
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--before", type=Path, required=True, help="a folder holding the old iat package")
+    ap.add_argument("--models", default=",".join(MODELS))
+    ap.add_argument("--repeats", type=int, default=2)
+    a = ap.parse_args(argv)
+    res = run_equal(a.before, tuple(a.models.split(",")), a.repeats)
+    OUT_JSON.write_text(json.dumps(res, indent=1))
+    OUT_MD.write_text(format_md(res) + "\n")
+    print(format_md(res))
+
+
+if __name__ == "__main__":
+    main()
