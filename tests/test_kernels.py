@@ -237,3 +237,41 @@ def test_rows_product_is_scipys_product_on_those_rows():
     for absolute, xx in ((False, x), (True, np.abs(x))):
         got = kernels.rows_product(a.indptr, a.indices, a.data, x, rows, absolute)
         np.testing.assert_array_equal(got, (a @ xx)[rows])
+
+
+def test_patch_point_is_the_numpy_blend():
+    """The compiled patch_point gives the bits of its numpy expressions (bilinear on quads,
+    barycentric on triangles)."""
+    from iat.geometry import quadtree as qt
+
+    rng = np.random.default_rng(5)
+    corners = rng.normal(size=(7, 4, 3)) * 10
+    is_quad = np.array([True, False, True, False, False, True, True])
+    patch = rng.integers(0, 7, 500)
+    u, v = rng.random(500), rng.random(500)
+    c = corners[patch]
+    uu, vv = u[:, None], v[:, None]
+    quad = (
+        (1 - uu) * (1 - vv) * c[:, 0] + uu * (1 - vv) * c[:, 1] + uu * vv * c[:, 2] + (1 - uu) * vv * c[:, 3]
+    )
+    tri = c[:, 0] + uu * (c[:, 1] - c[:, 0]) + vv * (c[:, 2] - c[:, 0])
+    want = np.where(is_quad[patch][:, None], quad, tri)
+    np.testing.assert_array_equal(qt.patch_point(corners, is_quad, patch, u, v), want)
+
+
+def test_leaf_corner_lattice_of_quads_and_both_triangles():
+    from iat.geometry import quadtree as qt
+
+    f = qt.roots(np.array([True, False]), 4)
+    f = qt.split(f, np.ones(f.n_leaves, dtype=bool))  # a triangle splits into up and down ones
+    c = qt.leaf_corner_lattice(f)
+    s = f.leaf_size[:, None]
+    base = np.stack([f.leaf_i, f.leaf_j], axis=1)[:, None, :]
+    for k in range(f.n_leaves):
+        if f.leaf_is_quad[k]:
+            off = qt.QUAD_CORNERS
+        else:
+            off = qt.DOWN_CORNERS if f.leaf_flip[k] else qt.UP_CORNERS
+            off = np.vstack([off, off[2:]])
+        np.testing.assert_array_equal(c[k], base[k] + off * s[k])
+    assert f.leaf_flip.any() and (~f.leaf_flip & ~f.leaf_is_quad).any()

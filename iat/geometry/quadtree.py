@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 #: corner offsets in units of the leaf size, (4, 2); quads use all four
 QUAD_CORNERS = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
@@ -118,17 +119,32 @@ def decode_key(key: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndar
 
 def leaf_corner_lattice(forest: Forest) -> np.ndarray:
     """(L, 4, 2) int64 lattice corners, counter-clockwise; triangles repeat corner 2 in slot 3."""
-    s = forest.leaf_size[:, None, None]
-    base = np.stack([forest.leaf_i, forest.leaf_j], axis=1).astype(np.int64)[:, None, :]
-    off = np.empty((forest.n_leaves, 4, 2), dtype=np.int64)
-    q = forest.leaf_is_quad
-    off[q] = QUAD_CORNERS
-    up = ~q & ~forest.leaf_flip
-    down = ~q & forest.leaf_flip
-    off[up, :3] = UP_CORNERS
-    off[down, :3] = DOWN_CORNERS
-    off[~q, 3] = off[~q, 2]
-    return base + off * s
+    out = np.empty((forest.n_leaves, 4, 2), dtype=np.int64)
+    _leaf_corner_lattice(
+        np.ascontiguousarray(forest.leaf_i, dtype=np.int64),
+        np.ascontiguousarray(forest.leaf_j, dtype=np.int64),
+        np.ascontiguousarray(forest.leaf_size, dtype=np.int64),
+        np.ascontiguousarray(forest.leaf_is_quad, dtype=np.bool_),
+        np.ascontiguousarray(forest.leaf_flip, dtype=np.bool_),
+        _CORNER_OFFSETS,
+        out,
+    )
+    return out
+
+
+#: the corner offsets of a quad, an "up" and a "down" triangle (corner 2 repeated in slot 3)
+_CORNER_OFFSETS = np.stack(
+    [QUAD_CORNERS, np.vstack([UP_CORNERS, UP_CORNERS[2:]]), np.vstack([DOWN_CORNERS, DOWN_CORNERS[2:]])]
+).astype(np.int64)
+
+
+@njit(cache=True, nogil=True)
+def _leaf_corner_lattice(i, j, size, is_quad, flip, offsets, out):
+    for k in range(i.shape[0]):
+        kind = 0 if is_quad[k] else (2 if flip[k] else 1)
+        for c in range(4):
+            out[k, c, 0] = i[k] + offsets[kind, c, 0] * size[k]
+            out[k, c, 1] = j[k] + offsets[kind, c, 1] * size[k]
 
 
 def leaf_corner_keys(forest: Forest) -> np.ndarray:
@@ -294,14 +310,34 @@ def bilinear(c: np.ndarray, u, v) -> np.ndarray:
 
 def patch_point(patch_corners: np.ndarray, patch_is_quad: np.ndarray, patch, u, v) -> np.ndarray:
     """(k, 3) float64 world points at parameters (u, v) (k,) of patches ``patch`` (k,): bilinear on
-    quads, barycentric on triangles."""
-    patch = np.asarray(patch, dtype=np.int64)
-    c = patch_corners[patch]
-    quad = bilinear(c, u, v)
-    u = np.asarray(u, dtype=np.float64)[:, None]
-    v = np.asarray(v, dtype=np.float64)[:, None]
-    tri = c[:, 0] + u * (c[:, 1] - c[:, 0]) + v * (c[:, 2] - c[:, 0])
-    return np.where(np.asarray(patch_is_quad, dtype=bool)[patch][:, None], quad, tri)
+    quads (as :func:`bilinear`), barycentric on triangles."""
+    patch = np.ascontiguousarray(patch, dtype=np.int64)
+    out = np.empty((len(patch), 3))
+    _patch_point(
+        np.ascontiguousarray(patch_corners, dtype=np.float64),
+        np.ascontiguousarray(patch_is_quad, dtype=np.bool_),
+        patch,
+        np.ascontiguousarray(u, dtype=np.float64).reshape(-1),
+        np.ascontiguousarray(v, dtype=np.float64).reshape(-1),
+        out,
+    )
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _patch_point(corners, is_quad, patch, u, v, out):
+    """:func:`patch_point` compiled (a mesh's every leaf corner, each refinement pass): the numpy
+    expressions' arithmetic in their order, so the same bits."""
+    for k in range(patch.shape[0]):
+        p, a, b = patch[k], u[k], v[k]
+        c = corners[p]
+        if is_quad[p]:
+            w0, w1, w2, w3 = (1 - a) * (1 - b), a * (1 - b), a * b, (1 - a) * b
+            for x in range(3):
+                out[k, x] = w0 * c[0, x] + w1 * c[1, x] + w2 * c[2, x] + w3 * c[3, x]
+        else:
+            for x in range(3):
+                out[k, x] = c[0, x] + a * (c[1, x] - c[0, x]) + b * (c[2, x] - c[0, x])
 
 
 def lattice_to_world(patch_corners: np.ndarray, patch_is_quad: np.ndarray, patch, i, j, n: int) -> np.ndarray:
