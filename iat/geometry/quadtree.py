@@ -224,17 +224,32 @@ def _edge_points(forest: Forest, fractions: tuple[int, ...], denom: int) -> np.n
     Edges run corner k -> corner k+1; triangles' slot-3 edge is degenerate
     (corner 2 -> corner 2 repeated) and is replaced by edge 2 -> 0.
     """
-    c = leaf_corner_lattice(forest)
-    tri = ~forest.leaf_is_quad
-    a = c
-    b = np.roll(c, -1, axis=1)
-    # triangles: edges 0-1, 1-2, 2-0 (slot 2 goes to corner 0), slot 3 duplicates slot 2
-    b[tri, 2] = c[tri, 0]
-    a = a.copy()
-    a[tri, 3], b[tri, 3] = a[tri, 2], b[tri, 2]
     fr = np.asarray(fractions, dtype=np.int64)
-    pts = a[:, :, None, :] + ((b - a)[:, :, None, :] * fr[None, None, :, None]) // denom
-    return make_key(forest.leaf_patch[:, None, None], pts[..., 0], pts[..., 1], forest.n)
+    out = np.empty((forest.n_leaves, 4, len(fr)), dtype=np.int64)
+    _edge_keys(
+        leaf_corner_lattice(forest),
+        np.ascontiguousarray(forest.leaf_is_quad, dtype=np.bool_),
+        np.ascontiguousarray(forest.leaf_patch, dtype=np.int64),
+        fr,
+        denom,
+        forest.n,
+        out,
+    )
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _edge_keys(c, is_quad, patch, fr, denom, n, out):
+    """:func:`_edge_points` compiled (integer arithmetic: floor division as numpy's)."""
+    m = n + 1
+    for k in range(c.shape[0]):
+        for e in range(4):
+            a = e if is_quad[k] or e < 3 else 2  # triangles: 0-1, 1-2, 2-0, and 2-0 again in slot 3
+            b = (e + 1) % 4 if is_quad[k] else (e + 1 if e < 2 else 0)
+            for f in range(fr.shape[0]):
+                pi = c[k, a, 0] + ((c[k, b, 0] - c[k, a, 0]) * fr[f]) // denom
+                pj = c[k, a, 1] + ((c[k, b, 1] - c[k, a, 1]) * fr[f]) // denom
+                out[k, e, f] = (patch[k] * m + pi) * m + pj
 
 
 def balance(forest: Forest) -> Forest:
