@@ -275,3 +275,13 @@ def test_leaf_corner_lattice_of_quads_and_both_triangles():
             off = np.vstack([off, off[2:]])
         np.testing.assert_array_equal(c[k], base[k] + off * s[k])
     assert f.leaf_flip.any() and (~f.leaf_flip & ~f.leaf_is_quad).any()
+
+
+def test_merge_keys_is_the_sorted_union():
+    from iat.geometry import quadtree as qt
+
+    rng = np.random.default_rng(8)
+    keys = np.unique(rng.integers(0, 10**6, 5000))
+    more = rng.integers(0, 10**6, (300, 4))
+    np.testing.assert_array_equal(qt.merge_keys(keys, more), np.unique(np.concatenate([keys, more.ravel()])))
+    np.testing.assert_array_equal(qt.merge_keys(keys[:0], more[:0]), keys[:0])

@@ -161,7 +161,11 @@ def sorted_unique(keys: np.ndarray) -> np.ndarray:
     0.09-0.15 s against 0.06-0.07 s on the leaf-corner keys of a 256 000-leaf forest
     (docs/stability.md, G1).
     """
-    k = np.sort(np.asarray(keys).ravel())
+    return _first_of_runs(np.sort(np.asarray(keys).ravel()))
+
+
+def _first_of_runs(k: np.ndarray) -> np.ndarray:
+    """The first of each run of equal values of sorted k."""
     return k[np.r_[True, k[1:] != k[:-1]]] if len(k) else k
 
 
@@ -254,8 +258,8 @@ def _edge_keys(c, is_quad, patch, fr, denom, n, out):
 
 def balance(forest: Forest) -> Forest:
     """Split leaves until every leaf's edge neighbours are at most one level finer (2:1)."""
+    keys = vertex_keys(forest)
     while True:
-        keys = vertex_keys(forest)
         big = forest.leaf_size >= 4
         if not big.any():
             return forest
@@ -264,7 +268,18 @@ def balance(forest: Forest) -> Forest:
         bad[big] = (lookup(keys, quarter) >= 0).any(axis=(1, 2))
         if not bad.any():
             return forest
+        before = forest.n_leaves
         forest = split(forest, bad)
+        # a split leaf's corners are its children's: the new vertices are the children's corners
+        # (:func:`split` puts the 4 children of each of the k split leaves last)
+        children = 4 * (forest.n_leaves - before) // 3
+        keys = merge_keys(keys, leaf_corner_keys(forest)[forest.n_leaves - children :])
+
+
+def merge_keys(keys: np.ndarray, more: np.ndarray) -> np.ndarray:
+    """(K,) sorted unique union of sorted unique ``keys`` and ``more`` (any shape and order): the
+    two sorted runs merged by numpy's stable sort (timsort: linear in their length), not sorted anew."""
+    return _first_of_runs(np.sort(np.concatenate([keys, np.sort(np.ravel(more))]), kind="stable"))
 
 
 def hanging_midpoints(forest: Forest, keys: np.ndarray) -> np.ndarray:
