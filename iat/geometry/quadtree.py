@@ -75,7 +75,7 @@ class Forest:
         return d
 
     def take(self, mask: np.ndarray) -> Forest:
-        """A forest with only the leaves where ``mask`` (L,) is True."""
+        """A forest with only the leaves where ``mask`` (L,) is True (or those of a numpy index)."""
         return Forest(
             self.max_depth,
             self.patch_is_quad,
@@ -273,7 +273,7 @@ def balance(forest: Forest) -> Forest:
         # a split leaf's corners are its children's: the new vertices are the children's corners
         # (:func:`split` puts the 4 children of each of the k split leaves last)
         children = 4 * (forest.n_leaves - before) // 3
-        keys = merge_keys(keys, leaf_corner_keys(forest)[forest.n_leaves - children :])
+        keys = merge_keys(keys, leaf_corner_keys(forest.take(slice(forest.n_leaves - children, None))))
 
 
 def merge_keys(keys: np.ndarray, more: np.ndarray) -> np.ndarray:

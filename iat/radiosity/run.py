@@ -244,9 +244,12 @@ class SolveRun:
         return gain
 
     # -- shooting -----------------------------------------------------------------
-    def patch_power(self, unshot: np.ndarray) -> np.ndarray:
-        """(P,) luminance power of each patch's unshot field (by magnitude: it may be signed)."""
-        return np.pi * luminance_of(self.mesh["M"] @ np.abs(unshot)) * self.ctx.area
+    def patch_power(self, unshot: np.ndarray, m_abs: np.ndarray | None = None) -> np.ndarray:
+        """(P,) luminance power of each patch's unshot field (by magnitude: it may be signed);
+        ``m_abs`` (P, 3): ``M @ |unshot|`` when the caller keeps it (then ``unshot`` is not read)."""
+        if m_abs is None:
+            m_abs = self.mesh["M"] @ np.abs(unshot)
+        return np.pi * luminance_of(m_abs) * self.ctx.area
 
     def shoot(self, span, target: float) -> None:
         """Shoot until the unshot power is below ``target`` or max_shots."""
@@ -265,7 +268,7 @@ class SolveRun:
         reached = np.zeros(self.P, dtype=bool)
         try:
             while self.shots < opts.max_shots:
-                power = np.pi * luminance_of(m_abs) * ctx.area
+                power = self.patch_power(self.unshot, m_abs)
                 total = float(power.sum())
                 if total <= target:
                     break
@@ -353,9 +356,10 @@ class SolveRun:
         rows, dv = [idx], [mesh["rho"][idx] * g]
         for k, (ci, g) in zip(levels, got, strict=True):
             c, w = self.coarse[k], mesh["coarse_w"][k]
-            gc = np.zeros_like(c["acc"])
-            gc[ci] = c["rho"][ci] * g
-            add_at_rows(c["acc"], ci, gc[ci])
+            got_c = c["rho"][ci] * g
+            add_at_rows(c["acc"], ci, got_c)
+            gc = np.zeros_like(c["acc"])  # dense: the interpolation weights index grid points
+            gc[ci] = got_c
             # the vertices of the patches at this level whose grid received take what it received
             # (a vertex interpolates its own patch's grid)
             got_any = np.zeros(self.P, dtype=bool)
