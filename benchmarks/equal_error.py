@@ -5,7 +5,7 @@
     .venv/bin/python benchmarks/equal_error.py --before /tmp/issue18 [--models a,b] [--repeats 2]
 
 writes ``benchmarks/equal_error.json`` and ``benchmarks/equal_error.md``. Per model the default
-solve with the old tree and this tree's ``EQUAL_LADDER`` (the draft preset and the defaults), each in
+solve with the old tree and this tree's ``EQUAL_LADDER`` (the draft preset, convergence 0.2 and 0.1, and the defaults), each in
 its own process, alternating (best wall and CPU seconds of ``--repeats``); each solution's surface
 error (area-weighted L1 of the luminance, 64 x 64 cells a patch, emitters left out) against a
 reference solve (``EQUAL_REFERENCE``: the final preset with seed 1, cached in ``out/solver_refs``),
@@ -26,6 +26,7 @@ from pathlib import Path
 from solver_bench import ROOT, Cornell, interp_at_error, speed_child, surface_error
 
 from iat.radiosity import Solution
+from iat.radiosity.options import QUALITY_PRESETS
 
 OUT_JSON = ROOT / "benchmarks" / "equal_error.json"
 OUT_MD = ROOT / "benchmarks" / "equal_error.md"
@@ -35,8 +36,13 @@ MODELS = ("cornell_box", "house", "cave", "lavapit", "pool")
 #: the reference of ``equal``: the "final" quality preset with another seed
 EQUAL_REFERENCE = {"convergence": 0.005, "tolerance": 0.05, "samples": 32, "seed": 1}
 #: the settings ``equal`` solves with this tree (its time at the old tree's error is interpolated
-#: between them): the "draft" quality preset and the defaults
-EQUAL_LADDER = {"draft": {"max_depth": 4, "samples": 8}, "default": {}}
+#: between them): the "draft" quality preset, looser convergences and the defaults
+EQUAL_LADDER = {
+    "draft": QUALITY_PRESETS["draft"],
+    "convergence 0.2": {"convergence": 0.2},
+    "convergence 0.1": {"convergence": 0.1},
+    "default": {},
+}
 #: cells per patch side of ``equal``'s surface error (the models have hundreds of patches)
 EQUAL_CELLS = 64
 
@@ -96,28 +102,29 @@ def run_equal(before: Path, models=MODELS, repeats: int = 2) -> dict:
 
 
 def format_md(eq: dict) -> str:
+    rungs = [f"now {k}" for k in EQUAL_LADDER]
     lines = [
         "## Speed at equal error (issue 18): before / now, alternating processes",
         "",
         "Surface error: area-weighted L1 of the luminance against a reference solve (the final preset, "
         "seed 1); image error (Cornell box): smooth lit pixels against the 4096-spp Mitsuba reference. "
         "'now at that error': this tree's time interpolated (log-log) at the old tree's surface error "
-        "between its draft and default solves ('-' outside them).",
+        "between the two of its solves that bracket it ('-' outside them). Cells: seconds / surface error.",
         "",
-        "| model | before: s | surface error | now, draft: s | surface error | now, default: s | surface error | "
-        "speed-up at the defaults | now at that error: s | speed-up at equal error |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| model | before | " + " | ".join(rungs) + " | speed-up at the defaults | now at that error: s | "
+        "speed-up at equal error |",
+        "|---|" + "---|" * (len(rungs) + 4),
     ]
     for name, r in eq.items():
         if name == "meta":
             continue
         cells = [name]
-        for label in ("before", "now draft", "now default"):
+        for label in ("before", *rungs):
             x = r[label]
-            err = f"{x['surface_error']:.4f}"
+            err = f"{x['time_s']:.2f} / {x['surface_error']:.4f}"
             if "image_error" in x:
                 err += f" (image {x['image_error']:.4f})"
-            cells += [f"{x['time_s']:.2f}", err]
+            cells.append(err)
         t_eq, s_eq = r["time_at_before_error_s"], r["speedup_at_equal_error"]
         cells += [
             f"{r['speedup_default']:.2f}x",

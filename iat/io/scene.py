@@ -261,6 +261,18 @@ class Scene:
             parts.append(w)
         return np.concatenate(parts)
 
+    def world_triangle_uv(self) -> np.ndarray:
+        """(T, 3, 2) float64 the lattice parameters (u, v) of :meth:`world_triangles`' corners in
+        their patch (a quad's corners are (0, 0), (1, 0), (1, 1), (0, 1), a triangle's (0, 0),
+        (1, 0), (0, 1)); linear over each triangle (exact but on a skewed quad's bilinear map)."""
+        whole = ~self.patch_clipped
+        q = self.patch_is_quad
+        first = np.where(
+            q[whole][:, None, None], np.array([[0, 0], [1, 0], [1, 1]]), np.array([[0, 0], [1, 0], [0, 1]])
+        )
+        second = np.broadcast_to(np.array([[0, 0], [1, 1], [0, 1]]), (int((whole & q).sum()), 3, 2))
+        return np.concatenate([first, second, self.clip_uv.reshape(-1, 3, 2)]).astype(np.float64)
+
     def world_triangle_patch(self) -> np.ndarray:
         """(T,) int64 the patch of each of :meth:`world_triangles`."""
         whole = ~self.patch_clipped

@@ -58,9 +58,16 @@ RESOLVE_MAX_CHANGE = 1.0
 #: PEAK_SAMPLE_LIMIT times (:func:`iat.radiosity.sampling.peak_factor`; the daylit room's sunlit floor)
 PEAK_RATIO = 4.0
 PEAK_SAMPLE_LIMIT = 3.0
-#: rays per vertex of the ambient term (the closure of its hemisphere, the unshot light it sees)
+#: rays per vertex of the ambient term (its final gather of the unshot light), a count
 AMBIENT_RAYS = 64
-#: upper bound of the measured reflected fraction r in the ambient term (keeps r / (1 - r) finite)
+#: side of the grid, a power of 2, on which the ambient term reads a patch's unshot light where its rays land
+AMBIENT_GRID = 8
+#: the ambient term's later bounces are summed until a bounce adds under this fraction of the first
+AMBIENT_BOUNCE_TOL = 1e-4
+#: ... or this many bounces, a count
+AMBIENT_MAX_BOUNCES = 500
+#: upper bound of the albedo in the ambient term's later bounces and of the measured reflected
+#: fraction r (keeps their sum finite in an albedo-1 room)
 MAX_REFLECTANCE = 0.95
 #: stage C refines once the unshot power is below this times ``convergence`` of the received power
 #: (it was sqrt(convergence), 22 % at the default: a daylit room's indirect light was then 10 %
@@ -98,7 +105,7 @@ class SolveOptions:
         below this fraction of the power the surfaces received from the sources in the direct
         pass (in a closed scene the emitted power; in an open or daylit one what came in,
         so an interior gets its bounces even when most of the light escapes); with ``ambient``
-        its later bounces are added as a uniform ambient term, otherwise that light
+        it is added by a final gather of it (all its later bounces), otherwise that light
         (amplified by interreflection) is missing from the result. Smaller costs more
         shots for the last, faint bounces.
     samples : int 1..1024, default 16. Per receiver and shot: that many stratified
@@ -136,8 +143,9 @@ class SolveOptions:
         shot so far (exact, never interpolated). Without it such surfaces keep their
         direct-light mesh.
     ambient : bool, default True. Add the ambient term for the light still unshot at
-        convergence (see :mod:`iat.radiosity.solver`, D); False leaves it out (the result is
-        then darker by about ``convergence`` times the interreflection gain).
+        convergence: a final gather of it from every vertex, its later bounces summed on the
+        patches (see :mod:`iat.radiosity.solver`, D); False leaves it out (the result is then
+        darker by about ``convergence`` times the interreflection gain).
     """
 
     max_depth: int = 6

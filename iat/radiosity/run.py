@@ -24,10 +24,8 @@ from iat.radiosity.meshing import (
 )
 from iat.radiosity.options import (
     ABS_FLOOR,
-    AMBIENT_RAYS,
     COARSE_EPS,
     COARSE_SIZE,
-    GATHER_BLOCK,
     MAX_REFLECTANCE,
     PEAK_RATIO,
     PEAK_SAMPLE_LIMIT,
@@ -36,7 +34,8 @@ from iat.radiosity.options import (
     SHOT_SAMPLE_FACTOR,
     SolveOptions,
 )
-from iat.radiosity.sampling import Lattice, concentric_disk, luminance_of, pattern_side, peak_factor
+from iat.radiosity.remainder import ambient_term
+from iat.radiosity.sampling import Lattice, luminance_of, pattern_side, peak_factor
 from iat.radiosity.solution import Solution
 from iat.radiosity.sources import sources_record
 from iat.radiosity.visibility import Visibility
@@ -484,73 +483,19 @@ class SolveRun:
             pass
 
     # -- the result ---------------------------------------------------------------
-    def gathered_unshot(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """What each vertex sees over ``AMBIENT_RAYS`` cosine-distributed directions (one pattern for
-        all vertices, so it varies smoothly) of the patches the rays meet first: ``seen`` (V, 3) the
-        mean unshot radiance (a patch's mean times its shot gain, on its front; 0 where a ray leaves
-        the scene or meets a back face), ``around`` (V, 3) the mean albedo seen the same way, and
-        ``closure`` (V,) the fraction of rays that meet the scene (1 in a closed room)."""
-        ctx, mesh, geo = self.ctx, self.mesh, self.mesh["geo"]
-        m = pattern_side(AMBIENT_RAYS)
-        pat = ctx.pattern(self.P, m, 0)  # (a patch index no shooter has)
-        dx, dy = concentric_disk(pat[:, 0], pat[:, 1])
-        dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
-        patch_unshot = np.asarray(mesh["M"] @ self.unshot) * self.gain[:, None]  # (P, 3)
-        tri_patch = self.scene.world_triangle_patch()[self.vis.opaque]
-        albedo = np.asarray(ctx.albedo, dtype=np.float64)
-        n, k = len(geo.key), len(pat)
-        seen, around, closure = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n)
-        for a in range(0, n, GATHER_BLOCK):
-            sl = slice(a, a + GATHER_BLOCK)
-            t1, t2 = ctx.tangent[geo.patch[sl], 0], ctx.tangent[geo.patch[sl], 1]
-            w = (
-                dx[None, :, None] * t1[:, None]
-                + dy[None, :, None] * t2[:, None]
-                + dz[None, :, None] * geo.normal[sl][:, None]
-            ).reshape(-1, 3)
-            o = np.repeat(geo.origin[sl], k, axis=0)
-            tri = self.vis.first_hit(o, w, np.full(len(o), 4.0 * ctx.scale))
-            hp = tri_patch[np.maximum(tri, 0)]
-            front = (tri >= 0) & (np.einsum("nc,nc->n", w, ctx.normal[hp]) < 0)
-            seen[sl] = np.where(front[:, None], patch_unshot[hp], 0.0).reshape(-1, k, 3).mean(axis=1)
-            around[sl] = np.where(front[:, None], albedo[hp], 0.0).reshape(-1, k, 3).mean(axis=1)
-            closure[sl] = (tri >= 0).reshape(-1, k).mean(axis=1)
-            self.check()
-        return seen, around, closure
-
-    def ambient(self, fallback_reflectance=None) -> tuple[np.ndarray, np.ndarray]:
-        """(V, 3) reflected radiance standing for the unshot light's later bounces, and the (3,)
-        reflected fraction r of the last half of the shots it was derived from
-        (:mod:`iat.radiosity.solver`, stage D). Per vertex the larger of
-
-        - the uniform term: an incoming radiance ``E`` times the vertex's albedo and closure, where
-          ``E`` spreads the unshot power's later reflected power ``phi_u r / (1 - r)`` over the
-          scene (right in a room: the remainder is everywhere);
-        - the local term: its albedo times the unshot light it sees (:meth:`gathered_unshot`, its
-          first bounce where it falls) times ``1 / (1 - a)`` for the bounces after, ``a`` the albedo
-          its surroundings show it: an interior of a sunlit building gets the bounces of its own
-          sunlit floor, which the uniform term spreads over the whole exterior.
-        """
-        ctx, mesh = self.ctx, self.mesh
+    def reflected_fraction(self, fallback=None) -> np.ndarray:
+        """(3,) the fraction r of a shot's power the scene reflects back, over the last half of the
+        shots (``fallback`` when there were none, or 0): a statistic of the solve."""
         log = self.shot_log[len(self.shot_log) // 2 :]
         if log:
             sp = np.sum([np.abs(a) for a, _ in log], axis=0)
             rp = np.sum([np.abs(b) for _, b in log], axis=0)
             r = np.where(sp > 0, rp / np.where(sp > 0, sp, 1.0), 0.0)
-        elif fallback_reflectance is not None and len(fallback_reflectance) == 3:
-            r = np.asarray(fallback_reflectance, dtype=np.float64)
+        elif fallback is not None and len(fallback) == 3:
+            r = np.asarray(fallback, dtype=np.float64)
         else:
-            return np.zeros((len(self.keys), 3)), np.zeros(3)
-        r = np.clip(r, 0.0, MAX_REFLECTANCE)
-        phi_u = np.pi * (ctx.area[:, None] * (mesh["M"] @ self.unshot)).sum(axis=0)
-        if not np.any(phi_u):
-            return np.zeros((len(self.keys), 3)), r
-        seen, around, closure = self.gathered_unshot()
-        weight = mesh["rho"] * closure[:, None]  # reflected per unit of incoming E
-        denom = np.pi * (ctx.area[:, None] * (mesh["M"] @ weight)).sum(axis=0)
-        e = np.where(denom > 0, phi_u * r / (1.0 - r) / np.where(denom > 0, denom, 1.0), 0.0)
-        local = mesh["rho"] * seen / (1.0 - np.clip(around, 0.0, MAX_REFLECTANCE))
-        return np.maximum(weight * e, local), r
+            r = np.zeros(3)
+        return np.clip(r, 0.0, MAX_REFLECTANCE)
 
     def finish(self, mode="solve", fallback_reflectance=None, extra=None) -> Solution:
         ctx, opts = self.ctx, self.opts
@@ -558,10 +503,10 @@ class SolveRun:
         unshot_power = self.patch_power(self.unshot)
         vpatch = qt.decode_key(keys, ctx.n)[0]
         reflected = self.reflected
-        amb, refl_frac = np.zeros((len(keys), 3)), np.zeros(3)
+        amb = np.zeros((len(keys), 3))
         if opts.ambient and opts.max_shots > 0 and len(keys) and not self.state["cancelled"]:
             try:
-                amb, refl_frac = self.ambient(fallback_reflectance)
+                amb = ambient_term(ctx, self.mesh, self.vis, self.scene, self.unshot, self.gain, self.check)
             except SolveCancelled:
                 amb = np.zeros((len(keys), 3))
             reflected = reflected + amb
@@ -611,7 +556,7 @@ class SolveRun:
             )
             if self.power_ref > 0 and area_tot > 0
             else 0.0,
-            "reflectance": [float(x) for x in refl_frac],
+            "reflectance": [float(x) for x in self.reflected_fraction(fallback_reflectance)],
             "culled_pairs": float(ctx.culled_fraction()),
             "mode": mode,
             "sources": sources_record(ctx),

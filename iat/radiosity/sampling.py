@@ -135,9 +135,10 @@ class Shooter:
         return self._kargs
 
 
-def sample_lattice(flat: np.ndarray, n: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+def sample_lattice(flat: np.ndarray, n: int, u: np.ndarray, v: np.ndarray, base=0) -> np.ndarray:
     """(k, 3) piecewise-linear interpolation at lattice parameters u, v (k,) of a lattice
-    grid given flat, ((N+1)**2, 3).
+    grid given flat, ((N+1)**2, 3), or of several such grids one after the other, each point
+    in the one starting at row ``base`` (k,).
 
     Each lattice cell is split along its anti-diagonal, so triangle patches (points with
     ``u + v <= 1``) only ever read lattice points inside the triangle.
@@ -146,7 +147,7 @@ def sample_lattice(flat: np.ndarray, n: int, u: np.ndarray, v: np.ndarray) -> np
     a = np.minimum(x.astype(np.int64), n - 1)
     b = np.minimum(y.astype(np.int64), n - 1)
     fx, fy = x - a, y - b
-    i00 = a * (n + 1) + b
+    i00 = base + a * (n + 1) + b
     lower = fx + fy <= 1.0
     # lower: g00 (1-fx-fy) + g10 fx + g01 fy ; upper: g11 (fx+fy-1) + g01 (1-fx) + g10 (1-fy)
     w_base = np.where(lower, 1.0 - fx - fy, fx + fy - 1.0)
@@ -162,14 +163,16 @@ class Lattice:
     def __init__(self, forest: qt.Forest, keys: np.ndarray):
         self.forest = forest
         self.n = forest.n
+        self.keys = keys
         self.corner = qt.lookup(keys, qt.leaf_corner_keys(forest))  # (L, 4)
         self.order = np.argsort(forest.leaf_patch, kind="stable")
         self.starts = np.searchsorted(forest.leaf_patch[self.order], np.arange(forest.n_patches + 1))
         self._offsets: dict[int, tuple] = {}
 
-    def _level(self, level: int):
-        if level not in self._offsets:
-            s = self.n >> level
+    def _points(self, s: int):
+        """A leaf's lattice points ``s`` steps a side: offsets a, b and corner weights (quads: all;
+        triangles: the ``up`` or ``down`` ones, by the leaf's flip)."""
+        if s not in self._offsets:
             a, b = np.meshgrid(np.arange(s + 1), np.arange(s + 1), indexing="ij")
             a, b = a.ravel(), b.ravel()
             x, y = a / s, b / s
@@ -178,8 +181,8 @@ class Lattice:
             down = np.flatnonzero(a + b >= s)
             wu = np.stack([1 - x - y, x, y, 0 * x], axis=1)[up]  # corners (0,0), (1,0), (0,1)
             wd = np.stack([x + y - 1, 1 - x, 1 - y, 0 * x], axis=1)[down]  # (1,1), (0,1), (1,0)
-            self._offsets[level] = (a, b, wq, up, wu, down, wd)
-        return self._offsets[level]
+            self._offsets[s] = (a, b, wq, up, wu, down, wd)
+        return self._offsets[s]
 
     def grid(self, p: int, values: np.ndarray) -> np.ndarray:
         """(N+1, N+1, 3) values of patch p on its lattice, interpolated in its leaves from ``values``."""
@@ -189,7 +192,7 @@ class Lattice:
         lvl = fo.leaf_level[leaves]
         for level in np.unique(lvl):
             sel = leaves[lvl == level]
-            a, b, wq, up, wu, down, wd = self._level(int(level))
+            a, b, wq, up, wu, down, wd = self._points(n >> int(level))
             vals = values[self.corner[sel]]  # (l, 4, 3)
             i0, j0 = fo.leaf_i[sel][:, None], fo.leaf_j[sel][:, None]
             if fo.patch_is_quad[p]:
@@ -200,6 +203,33 @@ class Lattice:
                 if mask.any():
                     g[i0[mask] + a[pts], j0[mask] + b[pts]] = np.einsum("gk,lkc->lgc", w, vals[mask])
         return g
+
+    def coarse_grids(self, values: np.ndarray, g: int) -> np.ndarray:
+        """(P, g+1, g+1, 3) every patch's field on the ``g`` x ``g`` lattice (``g`` a power of 2, at
+        most N): :meth:`grid` at every (N / g)-th point, for all patches at once. Points inside a
+        leaf larger than that interpolate its corners; the others are vertices and take their value.
+        values : (V, 3) at the lattice's vertex keys."""
+        n, fo = self.n, self.forest
+        g = min(int(g), n)
+        step = n // g
+        out = np.zeros((fo.n_patches, g + 1, g + 1, 3))
+        big = np.flatnonzero(fo.leaf_level < g.bit_length() - 1)  # leaves larger than a step
+        lvl = fo.leaf_level[big]
+        for level in np.unique(lvl):
+            sel = big[lvl == level]
+            a, b, wq, up, wu, down, wd = self._points(g >> int(level))
+            vals = values[self.corner[sel]]  # (l, 4, 3)
+            p = fo.leaf_patch[sel][:, None]
+            i0, j0 = fo.leaf_i[sel][:, None] // step, fo.leaf_j[sel][:, None] // step
+            quad, flip = fo.patch_is_quad[fo.leaf_patch[sel]], fo.leaf_flip[sel]
+            for mask, pts, w in ((quad, slice(None), wq), (~quad & ~flip, up, wu), (~quad & flip, down, wd)):
+                if mask.any():
+                    vm = np.einsum("gk,lkc->lgc", w, vals[mask])
+                    out[p[mask], i0[mask] + a[pts], j0[mask] + b[pts]] = vm
+        pk, i, j = qt.decode_key(self.keys, n)
+        on = (i % step == 0) & (j % step == 0)
+        out[pk[on], i[on] // step, j[on] // step] = values[on]
+        return out
 
 
 def pattern_side(samples: int) -> int:

@@ -60,24 +60,18 @@ C. **Refinement on the total radiance** (``refine_indirect``), once, after the
    hold is shot again, not lost. Shooting then continues to ``convergence``
    (unshot power over the power the surfaces received in the direct pass: the emitted
    power in a closed scene, what came in in an open one).
-D. **Ambient term** (``ambient``, after Cohen et al. 1988): the light still
-   unshot at convergence would, over all its later bounces, add a reflected
-   power of ``U * r / (1 - r)`` (``U`` the unshot power, ``r`` the fraction of a
-   shot's power that the scene reflects back, measured on the last half of the
-   shots, so an open scene's escaping light counts). It is spread as a uniform
-   incoming radiance ``E`` (per channel), every vertex adding ``rho * c * E``
-   where ``c`` is the closed fraction of its hemisphere (``AMBIENT_RAYS`` rays:
-   1 in a closed room, less near an opening): the energy of the result is right,
-   only the distribution of the last ``convergence`` of the light is
-   approximated (in the house, stopping at 5 % with the ambient term is 1.2 %
-   from the converged solution on average, against 4.7 % without it). Where it is
-   larger, a vertex takes instead the local term: its albedo times the unshot
-   radiance its hemisphere sees (the same rays, each the mean of the patch it meets),
-   times ``1 / (1 - a)``, ``a`` the albedo it sees. In an open scene the remainder
-   sits where the light came in: a sunlit building's interior holds its sunlit
-   floor's unshot light, which the uniform term spread over the whole exterior
-   (the IFC house's interior at 5 %: 0.48 of a solve converged to 0.2 % with the
-   uniform term alone, 0.95 with the local one).
+D. **Ambient term** (``ambient``; after Cohen et al. 1988, as a final gather): the light still
+   unshot at convergence, carried through all its later bounces (:mod:`.remainder`). Every
+   vertex casts ``AMBIENT_RAYS`` cosine-distributed rays (one pattern for all vertices, so it
+   varies smoothly) and reads the unshot radiance where each first meets a front face (the
+   patch's field on an ``AMBIENT_GRID`` lattice, times its shot gain): their mean times its
+   albedo is the remainder's first bounce, where it falls (a sunlit building's interior gets
+   its own sunlit floor's light, not a share spread over the exterior). The same rays, averaged
+   over each patch, are a sampled patch-to-patch form-factor matrix on which the bounces after
+   are summed (a Neumann series, albedo capped at ``MAX_REFLECTANCE``); rays that leave the
+   scene bring nothing, so an open scene's remainder escapes as it would. In the house,
+   stopping at 5 % is 1.8 % from the reference solve with it (2.2 % with the uniform term it
+   replaced), at 20 % 2.2 %; the furnace after a single shot is exact within 1 %.
 
 Because every vertex, early or late, receives every shot, the final values are
 unbiased with respect to the mesh: no late vertex misses early shots, the trap

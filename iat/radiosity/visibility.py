@@ -109,11 +109,14 @@ class Visibility:
         t : (n,) float32."""
         return self._scene.run(o, d, dists=t, query="OCCLUDED")
 
-    def _traced(self, query, origins, dirs, tfar, fill: int) -> np.ndarray:
+    def _traced(self, query, origins, dirs, tfar, fill, out: np.ndarray | None = None) -> np.ndarray:
         """``query(o, d, t)`` (one embreex call) over chunks of the rays, spread over the threads
-        and counted in ``rays`` and ``seconds``; (n,) int of its answers (``fill`` for no scene)."""
+        and counted in ``rays`` and ``seconds``; its answers in ``out`` (default (n,) int64),
+        ``fill`` where there is no scene."""
         n = len(origins)
-        out = np.full(n, fill, dtype=np.int64)
+        if out is None:
+            out = np.empty(n, dtype=np.int64)
+        out[...] = fill
         if n == 0 or self._n_tris == 0:
             with self._lock:
                 self.rays += n
@@ -149,6 +152,19 @@ class Visibility:
         """(n,) int64 the opaque triangle each ray meets first before ``tfar`` (an index into
         :attr:`opaque`), -1 where none; arguments as :meth:`occluded`."""
         return self._traced(lambda o, d, t: self._scene.run(o, d, dists=t), origins, dirs, tfar, -1)
+
+    def first_hits(self, origins, dirs, tfar) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`first_hit` with where on the triangle: (n,) int64 opaque triangle (-1: none) and
+        (n, 2) float64 its barycentric coordinates (b1, b2) of the hit, ``(1 - b1 - b2) v0 + b1 v1
+        + b2 v2``."""
+
+        def query(o, d, t):
+            r = self._scene.run(o, d, dists=t, output=1)
+            prim = np.where(np.asarray(r["geomID"]) < 0, -1, np.asarray(r["primID"]))
+            return np.stack([prim, r["u"], r["v"]], axis=1)
+
+        out = self._traced(query, origins, dirs, tfar, -1.0, np.empty((len(origins), 3)))
+        return out[:, 0].astype(np.int64), out[:, 1:]
 
     def visible(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray) -> np.ndarray:
         """(n,) float64 what of each ray's light gets through before ``tfar``: 0 when something
