@@ -66,3 +66,34 @@ def test_ambient_term_is_the_furnace_after_one_shot(albedo):
     assert sol.stats["unshot_fraction"] > 0.3
     assert sol.vert_radiance.mean() == pytest.approx(expected, rel=0.01)
     assert np.allclose(sol.vert_radiance, expected, rtol=0.03)
+
+
+def test_ambient_hits_read_the_lattice_where_the_rays_land():
+    """The compiled kernel against numpy: front hits only, each read with ``sample_lattice`` from its
+    patch's grid, the vertex's mean over its rays, and the fraction of its rays on each patch."""
+    from iat.radiosity.kernels import ambient_hits
+    from iat.radiosity.sampling import sample_lattice
+
+    rng = np.random.default_rng(6)
+    n, k, g, n_p, n_t = 40, 16, 4, 5, 9
+    tri = rng.integers(-1, n_t, n * k)
+    bary = rng.dirichlet(np.ones(3), n * k)[:, 1:]
+    dirs = rng.normal(size=(n * k, 3))
+    tri_patch = rng.integers(0, n_p, n_t)
+    tri_uv = rng.random((n_t, 3, 2))
+    normal = rng.normal(size=(n_p, 3))
+    grids = rng.random((n_p, (g + 1) ** 2, 3))
+    first = np.zeros((n, 3))
+    r, c, f = np.empty(n * k, np.int64), np.empty(n * k, np.int64), np.empty(n * k)
+    m = ambient_hits(tri, bary, dirs, tri_patch, tri_uv, normal, grids.reshape(-1, 3), g, k, first, r, c, f)
+    p = tri_patch[np.maximum(tri, 0)]
+    front = (tri >= 0) & (np.einsum("nc,nc->n", dirs, normal[p]) < 0)
+    b = np.column_stack([1 - bary.sum(axis=1), bary])
+    uv = np.clip(np.einsum("nk,nkc->nc", b, tri_uv[np.maximum(tri, 0)]), 0, 1)
+    want = np.zeros((n * k, 3))
+    for q in np.flatnonzero(front):
+        want[q] = sample_lattice(grids[p[q]], g, uv[q : q + 1, 0], uv[q : q + 1, 1])[0]
+    np.testing.assert_allclose(first, want.reshape(n, k, 3).mean(axis=1), rtol=1e-12, atol=1e-15)
+    got = {(int(a), int(b)): float(x) for a, b, x in zip(r[:m], c[:m], f[:m], strict=True)}
+    pairs, counts = np.unique(np.column_stack([np.arange(n * k) // k, p])[front], axis=0, return_counts=True)
+    assert got == {(int(a), int(b)): x / k for (a, b), x in zip(pairs, counts, strict=True)}

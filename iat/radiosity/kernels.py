@@ -616,3 +616,57 @@ def gather_finish(off, ws, vis, us, vs, fb, wsum, has_field, flat, nl, x, geom, 
                 val = min(val, 0.0)
             out[i, c] = val
     return out, seen
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def ambient_hits(tri, bary, dirs, tri_patch, tri_uv, normal, flat, g, k, first, rows, cols, counts):
+    """The ambient term's rays of a block of vertices, ``k`` each, in vertex order (n * k,): where
+    a ray meets a front face (opaque triangle ``tri`` >= 0, barycentric ``bary`` (n*k, 2), direction
+    ``dirs`` (n*k, 3) against the normal (P, 3) of its patch ``tri_patch[tri]``), the unshot radiance
+    there, read piecewise-linearly (as ``sampling.sample_lattice``) from ``flat`` ((P (g+1)^2, 3):
+    each patch's g x g lattice) at the hit's lattice (u, v) (``tri_uv`` (T, 3, 2)). Adds each
+    vertex's mean over its rays to ``first`` (n, 3); writes per vertex the patches its rays met
+    (``rows`` its index in the block, ``cols`` the patch) and the fraction of its rays on each
+    (``counts``), and returns how many such pairs."""
+    n = tri.shape[0] // k
+    found = np.empty(k, dtype=np.int64)
+    tally = np.empty(k, dtype=np.int64)
+    m = 0
+    for v in range(n):
+        nf = 0
+        for q in range(v * k, (v + 1) * k):
+            t = tri[q]
+            if t < 0:
+                continue
+            p = tri_patch[t]
+            if dirs[q, 0] * normal[p, 0] + dirs[q, 1] * normal[p, 1] + dirs[q, 2] * normal[p, 2] >= 0.0:
+                continue  # a back face
+            b1, b2 = bary[q, 0], bary[q, 1]
+            b0 = 1.0 - b1 - b2
+            u = min(max(b0 * tri_uv[t, 0, 0] + b1 * tri_uv[t, 1, 0] + b2 * tri_uv[t, 2, 0], 0.0), 1.0)
+            w = min(max(b0 * tri_uv[t, 0, 1] + b1 * tri_uv[t, 1, 1] + b2 * tri_uv[t, 2, 1], 0.0), 1.0)
+            x, y = u * g, w * g
+            a, b = min(int(x), g - 1), min(int(y), g - 1)
+            fx, fy = x - a, y - b
+            i00 = p * (g + 1) * (g + 1) + a * (g + 1) + b
+            if fx + fy <= 1.0:
+                wb, ib, w10, w01 = 1.0 - fx - fy, i00, fx, fy
+            else:
+                wb, ib, w10, w01 = fx + fy - 1.0, i00 + g + 2, 1.0 - fy, 1.0 - fx
+            for c in range(3):
+                val = flat[ib, c] * wb + flat[i00 + g + 1, c] * w10 + flat[i00 + 1, c] * w01
+                first[v, c] += val / k
+            j = 0
+            while j < nf and found[j] != p:
+                j += 1
+            if j == nf:
+                found[nf] = p
+                tally[nf] = 0
+                nf += 1
+            tally[j] += 1
+        for j in range(nf):
+            rows[m] = v
+            cols[m] = found[j]
+            counts[m] = tally[j] / k
+            m += 1
+    return m

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
+from iat.radiosity.kernels import ambient_hits
 from iat.radiosity.options import (
     AMBIENT_BOUNCE_TOL,
     AMBIENT_GRID,
@@ -26,17 +27,13 @@ from iat.radiosity.options import (
     GATHER_BLOCK,
     MAX_REFLECTANCE,
 )
-from iat.radiosity.sampling import concentric_disk, pattern_side, sample_lattice
+from iat.radiosity.sampling import concentric_disk, pattern_side
 
 
-def hemisphere_hits(ctx, geo, vis, tri_patch: np.ndarray, tri_uv: np.ndarray, check):
-    """Per block of vertices: what their ``AMBIENT_RAYS`` cosine-distributed rays meet first.
-
-    ctx : the solve's :class:`~iat.radiosity.context.Context`; geo : the vertices' geometry
-    tri_patch : (T_opaque,) patch of each opaque triangle; tri_uv : (T_opaque, 3, 2) its lattice (u, v)
-    Yields ``(vertices, k, patch, u, v)``: the block's vertex indices (b,), the rays per vertex,
-    and for the rays that meet a front face (in vertex order) their vertex (h,), patch and
-    lattice parameters (h,) there."""
+def hemisphere_rays(ctx, geo):
+    """Per block of at most ``GATHER_BLOCK`` vertices: their slice and their ``AMBIENT_RAYS``
+    cosine-distributed rays, origins and directions (b k, 3) in vertex order, the same pattern
+    at every vertex, and k."""
     m = pattern_side(AMBIENT_RAYS)
     pat = ctx.pattern(ctx.n_patches, m, 0)  # (a patch index no shooter has)
     dx, dy = concentric_disk(pat[:, 0], pat[:, 1])
@@ -44,19 +41,10 @@ def hemisphere_hits(ctx, geo, vis, tri_patch: np.ndarray, tri_uv: np.ndarray, ch
     dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
     k = pat.shape[0]
     for a in range(0, len(geo.key), GATHER_BLOCK):
-        sl = slice(a, a + GATHER_BLOCK)
+        sl = slice(a, min(a + GATHER_BLOCK, len(geo.key)))
         t1, t2, nz = ctx.tangent[geo.patch[sl], 0], ctx.tangent[geo.patch[sl], 1], geo.normal[sl]
         w = (dx * t1[:, None] + dy * t2[:, None] + dz * nz[:, None]).reshape(-1, 3)
-        o = np.repeat(geo.origin[sl], k, axis=0)
-        tri, bary = vis.first_hits(o, w, np.full(len(o), 4.0 * ctx.scale))
-        hp = tri_patch[np.maximum(tri, 0)]
-        front = np.flatnonzero((tri >= 0) & (np.einsum("nc,nc->n", w, ctx.normal[hp]) < 0))
-        t, b = tri_uv[tri[front]], bary[front]
-        uv = (1.0 - b[:, :1] - b[:, 1:]) * t[:, 0] + b[:, :1] * t[:, 1] + b[:, 1:] * t[:, 2]
-        uv = np.clip(uv, 0.0, 1.0)
-        verts = np.arange(a, min(a + GATHER_BLOCK, len(geo.key)))
-        yield verts, k, a + front // k, hp[front], uv[:, 0], uv[:, 1]
-        check()
+        yield sl, np.repeat(geo.origin[sl], k, axis=0), w, k
 
 
 def ambient_term(ctx, mesh: dict, vis, scene, unshot: np.ndarray, gain: np.ndarray, check) -> np.ndarray:
@@ -74,14 +62,14 @@ def ambient_term(ctx, mesh: dict, vis, scene, unshot: np.ndarray, gain: np.ndarr
     n_v, n_p = len(geo.key), ctx.n_patches
     first = np.zeros((n_v, 3))
     rows, cols, counts = [], [], []
-    for verts, k, v, p, u, w in hemisphere_hits(ctx, geo, vis, tri_patch, tri_uv, check):
-        val = sample_lattice(flat, g, u, w, p * (g + 1) ** 2)
-        for c in range(3):
-            first[verts, c] = np.bincount(v - verts[0], weights=val[:, c], minlength=len(verts)) / k
-        pair, count = np.unique(v * n_p + p, return_counts=True)
-        rows.append(pair // n_p)
-        cols.append(pair % n_p)
-        counts.append(count / k)
+    for sl, o, w, k in hemisphere_rays(ctx, geo):
+        tri, bary = vis.first_hits(o, w, np.full(len(o), 4.0 * ctx.scale))
+        r, c, f = np.empty(len(o), np.int64), np.empty(len(o), np.int64), np.empty(len(o))
+        m = ambient_hits(tri, bary, w, tri_patch, tri_uv, ctx.normal, flat, g, k, first[sl], r, c, f)
+        rows.append(r[:m] + sl.start)
+        cols.append(c[:m])
+        counts.append(f[:m])
+        check()
     fv = sparse.csr_matrix(
         (np.concatenate(counts), (np.concatenate(rows), np.concatenate(cols))), shape=(n_v, n_p)
     )

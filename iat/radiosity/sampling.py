@@ -135,10 +135,9 @@ class Shooter:
         return self._kargs
 
 
-def sample_lattice(flat: np.ndarray, n: int, u: np.ndarray, v: np.ndarray, base=0) -> np.ndarray:
+def sample_lattice(flat: np.ndarray, n: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """(k, 3) piecewise-linear interpolation at lattice parameters u, v (k,) of a lattice
-    grid given flat, ((N+1)**2, 3), or of several such grids one after the other, each point
-    in the one starting at row ``base`` (k,).
+    grid given flat, ((N+1)**2, 3).
 
     Each lattice cell is split along its anti-diagonal, so triangle patches (points with
     ``u + v <= 1``) only ever read lattice points inside the triangle.
@@ -147,7 +146,7 @@ def sample_lattice(flat: np.ndarray, n: int, u: np.ndarray, v: np.ndarray, base=
     a = np.minimum(x.astype(np.int64), n - 1)
     b = np.minimum(y.astype(np.int64), n - 1)
     fx, fy = x - a, y - b
-    i00 = base + a * (n + 1) + b
+    i00 = a * (n + 1) + b
     lower = fx + fy <= 1.0
     # lower: g00 (1-fx-fy) + g10 fx + g01 fy ; upper: g11 (fx+fy-1) + g01 (1-fx) + g10 (1-fy)
     w_base = np.where(lower, 1.0 - fx - fy, fx + fy - 1.0)
