@@ -303,7 +303,7 @@ class SolveRun:
                 add_at_rows(dv_full, rows, dv)
                 m_dv = np.zeros((self.P, 3))
                 m_dv[touched] = rows_product(*csr, dv_full, touched, False)
-                dv_full[rows] = 0.0
+                add_at_rows(dv_full, rows, -dv)  # back to exact zeros (0 + dv - dv)
                 received = np.pi * (ctx.area[:, None] * m_dv).sum(axis=0)
                 self.shot_log.append((np.pi * ctx.area[s] * field_mean, received))
         finally:
