@@ -109,6 +109,14 @@ def ranges_of(start: np.ndarray, patches: np.ndarray) -> np.ndarray:
     return np.arange(int(n.sum()), dtype=np.int64) + off
 
 
+def emitter_shares(emission: np.ndarray, area: np.ndarray) -> np.ndarray:
+    """(P,) each patch's share of the emitted power (luminance of ``emission`` (P, 3) x ``area``
+    (P,)); 0 on patches that emit nothing, and all 0 when nothing does."""
+    power = np.abs(luminance_of(emission)) * area
+    total = float(power.sum())
+    return power / total if total > 0 else np.zeros(len(area))
+
+
 class Context:
     """Per-solve constant data and the shared gather kernels."""
 
@@ -153,6 +161,7 @@ class Context:
         self.suns = [lt for lt in scene.lights if lt.kind == "directional" and np.any(lt.radiant_intensity)]
         self.sky = getattr(scene, "sky", None)
         self.emitters = np.flatnonzero((self.emission > 0).any(axis=1))
+        self.emitter_share = emitter_shares(self.emission, self.area)  # (P,) for the direct pass's samples
         # a tangent frame per patch (for cosine-distributed directions)
         helper = np.where(np.abs(self.normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
         t1 = np.cross(self.normal, helper)
@@ -628,10 +637,17 @@ class Context:
             out += sign * (lumped - k)[:, None] * light.radiant_intensity[None, :]
         return self.albedo[geo.patch] * out / np.pi
 
-    def emitter_gather(self, e: int, geo: ReceiverGeometry) -> np.ndarray:
+    def emitter_side(self, share: float) -> int:
+        """Samples per side of the direct pass's gathers from an emitter with ``share`` of the emitted
+        power: ``DIRECT_SAMPLE_FACTOR`` x the per-side samples times ``sqrt(share)`` (samples by
+        power, as the shots'), at least the per-side samples."""
+        side = pattern_side(self.opts.samples)
+        return max(side, round(DIRECT_SAMPLE_FACTOR * side * math.sqrt(share)))
+
+    def emitter_gather(self, e: int, geo: ReceiverGeometry, side: int) -> np.ndarray:
         """(n,) ``F * vis`` from emissive patch e, as the direct pass computes it (per-vertex
-        rotated patterns, ``DIRECT_SAMPLE_FACTOR`` x the per-side samples, shot 0)."""
-        return self.gather(int(e), geo, DIRECT_SAMPLE_FACTOR * pattern_side(self.opts.samples))
+        rotated patterns, shot 0), ``side`` samples per side (:meth:`emitter_side`)."""
+        return self.gather(int(e), geo, side)
 
     def direct(
         self, keys: np.ndarray, check: Callable[[], None], geo: ReceiverGeometry | None = None
@@ -643,7 +659,8 @@ class Context:
         geo = self.geometry(keys) if geo is None else geo
         incoming = np.zeros((len(keys), 3))  # radiance-weighted: rho * incoming = reflected
         for e in self.emitters:
-            incoming += self.emitter_gather(e, geo)[:, None] * self.emission[e]
+            side = self.emitter_side(self.emitter_share[e])
+            incoming += self.emitter_gather(e, geo, side)[:, None] * self.emission[e]
             check()
         for light in self.lights:
             incoming += self.light_irradiance(light, geo) / np.pi

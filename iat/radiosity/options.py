@@ -42,7 +42,8 @@ COARSE_SIZE = (0.125, 0.25)
 FF_FAR = 4.0
 #: (receiver, shooter) form factors kept for the shooters' later shots on one mesh, a count (8 bytes each)
 FF_CACHE_ENTRIES = 12_000_000
-#: per-side multiple of ``samples`` for the direct pass from emitters (the direct light shapes the mesh)
+#: per-side multiple of ``samples`` for the direct pass from an emitter of all the emitted power (the
+#: direct light shapes the mesh); one of share s gets sqrt(s) of it, at least ``samples`` (samples by power)
 DIRECT_SAMPLE_FACTOR = 2
 #: per-side multiple of ``samples`` for the strongest shots (the first bounces make most indirect light)
 SHOT_SAMPLE_FACTOR = 2
@@ -110,9 +111,10 @@ class SolveOptions:
         shots for the last, faint bounces.
     samples : int 1..1024, default 16. Per receiver and shot: that many stratified
         points on the shooter's area and, for near receivers, as many cosine-distributed
-        directions (both rounded up to ``k*k``). The direct pass from emissive patches
-        uses ``(2k)**2``, as do the strongest shots of reflected light; fainter shots use
-        fewer (by the square root of their power), down to one. Shots rotate the pattern per
+        directions (both rounded up to ``k*k``). The direct pass from an emissive patch
+        uses ``(2k)**2`` times its share of the emitted power (at least ``k*k``), the strongest
+        shots of reflected light ``(2k)**2``; fainter shots use fewer (by the square root of
+        their power per side), down to one. Shots rotate the pattern per
         receiver (independent errors, which average out over the shots); the gathers that
         give the vertices new in stage C the light shot so far use one pattern for all
         receivers (errors smooth in space: new vertices do not stand out as speckle) and,

@@ -12,7 +12,7 @@ from iat.color import LUMINANCE_WEIGHTS
 from iat.errors import OptionError
 from iat.progress import Progress
 from iat.radiosity.checks import check_mesh, check_scene, validated_options
-from iat.radiosity.context import SolveCancelled, light_power, solver_albedo
+from iat.radiosity.context import SolveCancelled, emitter_shares, light_power, solver_albedo
 from iat.radiosity.options import RESOLVE_MAX_CHANGE, SolveOptions
 from iat.radiosity.run import SolveRun
 from iat.radiosity.solution import Solution
@@ -99,8 +99,15 @@ def resolve(
             n_changed = len(changed_patches) + len(added) + len(removed)
             run.report(0.0, f"resolving: direct light of {n_changed} changed sources")
             incoming = np.zeros((len(keys), 3))
-            for e in changed_patches:
-                incoming += ctx.emitter_gather(int(e), geo)[:, None] * diff[e]
+            old_share = emitter_shares(old_emission, area)
+            for e in changed_patches:  # the old light off and the new on, each sampled as solved
+                was, now = ctx.emitter_side(old_share[e]), ctx.emitter_side(ctx.emitter_share[e])
+                if was == now:
+                    incoming += ctx.emitter_gather(int(e), geo, now)[:, None] * diff[e]
+                else:
+                    for side, e_rad in ((now, emission[e]), (was, -old_emission[e])):
+                        if e_rad.any():
+                            incoming += ctx.emitter_gather(int(e), geo, side)[:, None] * e_rad
                 run.check()
             for sign, group in ((1.0, added), (-1.0, removed)):
                 for lt in group:
