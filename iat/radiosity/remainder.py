@@ -61,29 +61,31 @@ def ambient_term(ctx, mesh: dict, vis, scene, unshot: np.ndarray, gain: np.ndarr
     tri_patch, tri_uv = scene.world_triangle_patch()[opaque], scene.world_triangle_uv()[opaque]
     n_v, n_p = len(geo.key), ctx.n_patches
     first = np.zeros((n_v, 3))
-    rows, cols, counts = [], [], []
+    per_vertex, cols, counts = [], [], []  # (V, P) CSR by rows: the kernel writes them in vertex order
     for sl, o, w, k in hemisphere_rays(ctx, geo):
         tri, bary = vis.first_hits(o, w, np.full(len(o), 4.0 * ctx.scale))
         r, c, f = np.empty(len(o), np.int64), np.empty(len(o), np.int64), np.empty(len(o))
         m = ambient_hits(tri, bary, w, tri_patch, tri_uv, ctx.normal, flat, g, k, first[sl], r, c, f)
-        rows.append(r[:m] + sl.start)
-        cols.append(c[:m])
+        per_vertex.append(np.bincount(r[:m], minlength=sl.stop - sl.start))
+        cols.append(c[:m].astype(np.int32))
         counts.append(f[:m])
         check()
-    fv = sparse.csr_matrix(
-        (np.concatenate(counts), (np.concatenate(rows), np.concatenate(cols))), shape=(n_v, n_p)
-    )
+    indptr = np.concatenate([[0], np.cumsum(np.concatenate(per_vertex))])
+    fv = sparse.csr_matrix((np.concatenate(counts), np.concatenate(cols), indptr), shape=(n_v, n_p))
     r1 = rho * first
-    fp = (avg @ fv).tocsr()  # (P, P) the fraction of a patch's hemisphere each patch fills
     rho_p = np.minimum(np.asarray(ctx.albedo, dtype=np.float64), MAX_REFLECTANCE)
     src = np.asarray(avg @ r1)
+
+    def bounce(x):  # rho F x, F = M F_v (P, P) not formed: in a large building it holds every
+        return rho_p * np.asarray(avg @ np.asarray(fv @ x))  # pair of patches that see each other
+
     # B = rho F (R1 + B): its Neumann series, summed to a tolerance (rho F's norm < MAX_REFLECTANCE)
     later = np.zeros_like(src)
-    term = rho_p * np.asarray(fp @ src)
+    term = bounce(src)
     scale = max(float(np.abs(src).sum()), 1e-300)
     for _ in range(AMBIENT_MAX_BOUNCES):
         later += term
         if np.abs(term).sum() <= AMBIENT_BOUNCE_TOL * scale:
             break
-        term = rho_p * np.asarray(fp @ term)
+        term = bounce(term)
     return r1 + rho * np.asarray(fv @ (src + later))
