@@ -40,6 +40,7 @@ from iat.radiosity.sampling import (
     GAUSS_QUAD,
     GAUSS_TRI,
     Shooter,
+    disk_to_hemisphere,
     hash_uniform,
     luminance_of,
     pattern_side,
@@ -723,13 +724,8 @@ class Context:
         def block(idx: np.ndarray) -> np.ndarray:  # the irradiance at these vertices
             rot = hash_uniform(geo.key[idx], int(self.opts.seed) * 7919 + 29, 2)
             dx, dy = rotated_disk(pat, rot[:, :1], rot[:, 1:2])
-            dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
             t1, t2 = self.tangent[geo.patch[idx], 0], self.tangent[geo.patch[idx], 1]
-            w = (
-                dx[..., None] * t1[:, None]
-                + dy[..., None] * t2[:, None]
-                + dz[..., None] * geo.normal[idx][:, None]
-            )
+            w = disk_to_hemisphere(dx, dy, t1, t2, geo.normal[idx])
             free = self._escape(geo, idx, w)
             L = sky_radiance(self.sky, w.reshape(-1, 3)).reshape(len(idx), m * m, 3)
             return np.pi * np.einsum("ks,ksc->kc", free, L) / (m * m)

@@ -27,7 +27,7 @@ from iat.radiosity.options import (
     GATHER_BLOCK,
     MAX_REFLECTANCE,
 )
-from iat.radiosity.sampling import concentric_disk, pattern_side
+from iat.radiosity.sampling import concentric_disk, disk_to_hemisphere, pattern_side
 
 
 def hemisphere_rays(ctx, geo):
@@ -36,14 +36,12 @@ def hemisphere_rays(ctx, geo):
     at every vertex, and k."""
     m = pattern_side(AMBIENT_RAYS)
     pat = ctx.pattern(ctx.n_patches, m, 0)  # (a patch index no shooter has)
-    dx, dy = concentric_disk(pat[:, 0], pat[:, 1])
-    dx, dy = dx[None, :, None], dy[None, :, None]
-    dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
+    dx, dy = concentric_disk(pat[None, :, 0], pat[None, :, 1])
     k = pat.shape[0]
     for a in range(0, len(geo.key), GATHER_BLOCK):
         sl = slice(a, min(a + GATHER_BLOCK, len(geo.key)))
-        t1, t2, nz = ctx.tangent[geo.patch[sl], 0], ctx.tangent[geo.patch[sl], 1], geo.normal[sl]
-        w = (dx * t1[:, None] + dy * t2[:, None] + dz * nz[:, None]).reshape(-1, 3)
+        t1, t2 = ctx.tangent[geo.patch[sl], 0], ctx.tangent[geo.patch[sl], 1]
+        w = disk_to_hemisphere(dx, dy, t1, t2, geo.normal[sl]).reshape(-1, 3)
         yield sl, np.repeat(geo.origin[sl], k, axis=0), w, k
 
 

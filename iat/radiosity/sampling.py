@@ -48,6 +48,14 @@ GAUSS_TRI = (
 )
 
 
+def disk_to_hemisphere(dx, dy, t1, t2, normal) -> np.ndarray:
+    """(k, S, 3) directions: disc points ``dx, dy`` ((k, S), or (1, S) shared by all) lifted to the
+    hemisphere (Malley: cosine-distributed for uniform disc points) in the frames ``t1, t2, normal``
+    (k, 3) each."""
+    dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
+    return dx[..., None] * t1[:, None] + dy[..., None] * t2[:, None] + dz[..., None] * normal[:, None]
+
+
 def rotated_disk(pattern: np.ndarray, ru: np.ndarray, rv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`concentric_disk` of a stratified pattern (S, 2) in [0, 1)^2 shifted by ``ru``, ``rv``
     (k, 1) per row (Cranley-Patterson rotation, modulo 1): (k, S) disc points each."""

@@ -40,7 +40,7 @@ import numpy as np
 
 from iat.errors import LoadError
 from iat.io.scene import Sky
-from iat.radiosity.sampling import concentric_disk
+from iat.radiosity.sampling import concentric_disk, disk_to_hemisphere
 
 SKY_KINDS = ("uniform", "cie_overcast", "preetham", "hdr")
 #: file extensions :func:`load_hdr` reads (Radiance RGBE, OpenEXR, portable float map)
@@ -417,6 +417,4 @@ def cosine_directions(normals: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.n
     t, b = tangent_frame(normals)
     nrm = _unit(normals).reshape(-1, 3)
     dx, dy = concentric_disk(np.asarray(u, dtype=np.float64), np.asarray(v, dtype=np.float64))
-    dz = np.sqrt(np.maximum(1.0 - dx * dx - dy * dy, 0.0))
-    out = dx[..., None] * t[:, None, :] + dy[..., None] * b[:, None, :] + dz[..., None] * nrm[:, None, :]
-    return _unit(out)
+    return _unit(disk_to_hemisphere(dx, dy, t, b, nrm))
