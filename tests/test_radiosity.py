@@ -319,6 +319,24 @@ def test_deterministic():
     assert np.array_equal(a.vert_key, b.vert_key) and np.array_equal(a.vert_radiance, b.vert_radiance)
 
 
+def test_the_same_light_on_one_thread_or_two(monkeypatch):
+    """Shots run two at a time (``SHOT_GROUP``) and gathers on the threads; the result does
+    not depend on the thread count, bit for bit, and the groups do form."""
+    from iat.radiosity.run import SolveRun
+    from iat.radiosity.visibility import RAY_THREADS_ENV
+
+    groups = []
+    group = SolveRun.shot_group
+    monkeypatch.setattr(SolveRun, "shot_group", lambda self, *a: groups.append(group(self, *a)) or groups[-1])
+    out = []
+    for threads in ("1", "2"):
+        monkeypatch.setenv(RAY_THREADS_ENV, threads)
+        out.append(solve(lit_box(), SolveOptions(max_depth=2, convergence=0.01)))
+    a, b = out
+    assert np.array_equal(a.vert_key, b.vert_key) and np.array_equal(a.vert_radiance, b.vert_radiance)
+    assert max(len(g) for g in groups) == 2 and a.stats["shots"] > 20
+
+
 # -- contracts: options, progress, cancel, files --------------------------------------------
 @pytest.mark.parametrize(
     "kw, word",

@@ -345,6 +345,14 @@ class Context:
             ok = ~hidden if ok is None else ok & ~hidden
         return ok
 
+    def receiver_patches(self, s: int, cull: bool = False, patches: np.ndarray | None = None) -> np.ndarray:
+        """(P,) bool patches whose vertices a :meth:`gather` from s with these ``cull`` and
+        ``patches`` may reach (in front of s and allowed): a gather to vertices on none of them
+        returns zeros."""
+        full, part = self.candidates(s)
+        ok = self.allowed(s, cull, patches)
+        return (full | part) if ok is None else (full | part) & ok
+
     def receivers(self, s: int, geo: ReceiverGeometry, allowed: np.ndarray | None = None) -> np.ndarray:
         """Sorted indices into ``geo`` of vertices that can receive from patch s (front side,
         other patch, on an ``allowed`` patch)."""

@@ -49,6 +49,11 @@ DIRECT_SAMPLE_FACTOR = 2
 SHOT_SAMPLE_FACTOR = 2
 #: emitted-power share from which a shot gets all of those; share s gets sqrt(s / this) (samples by power)
 SHOT_FULL_SHARE = 0.05
+#: shooters whose shots run at once: the strongest and up to this many - 1 more (a count; not the
+#: thread count, so that results do not depend on it) ...
+SHOT_GROUP = 2
+#: ... that have at least this fraction of its unshot power (weaker ones wait for its light)
+SHOT_GROUP_RATIO = 0.5
 #: per-side multiple of ``samples`` for stage C's gathers at new vertices (one pattern: its error is common)
 REFINE_SAMPLE_FACTOR = 2
 #: a patch's shot gain (probe-integrated / interpolated power) kept in [1/(1+this), 1+this] (concave light)

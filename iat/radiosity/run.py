@@ -31,6 +31,8 @@ from iat.radiosity.options import (
     PEAK_SAMPLE_LIMIT,
     REFINE_SAMPLE_FACTOR,
     SHOT_FULL_SHARE,
+    SHOT_GROUP,
+    SHOT_GROUP_RATIO,
     SHOT_SAMPLE_FACTOR,
     SolveOptions,
 )
@@ -251,7 +253,8 @@ class SolveRun:
         return np.pi * luminance_of(m_abs) * self.ctx.area
 
     def shoot(self, span, target: float) -> None:
-        """Shoot until the unshot power is below ``target`` or max_shots."""
+        """Shoot until the unshot power is below ``target`` or max_shots, a :meth:`shot_group`
+        at a time."""
         ctx, mesh, opts = self.ctx, self.mesh, self.opts
         if self.power_ref <= 0 or len(self.keys) == 0:
             return
@@ -277,37 +280,58 @@ class SolveRun:
                     f"shooting: {self.shots} shots, unshot {total / self.power_ref:.3g} of received"
                 )
                 self.check()
-                s = int(np.argmax(power))
-                a, b = mesh["start"][s], mesh["start"][s + 1]
-                field = mesh["lattice"].grid(s, self.unshot) * self.gain[s]
-                field_mean = rows_product(*csr, self.unshot, np.array([s]), False)[0] * self.gain[s]
-                # fewer samples for faint shots: their noise matters less (sqrt keeps power / m flat-ish);
-                # more for a concentrated field (a sunlit patch on a floor), whose points must land in it
-                m_hi = SHOT_SAMPLE_FACTOR * self.m_side
-                share = float(power[s]) / (SHOT_FULL_SHARE * self.power_ref)
-                m = max(1, min(m_hi, round(m_hi * math.sqrt(share))))
-                m = round(m * peak_factor(field, PEAK_RATIO, PEAK_SAMPLE_LIMIT))
-                rows, dv = self.shot_gather(s, m, field, field_mean)
-                self.shot_index[s] += 1
-                self.shot_power[s] += float(power[s])
-                self.shots += 1
-                self.unshot[a:b] = 0.0
-                add_at_rows(self.reflected, rows, dv)
-                add_at_rows(self.unshot, rows, dv)
-                # the rows of M @ dv and M @ |unshot| that changed: the patches it reached, and s
-                reached[vpatch[rows]] = True
-                reached[s] = True
-                touched = np.flatnonzero(reached)
-                reached[touched] = False
-                m_abs[touched] = rows_product(*csr, self.unshot, touched, True)
-                add_at_rows(dv_full, rows, dv)
-                m_dv = np.zeros((self.P, 3))
-                m_dv[touched] = rows_product(*csr, dv_full, touched, False)
-                add_at_rows(dv_full, rows, -dv)  # back to exact zeros (0 + dv - dv)
-                received = np.pi * (ctx.area[:, None] * m_dv).sum(axis=0)
-                self.shot_log.append((np.pi * ctx.area[s] * field_mean, received))
+                group = self.shot_group(power, opts.max_shots - self.shots)
+                jobs = []
+                for s in group:  # each shooter's field and samples, before any of the group shoots
+                    field = mesh["lattice"].grid(s, self.unshot) * self.gain[s]
+                    field_mean = rows_product(*csr, self.unshot, np.array([s]), False)[0] * self.gain[s]
+                    # fewer samples for faint shots: their noise matters less (sqrt keeps power / m
+                    # flat-ish); more for a concentrated field (a sunlit patch on a floor), whose
+                    # points must land in it
+                    m_hi = SHOT_SAMPLE_FACTOR * self.m_side
+                    share = float(power[s]) / (SHOT_FULL_SHARE * self.power_ref)
+                    m = max(1, min(m_hi, round(m_hi * math.sqrt(share))))
+                    m = round(m * peak_factor(field, PEAK_RATIO, PEAK_SAMPLE_LIMIT))
+                    jobs.append((s, m, field, field_mean))
+                shots = list(ctx.imap(lambda job: self.shot_gather(*job), jobs, self.check))
+                for s in group:  # (the light one shooter of the group sends another stays unshot there)
+                    self.unshot[mesh["start"][s] : mesh["start"][s + 1]] = 0.0
+                for (s, _, _, field_mean), (rows, dv, acc) in zip(jobs, shots, strict=True):
+                    for k, ci, got in acc:
+                        add_at_rows(self.coarse[k]["acc"], ci, got)
+                    self.shot_index[s] += 1
+                    self.shot_power[s] += float(power[s])
+                    self.shots += 1
+                    add_at_rows(self.reflected, rows, dv)
+                    add_at_rows(self.unshot, rows, dv)
+                    # the rows of M @ dv and M @ |unshot| that changed: the patches it reached, and s
+                    reached[vpatch[rows]] = True
+                    reached[s] = True
+                    touched = np.flatnonzero(reached)
+                    reached[touched] = False
+                    m_abs[touched] = rows_product(*csr, self.unshot, touched, True)
+                    add_at_rows(dv_full, rows, dv)
+                    m_dv = np.zeros((self.P, 3))
+                    m_dv[touched] = rows_product(*csr, dv_full, touched, False)
+                    add_at_rows(dv_full, rows, -dv)  # back to exact zeros (0 + dv - dv)
+                    received = np.pi * (ctx.area[:, None] * m_dv).sum(axis=0)
+                    self.shot_log.append((np.pi * ctx.area[s] * field_mean, received))
         finally:
             self.timings["shooting_s"] += time.perf_counter() - t0
+
+    def shot_group(self, power: np.ndarray, left: int) -> list[int]:
+        """The patches that shoot next, at once (their gathers share the threads, and each one's
+        Python runs while the other's kernels and rays do): the one with the most unshot power
+        (P,), then up to ``SHOT_GROUP - 1`` more with at least ``SHOT_GROUP_RATIO`` of its power;
+        at most ``left``."""
+        first = int(np.argmax(power))
+        k = min(SHOT_GROUP, left, len(power))
+        if k <= 1:
+            return [first]
+        top = np.argpartition(-power, k - 1)[:k] if k < len(power) else np.arange(len(power))
+        top = top[np.lexsort((top, -power[top]))]  # by power, then index (as argmax on ties)
+        rest = [int(s) for s in top if s != first][: k - 1]
+        return [first, *(s for s in rest if power[s] >= SHOT_GROUP_RATIO * power[first])]
 
     def receiver_levels(self, s: int, field_mean: np.ndarray) -> np.ndarray:
         """(P,) int8 receiver level of each patch for the shots of s: -1 at every vertex, k on
@@ -352,11 +376,11 @@ class SolveRun:
         levels = [k for k in range(len(self.coarse or [])) if (lvl == k).any()]
         parts = [(mesh["geo"], lvl < 0)] + [(self.coarse[k]["geo"], lvl == k) for k in levels]
         (idx, g), *got = ctx.gathers(s, parts, m, shot, field, field_mean, correlated=False, cull=True)
-        rows, dv = [idx], [mesh["rho"][idx] * g]
+        rows, dv, acc = [idx], [mesh["rho"][idx] * g], []
         for k, (ci, g) in zip(levels, got, strict=True):
             c, w = self.coarse[k], mesh["coarse_w"][k]
             got_c = c["rho"][ci] * g
-            add_at_rows(c["acc"], ci, got_c)
+            acc.append((k, ci, got_c))
             gc = np.zeros_like(c["acc"])  # dense: the interpolation weights index grid points
             gc[ci] = got_c
             # the vertices of the patches at this level whose grid received take what it received
@@ -365,7 +389,7 @@ class SolveRun:
             got_any[c["geo"].patch[ci]] = True
             rows.append(ranges_of(mesh["start"], np.flatnonzero(got_any & (lvl == k))))
             dv.append(rows_product(w.indptr, w.indices, w.data, gc, rows[-1], False))
-        return np.concatenate(rows), np.concatenate(dv)
+        return np.concatenate(rows), np.concatenate(dv), acc
 
     def refine_total(self, label: str, span) -> None:
         """Stage C: refine on the total radiance. New vertices get their direct light and a
@@ -411,11 +435,11 @@ class SolveRun:
                 for level, c in enumerate(self.coarse or []):
                     out += coarse_weights(new, c["keys"], ctx.is_quad, level, ctx.n) @ c["acc"]
                 # and a gather of what each source shot at the vertices of these patches
-                calls = []
+                calls = []  # the sources that can reach these vertices (most reach none of a few)
                 for p in sources:
                     p = int(p)
                     fine = self.levels[p] < 0 if p in self.levels else None
-                    if fine is None or (fine & on).any():
+                    if (ctx.receiver_patches(p, True, fine) & on).any():
                         calls.append((p, fine))
 
                 def gather(call):

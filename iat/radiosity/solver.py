@@ -29,8 +29,11 @@ B. **Progressive refinement on the settled mesh.** Each vertex's unshot radiance
    element left coarse under concave light, which interpolates below it, does not take that
    light out of the indirect light (:func:`.meshing.probe_shot_gain`; 1 where point lights shine and
    on a given mesh). The patch with the most unshot power (pi x area x
-   area-weighted mean of |unshot|, from a sparse (P, V) averaging matrix) shoots: every
-   vertex in front of it receives ``rho * <F * vis * L>`` -- the analytic
+   area-weighted mean of |unshot|, from a sparse (P, V) averaging matrix) shoots, together
+   with the next (``SHOT_GROUP``) if it has at least ``SHOT_GROUP_RATIO`` of that power: their
+   gathers run at once on the two threads, so that one shot's Python runs while the other's
+   kernels and rays do (what one sends the other stays unshot there, shot later). Every
+   vertex in front of a shooter receives ``rho * <F * vis * L>`` -- the analytic
    point-to-polygon form factor (:mod:`.formfactor`, cached per shooter for its later
    shots) times the visible fraction and the shooter's radiance, estimated from
    stratified samples on the shooter's area and, for near receivers, cosine-distributed
