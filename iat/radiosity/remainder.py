@@ -1,16 +1,20 @@
 """The ambient term (stage D of :mod:`iat.radiosity.solver`): what the light still unshot at
-convergence adds over all its later bounces, by one final gather of it.
+convergence adds over all its later bounces, by a final gather of it.
 
 Every vertex casts ``AMBIENT_RAYS`` cosine-distributed rays (one stratified pattern for all, so
 the result varies smoothly) and takes, where each first meets a front face, the unshot radiance
 there (the patch's field on its ``AMBIENT_GRID`` x ``AMBIENT_GRID`` lattice, times its shot gain):
-their mean times the vertex's albedo is the remainder's first bounce, at the resolution of the
-unshot light (a sunlit patch of floor lights what faces it, not its whole room). The bounces after
-are solved on the patches: the same rays, averaged over each patch, give a sampled patch-to-patch
-form-factor matrix ``F`` (P, P); the later reflected radiance ``B`` (P, 3) solves
-``B = rho F (R1 + B)`` (``R1`` the first bounce's patch means), and each vertex adds
-``rho (F_v (R1 + B))``. Rays that leave the scene or meet a back face bring nothing, so an open
-scene's remainder escapes as it would.
+their mean times the vertex's albedo is the remainder's first bounce ``R1``, at the resolution of
+the unshot light (a sunlit patch of floor lights what faces it, not its whole room). The same rays,
+traced again, read ``R1`` where they land for the second bounce ``R2`` (a patch's light is uneven:
+the Cornell box's walls are one patch each), except on panel cells (clipped patches), which give
+their patch mean: their lattice square reaches past their surface, and their vertex field read
+there put the sunlit IFC house's interior at 0.84 of Mitsuba instead of 0.92. The bounces after
+are solved on the patches: the rays, averaged over each patch, give a sampled patch-to-patch
+form-factor matrix ``F = M F_v`` (P, P); the later reflected radiance ``B`` (P, 3) solves
+``B = rho F (R2 + B)`` (``R2`` as patch means), and each vertex adds ``rho F_v (R2 + B)``. Rays
+that leave the scene or meet a back face bring nothing, so an open scene's remainder escapes as
+it would.
 """
 
 from __future__ import annotations
@@ -45,6 +49,33 @@ def hemisphere_rays(ctx, geo):
         yield sl, np.repeat(geo.origin[sl], k, axis=0), w, k
 
 
+def hemisphere_gather(ctx, geo, vis, scene, grids: np.ndarray, check, tally: bool):
+    """(V, 3) each vertex's mean, over its :func:`hemisphere_rays`, of the radiance ``grids``
+    ((P, g+1, g+1, 3): each patch's field on a g x g lattice) where they meet a front face, and,
+    when ``tally``, the (V, P) CSR fraction of each vertex's rays that meet each patch (else None).
+    geo : the vertices' :class:`~iat.radiosity.context.ReceiverGeometry`."""
+    g = grids.shape[1] - 1
+    flat = np.ascontiguousarray(grids.reshape(-1, 3))
+    opaque = vis.opaque
+    tri_patch, tri_uv = scene.world_triangle_patch()[opaque], scene.world_triangle_uv()[opaque]
+    mean = np.zeros((len(geo.key), 3))
+    per_vertex, cols, counts = [], [], []  # (V, P) CSR by rows: the kernel writes them in vertex order
+    for sl, o, w, k in hemisphere_rays(ctx, geo):
+        tri, bary = vis.first_hits(o, w, np.full(len(o), 4.0 * ctx.scale))
+        r, c, f = np.empty(len(o), np.int64), np.empty(len(o), np.int64), np.empty(len(o))
+        m = ambient_hits(tri, bary, w, tri_patch, tri_uv, ctx.normal, flat, g, k, mean[sl], r, c, f)
+        if tally:
+            per_vertex.append(np.bincount(r[:m], minlength=sl.stop - sl.start))
+            cols.append(c[:m].astype(np.int32))
+            counts.append(f[:m])
+        check()
+    if not tally:
+        return mean, None
+    indptr = np.concatenate([[0], np.cumsum(np.concatenate(per_vertex))])
+    shape = (len(geo.key), ctx.n_patches)
+    return mean, sparse.csr_matrix((np.concatenate(counts), np.concatenate(cols), indptr), shape=shape)
+
+
 def ambient_term(ctx, mesh: dict, vis, scene, unshot: np.ndarray, gain: np.ndarray, check) -> np.ndarray:
     """(V, 3) the reflected radiance the unshot light adds over all its later bounces (see the
     module docstring).
@@ -54,30 +85,20 @@ def ambient_term(ctx, mesh: dict, vis, scene, unshot: np.ndarray, gain: np.ndarr
     unshot : (V, 3) unshot radiance; gain : (P,) each patch's shot gain."""
     geo, avg, rho, lattice = mesh["geo"], mesh["M"], mesh["rho"], mesh["lattice"]
     g = min(AMBIENT_GRID, ctx.n)
-    flat = (lattice.coarse_grids(unshot, g) * gain[:, None, None, None]).reshape(-1, 3)
-    opaque = vis.opaque
-    tri_patch, tri_uv = scene.world_triangle_patch()[opaque], scene.world_triangle_uv()[opaque]
-    n_v, n_p = len(geo.key), ctx.n_patches
-    first = np.zeros((n_v, 3))
-    per_vertex, cols, counts = [], [], []  # (V, P) CSR by rows: the kernel writes them in vertex order
-    for sl, o, w, k in hemisphere_rays(ctx, geo):
-        tri, bary = vis.first_hits(o, w, np.full(len(o), 4.0 * ctx.scale))
-        r, c, f = np.empty(len(o), np.int64), np.empty(len(o), np.int64), np.empty(len(o))
-        m = ambient_hits(tri, bary, w, tri_patch, tri_uv, ctx.normal, flat, g, k, first[sl], r, c, f)
-        per_vertex.append(np.bincount(r[:m], minlength=sl.stop - sl.start))
-        cols.append(c[:m].astype(np.int32))
-        counts.append(f[:m])
-        check()
-    indptr = np.concatenate([[0], np.cumsum(np.concatenate(per_vertex))])
-    fv = sparse.csr_matrix((np.concatenate(counts), np.concatenate(cols), indptr), shape=(n_v, n_p))
+    grids = lattice.coarse_grids(unshot, g) * gain[:, None, None, None]
+    first, fv = hemisphere_gather(ctx, geo, vis, scene, grids, check, True)
     r1 = rho * first
+    grids = lattice.coarse_grids(r1, g)
+    grids[ctx.clipped] = np.asarray(avg @ r1)[ctx.clipped][:, None, None, :]
+    second, _ = hemisphere_gather(ctx, geo, vis, scene, grids, check, False)  # the same rays again
+    r2 = rho * second
     rho_p = np.minimum(np.asarray(ctx.albedo, dtype=np.float64), MAX_REFLECTANCE)
-    src = np.asarray(avg @ r1)
+    src = np.asarray(avg @ r2)
 
     def bounce(x):  # rho F x, F = M F_v (P, P) not formed: in a large building it holds every
         return rho_p * np.asarray(avg @ np.asarray(fv @ x))  # pair of patches that see each other
 
-    # B = rho F (R1 + B): its Neumann series, summed to a tolerance (rho F's norm < MAX_REFLECTANCE)
+    # B = rho F (R2 + B): its Neumann series, summed to a tolerance (rho F's norm < MAX_REFLECTANCE)
     later = np.zeros_like(src)
     term = bounce(src)
     scale = max(float(np.abs(src).sum()), 1e-300)
@@ -86,4 +107,4 @@ def ambient_term(ctx, mesh: dict, vis, scene, unshot: np.ndarray, gain: np.ndarr
         if np.abs(term).sum() <= AMBIENT_BOUNCE_TOL * scale:
             break
         term = bounce(term)
-    return r1 + rho * np.asarray(fv @ (src + later))
+    return r1 + r2 + rho * np.asarray(fv @ (src + later))

@@ -69,12 +69,14 @@ D. **Ambient term** (``ambient``; after Cohen et al. 1988, as a final gather): t
    varies smoothly) and reads the unshot radiance where each first meets a front face (the
    patch's field on an ``AMBIENT_GRID`` lattice, times its shot gain): their mean times its
    albedo is the remainder's first bounce, where it falls (a sunlit building's interior gets
-   its own sunlit floor's light, not a share spread over the exterior). The same rays, averaged
-   over each patch, are a sampled patch-to-patch form-factor matrix on which the bounces after
-   are summed (a Neumann series, albedo capped at ``MAX_REFLECTANCE``); rays that leave the
-   scene bring nothing, so an open scene's remainder escapes as it would. In the house,
-   stopping at 5 % is 1.8 % from the reference solve with it (2.2 % with the uniform term it
-   replaced), at 20 % 2.2 %; the furnace after a single shot is exact within 1 %.
+   its own sunlit floor's light, not a share spread over the exterior). The same rays, traced
+   again, read that first bounce where they land for the second (a panel cell gives its patch
+   mean). The rays, averaged over each patch, are a sampled patch-to-patch form-factor matrix
+   on which the bounces after are summed (a Neumann series, albedo capped at
+   ``MAX_REFLECTANCE``); rays that leave the scene bring nothing, so an open scene's remainder
+   escapes as it would. In the house, stopping at 5 % is 1.8 % from the reference solve with it
+   (2.2 % with the uniform term it replaced), at 20 % 2.0 %; the furnace after a single shot is
+   exact within 1 %.
 
 Because every vertex, early or late, receives every shot, the final values are
 unbiased with respect to the mesh: no late vertex misses early shots, the trap
