@@ -364,11 +364,13 @@ class SolveRun:
 
     def shot_gather(
         self, s: int, m: int, field: np.ndarray, field_mean: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """The reflected radiance one shot from s adds, ``(rows, dv)``: the vertices it reaches
-        (k,) (distinct) and what each gets (k, 3) (nothing at the others): gathered at the
-        vertices of the patches it lights noticeably, interpolated from coarse grids on the
-        others (whose gathered values are kept, per grid point, in the grids' ``acc``)."""
+    ) -> tuple[np.ndarray, np.ndarray, list]:
+        """The reflected radiance one shot from s adds, ``(rows, dv, acc)``: the vertices it
+        reaches (k,) (distinct) and what each gets (k, 3) (nothing at the others): gathered at
+        the vertices of the patches it lights noticeably, interpolated from coarse grids on the
+        others; ``acc`` lists per coarse level ``(level, points, values)`` what its grid points
+        received, which the caller adds to the grids' ``acc`` (a shot reads no state that
+        another shot of its group writes)."""
         ctx, mesh = self.ctx, self.mesh
         shot = int(self.shot_index[s])
         lvl = self.receiver_levels(s, field_mean)
