@@ -49,15 +49,14 @@ def hemisphere_rays(ctx, geo):
         yield sl, np.repeat(geo.origin[sl], k, axis=0), w, k
 
 
-def hemisphere_gather(ctx, geo, vis, scene, grids: np.ndarray, check, tally: bool):
+def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, check, tally: bool):
     """(V, 3) each vertex's mean, over its :func:`hemisphere_rays`, of the radiance ``grids``
     ((P, g+1, g+1, 3): each patch's field on a g x g lattice) where they meet a front face, and,
     when ``tally``, the (V, P) CSR fraction of each vertex's rays that meet each patch (else None).
-    geo : the vertices' :class:`~iat.radiosity.context.ReceiverGeometry`."""
+    geo : the vertices' :class:`~iat.radiosity.context.ReceiverGeometry`; tri_patch (T,), tri_uv
+    (T, 3, 2): the patch and lattice (u, v) of each of ``vis``'s opaque triangles."""
     g = grids.shape[1] - 1
     flat = np.ascontiguousarray(grids.reshape(-1, 3))
-    opaque = vis.opaque
-    tri_patch, tri_uv = scene.world_triangle_patch()[opaque], scene.world_triangle_uv()[opaque]
     mean = np.zeros((len(geo.key), 3))
     per_vertex, cols, counts = [], [], []  # (V, P) CSR by rows: the kernel writes them in vertex order
     for sl, o, w, k in hemisphere_rays(ctx, geo):
@@ -85,12 +84,13 @@ def ambient_term(ctx, mesh: dict, vis, scene, unshot: np.ndarray, gain: np.ndarr
     unshot : (V, 3) unshot radiance; gain : (P,) each patch's shot gain."""
     geo, avg, rho, lattice = mesh["geo"], mesh["M"], mesh["rho"], mesh["lattice"]
     g = min(AMBIENT_GRID, ctx.n)
+    tris = scene.world_triangle_patch()[vis.opaque], scene.world_triangle_uv()[vis.opaque]
     grids = lattice.coarse_grids(unshot, g) * gain[:, None, None, None]
-    first, fv = hemisphere_gather(ctx, geo, vis, scene, grids, check, True)
+    first, fv = hemisphere_gather(ctx, geo, vis, *tris, grids, check, True)
     r1 = rho * first
     grids = lattice.coarse_grids(r1, g)
     grids[ctx.clipped] = np.asarray(avg @ r1)[ctx.clipped][:, None, None, :]
-    second, _ = hemisphere_gather(ctx, geo, vis, scene, grids, check, False)  # the same rays again
+    second, _ = hemisphere_gather(ctx, geo, vis, *tris, grids, check, False)  # the same rays again
     r2 = rho * second
     rho_p = np.minimum(np.asarray(ctx.albedo, dtype=np.float64), MAX_REFLECTANCE)
     src = np.asarray(avg @ r2)
