@@ -285,13 +285,7 @@ class SolveRun:
                 for s in group:  # each shooter's field and samples, before any of the group shoots
                     field = mesh["lattice"].grid(s, self.unshot) * self.gain[s]
                     field_mean = rows_product(*csr, self.unshot, np.array([s]), False)[0] * self.gain[s]
-                    # fewer samples for faint shots: their noise matters less (sqrt keeps power / m
-                    # flat-ish); more for a concentrated field (a sunlit patch on a floor), whose
-                    # points must land in it
-                    m_hi = SHOT_SAMPLE_FACTOR * self.m_side
-                    share = float(power[s]) / (SHOT_FULL_SHARE * self.power_ref)
-                    m = max(1, min(m_hi, round(m_hi * math.sqrt(share))))
-                    m = round(m * peak_factor(field, PEAK_RATIO, PEAK_SAMPLE_LIMIT))
+                    m = self.samples_by_power(SHOT_SAMPLE_FACTOR * self.m_side, float(power[s]), field)
                     jobs.append((s, m, field, field_mean))
                 shots = list(ctx.imap(lambda job: self.shot_gather(*job), jobs, self.check))
                 for s in group:  # (the light one shooter of the group sends another stays unshot there)
@@ -318,6 +312,15 @@ class SolveRun:
                     self.shot_log.append((np.pi * ctx.area[s] * field_mean, received))
         finally:
             self.timings["shooting_s"] += time.perf_counter() - t0
+
+    def samples_by_power(self, m_hi: int, power: float, field: np.ndarray) -> int:
+        """Samples per side of a gather of a shooter's ``field`` ((N+1, N+1, 3) lattice radiance)
+        of luminance ``power``: ``m_hi`` x sqrt(power / (``SHOT_FULL_SHARE`` x the received
+        power)), 1 to ``m_hi`` (a faint shot's noise matters less), times :func:`peak_factor` (a
+        concentrated field, a sunlit patch on a floor, needs its points to land in it)."""
+        share = power / max(SHOT_FULL_SHARE * self.power_ref, 1e-300)
+        m = max(1, min(m_hi, round(m_hi * math.sqrt(share))))
+        return round(m * peak_factor(field, PEAK_RATIO, PEAK_SAMPLE_LIMIT))
 
     def shot_group(self, power: np.ndarray, left: int) -> list[int]:
         """The patches that shoot next, at once (their gathers share the threads, and each one's
@@ -409,18 +412,11 @@ class SolveRun:
         grids = {int(p): lattice_b.grid(int(p), shot_field) * self.gain[p] for p in sources}
         means = (mesh["M"] @ shot_field) * self.gain[:, None]
         total_cache = VertexCache(keys, self.reflected.copy())
-        # samples per source by the share of the power it has shot (as the shots themselves), but
+        # samples per source by the power it has shot (as the shots themselves), but
         # REFINE_SAMPLE_FACTOR x more per side: one pattern serves all new vertices, so its error
         # is a coherent offset of them all, which the shots' per-vertex patterns average out
-        ref = max(SHOT_FULL_SHARE * self.power_ref, 1e-300)
         m_ref = REFINE_SAMPLE_FACTOR * self.m_side
-        m_src = {
-            int(p): round(
-                max(1, min(m_ref, round(m_ref * math.sqrt(self.shot_power[p] / ref))))
-                * peak_factor(grids[int(p)], PEAK_RATIO, PEAK_SAMPLE_LIMIT)
-            )
-            for p in sources
-        }
+        m_src = {int(p): self.samples_by_power(m_ref, self.shot_power[p], grids[int(p)]) for p in sources}
         n_pass = self.stats["refine_passes"]
 
         def evaluate_total(new: np.ndarray) -> np.ndarray:
