@@ -27,6 +27,7 @@ from iat.radiosity.options import (
     GATHER_BLOCK,
     MAX_ELEMENT_FRACTION,
     MIN_ELEMENT_FRACTION,
+    PATTERN_CACHE_POINTS,
     RAY_EPS,
     RAY_EPS_PATCH,
     SHOOTER_COVERAGE,
@@ -172,6 +173,7 @@ class Context:
         self._valid_corner = np.arange(4)[None, :] < self.n_corners[:, None]
         self._shooters: dict[int, Shooter] = {}
         self._patterns: dict[tuple[int, int, int], np.ndarray] = {}
+        self._pattern_points = 0  # (u, v) pairs in _patterns
         self._buffers = threading.local()  # per thread: the gathers' scratch (:meth:`_scratch`)
         self._lock = threading.Lock()  # form-factor caches and cull counts, shared by gather threads
         self._cand: dict[int, tuple[np.ndarray, np.ndarray]] = {}
@@ -244,13 +246,16 @@ class Context:
         """(m*m, 2) stratified jittered (u, v) in [0, 1)^2 for patch s (fixed per seed, patch, shot)."""
         key = (int(s), int(m), int(shot))
         pat = self._patterns.get(key)
-        if pat is None:  # a shot gathers at the mesh and at coarse grids: made once
-            if len(self._patterns) >= 64:
-                self._patterns.clear()
+        if pat is None:  # stage C's passes gather from every source with the same pattern
             rng = np.random.default_rng([self.opts.seed, int(s), int(shot), int(m)])
             a, b = np.meshgrid(np.arange(m), np.arange(m), indexing="ij")
             pat = np.stack([(a.ravel() + rng.random(m * m)) / m, (b.ravel() + rng.random(m * m)) / m], axis=1)
-            self._patterns[key] = pat
+            with self._lock:
+                if self._pattern_points + m * m > PATTERN_CACHE_POINTS:
+                    self._patterns.clear()
+                    self._pattern_points = 0
+                self._patterns[key] = pat
+                self._pattern_points += m * m
         return pat
 
     def shooter(self, s: int) -> Shooter:

@@ -461,6 +461,40 @@ def add_at_rows(out, rows, vals):
         out[r, 2] += vals[i, 2]
 
 
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def leaf_fields(out, leaves, level, li, lj, flip, is_quad, corner, values):
+    """One patch's field on its lattice, ``out`` (N+1, N+1, 3) (N = its first dimension - 1): per
+    leaf in ``leaves`` (in order, so that a finer leaf listed later writes the points it shares
+    with a coarser one), its lattice points interpolated from its corners' ``values`` (V, 3)
+    (``corner`` (L, 4) their rows): bilinear on a quad patch, linear on the leaf's half of its
+    square on a triangle (``flip``: the half with the far corner). level, li, lj (L,): each
+    leaf's level and lattice position."""
+    n = out.shape[0] - 1
+    for t in range(leaves.shape[0]):
+        q = leaves[t]
+        s = n >> level[q]
+        c0, c1, c2, c3 = corner[q, 0], corner[q, 1], corner[q, 2], corner[q, 3]
+        for a in range(s + 1):
+            x = a / s
+            for b in range(s + 1):
+                y = b / s
+                if is_quad:
+                    w0, w1, w2, w3 = (1 - x) * (1 - y), x * (1 - y), x * y, (1 - x) * y
+                elif not flip[q]:
+                    if a + b > s:
+                        continue
+                    w0, w1, w2, w3 = 1 - x - y, x, y, 0 * x
+                else:
+                    if a + b < s:
+                        continue
+                    w0, w1, w2, w3 = x + y - 1, 1 - x, 1 - y, 0 * x
+                for k in range(3):
+                    out[li[q] + a, lj[q] + b, k] = (
+                        w0 * values[c0, k] + w1 * values[c1, k] + w2 * values[c2, k] + w3 * values[c3, k]
+                    )
+
+
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)

@@ -42,6 +42,8 @@ COARSE_SIZE = (0.125, 0.25)
 FF_FAR = 4.0
 #: (receiver, shooter) form factors kept for the shooters' later shots on one mesh, a count (8 bytes each)
 FF_CACHE_ENTRIES = 12_000_000
+#: sample patterns kept for reuse (stage C gathers every source with one pattern per pass), in (u, v) pairs
+PATTERN_CACHE_POINTS = 1_000_000
 #: per-side multiple of ``samples`` for the direct pass from an emitter of all the emitted power (the
 #: direct light shapes the mesh); one of share s gets sqrt(s) of it, at least ``samples`` (samples by power)
 DIRECT_SAMPLE_FACTOR = 2

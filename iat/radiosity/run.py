@@ -263,10 +263,10 @@ class SolveRun:
         span_log = math.log(u_start / target) if u_start > target > 0 else 1.0  # progress on a log scale
         avg, vpatch = mesh["M"], mesh["geo"].patch
         csr = (avg.indptr, avg.indices, avg.data)
-        # M @ |unshot| (P, 3) (what :meth:`patch_power` weighs), kept up to date by the shots' rows;
-        # a shot's dv (V, 3) is zero but at its rows: scattered into `dv_full` for M @ dv, then cleared
+        # M @ |unshot| (P, 3) (what :meth:`patch_power` weighs), kept up to date by the shots' rows
         m_abs = avg @ np.abs(self.unshot)
-        dv_full = np.zeros_like(self.unshot)
+        # (V,) what a unit of reflected radiance at a vertex is in power: pi M^T area
+        vertex_power = np.pi * (avg.T @ ctx.area)
         reached = np.zeros(self.P, dtype=bool)
         try:
             while self.shots < opts.max_shots:
@@ -281,16 +281,11 @@ class SolveRun:
                 )
                 self.check()
                 group = self.shot_group(power, opts.max_shots - self.shots)
-                jobs = []
-                for s in group:  # each shooter's field and samples, before any of the group shoots
-                    field = mesh["lattice"].grid(s, self.unshot) * self.gain[s]
-                    field_mean = rows_product(*csr, self.unshot, np.array([s]), False)[0] * self.gain[s]
-                    m = self.samples_by_power(SHOT_SAMPLE_FACTOR * self.m_side, float(power[s]), field)
-                    jobs.append((s, m, field, field_mean))
+                jobs = [(s, float(power[s])) for s in group]  # each shot's field is taken in its task
                 shots = list(ctx.imap(lambda job: self.shot_gather(*job), jobs, self.check))
                 for s in group:  # (the light one shooter of the group sends another stays unshot there)
                     self.unshot[mesh["start"][s] : mesh["start"][s + 1]] = 0.0
-                for (s, _, _, field_mean), (rows, dv, acc) in zip(jobs, shots, strict=True):
+                for s, (rows, dv, acc, field_mean) in zip(group, shots, strict=True):
                     for k, ci, got in acc:
                         add_at_rows(self.coarse[k]["acc"], ci, got)
                     self.shot_index[s] += 1
@@ -298,17 +293,13 @@ class SolveRun:
                     self.shots += 1
                     add_at_rows(self.reflected, rows, dv)
                     add_at_rows(self.unshot, rows, dv)
-                    # the rows of M @ dv and M @ |unshot| that changed: the patches it reached, and s
+                    # the rows of M @ |unshot| that changed: the patches it reached, and s
                     reached[vpatch[rows]] = True
                     reached[s] = True
                     touched = np.flatnonzero(reached)
                     reached[touched] = False
                     m_abs[touched] = rows_product(*csr, self.unshot, touched, True)
-                    add_at_rows(dv_full, rows, dv)
-                    m_dv = np.zeros((self.P, 3))
-                    m_dv[touched] = rows_product(*csr, dv_full, touched, False)
-                    add_at_rows(dv_full, rows, -dv)  # back to exact zeros (0 + dv - dv)
-                    received = np.pi * (ctx.area[:, None] * m_dv).sum(axis=0)
+                    received = vertex_power[rows] @ dv  # (rows are distinct)
                     self.shot_log.append((np.pi * ctx.area[s] * field_mean, received))
         finally:
             self.timings["shooting_s"] += time.perf_counter() - t0
@@ -347,17 +338,20 @@ class SolveRun:
         ctx, mesh = self.ctx, self.mesh
         lvl = np.full(self.P, -1, dtype=np.int8)
         if self.coarse:
+            dist = np.linalg.norm(ctx.centre - ctx.centre[s], axis=1) - ctx.radius[s]
+            size = ctx.radius / np.maximum(dist, 1e-300)
+            size[dist <= 0] = np.inf
+            # form factors only to the corners of patches small and far enough for some level
+            fewer = np.min([c["npts"] for c in self.coarse], axis=0)
+            may = (size < max(COARSE_SIZE)) & (mesh["nverts"] > fewer)
             cgeo = self.coarse[0]["geo"]  # the patches' corners
-            idx, f = ctx.form_factors(s, cgeo)
+            idx, f = ctx.form_factors(s, cgeo, patches=may)
             fmax = np.zeros(self.P)
             np.maximum.at(fmax, cgeo.patch[idx], f)
             y = mesh["M"] @ luminance_of(self.reflected) + luminance_of(ctx.emission)
             floor = ABS_FLOOR * float((y * ctx.area).sum() / max(ctx.area.sum(), 1e-300))
             lum_mean = float(luminance_of(np.abs(field_mean)))
             rel = fmax * lum_mean * luminance_of(ctx.albedo) / (y + max(floor, 1e-30))
-            dist = np.linalg.norm(ctx.centre - ctx.centre[s], axis=1) - ctx.radius[s]
-            size = ctx.radius / np.maximum(dist, 1e-300)
-            size[dist <= 0] = np.inf
             for level in range(len(self.coarse) - 1, -1, -1):  # the coarsest that is fine enough
                 sel = (rel < COARSE_EPS[level]) & (size < COARSE_SIZE[level])
                 sel &= mesh["nverts"] > self.coarse[level]["npts"]
@@ -365,16 +359,20 @@ class SolveRun:
         self.levels[s] = lvl
         return lvl
 
-    def shot_gather(
-        self, s: int, m: int, field: np.ndarray, field_mean: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, list]:
-        """The reflected radiance one shot from s adds, ``(rows, dv, acc)``: the vertices it
-        reaches (k,) (distinct) and what each gets (k, 3) (nothing at the others): gathered at
-        the vertices of the patches it lights noticeably, interpolated from coarse grids on the
-        others; ``acc`` lists per coarse level ``(level, points, values)`` what its grid points
-        received, which the caller adds to the grids' ``acc`` (a shot reads no state that
-        another shot of its group writes)."""
+    def shot_gather(self, s: int, power: float) -> tuple[np.ndarray, np.ndarray, list, np.ndarray]:
+        """The reflected radiance one shot from s (of luminance ``power``) adds, ``(rows, dv, acc,
+        field_mean)``: the vertices it reaches (k,) (distinct) and what each gets (k, 3) (nothing
+        at the others): gathered at the vertices of the patches it lights noticeably,
+        interpolated from coarse grids on the others; ``acc`` lists per coarse level ``(level,
+        points, values)`` what its grid points received, which the caller adds to the grids'
+        ``acc``; ``field_mean`` (3,) the mean radiance it shot. A shot reads no state that another
+        shot of its group writes (the caller applies them once all have returned)."""
         ctx, mesh = self.ctx, self.mesh
+        avg = mesh["M"]
+        field = mesh["lattice"].grid(s, self.unshot) * self.gain[s]
+        field_mean = rows_product(avg.indptr, avg.indices, avg.data, self.unshot, np.array([s]), False)[0]
+        field_mean = field_mean * self.gain[s]
+        m = self.samples_by_power(SHOT_SAMPLE_FACTOR * self.m_side, power, field)
         shot = int(self.shot_index[s])
         lvl = self.receiver_levels(s, field_mean)
         # the vertices of the patches it lights noticeably, and a coarse grid per level of the others
@@ -394,7 +392,7 @@ class SolveRun:
             got_any[c["geo"].patch[ci]] = True
             rows.append(ranges_of(mesh["start"], np.flatnonzero(got_any & (lvl == k))))
             dv.append(rows_product(w.indptr, w.indices, w.data, gc, rows[-1], False))
-        return np.concatenate(rows), np.concatenate(dv), acc
+        return np.concatenate(rows), np.concatenate(dv), acc, field_mean
 
     def refine_total(self, label: str, span) -> None:
         """Stage C: refine on the total radiance. New vertices get their direct light and a

@@ -9,7 +9,7 @@ import numpy as np
 
 from iat.color import LUMINANCE_WEIGHTS
 from iat.geometry import quadtree as qt
-from iat.radiosity.kernels import hash_keys
+from iat.radiosity.kernels import hash_keys, leaf_fields
 
 
 def hash_uniform(keys: np.ndarray, salt: int, k: int = 2) -> np.ndarray:
@@ -172,7 +172,7 @@ class Lattice:
         self.n = forest.n
         self.keys = keys
         self.corner = qt.lookup(keys, qt.leaf_corner_keys(forest))  # (L, 4)
-        self.order = np.argsort(forest.leaf_patch, kind="stable")
+        self.order = np.lexsort((forest.leaf_level, forest.leaf_patch))  # by patch, coarse leaves first
         self.starts = np.searchsorted(forest.leaf_patch[self.order], np.arange(forest.n_patches + 1))
         self._offsets: dict[int, tuple] = {}
 
@@ -193,22 +193,13 @@ class Lattice:
 
     def grid(self, p: int, values: np.ndarray) -> np.ndarray:
         """(N+1, N+1, 3) values of patch p on its lattice, interpolated in its leaves from ``values``."""
-        n, fo = self.n, self.forest
-        g = np.zeros((n + 1, n + 1, 3))
+        fo = self.forest
+        g = np.zeros((self.n + 1, self.n + 1, 3))
         leaves = self.order[self.starts[p] : self.starts[p + 1]]
-        lvl = fo.leaf_level[leaves]
-        for level in np.unique(lvl):
-            sel = leaves[lvl == level]
-            a, b, wq, up, wu, down, wd = self._points(n >> int(level))
-            vals = values[self.corner[sel]]  # (l, 4, 3)
-            i0, j0 = fo.leaf_i[sel][:, None], fo.leaf_j[sel][:, None]
-            if fo.patch_is_quad[p]:
-                g[i0 + a, j0 + b] = np.einsum("gk,lkc->lgc", wq, vals)
-                continue
-            flip = fo.leaf_flip[sel]
-            for mask, pts, w in ((~flip, up, wu), (flip, down, wd)):
-                if mask.any():
-                    g[i0[mask] + a[pts], j0[mask] + b[pts]] = np.einsum("gk,lkc->lgc", w, vals[mask])
+        leaf_fields(
+            g, leaves, fo.leaf_level, fo.leaf_i, fo.leaf_j, fo.leaf_flip, bool(fo.patch_is_quad[p]),
+            self.corner, np.ascontiguousarray(values, dtype=np.float64),
+        )  # fmt: skip
         return g
 
     def coarse_grids(self, values: np.ndarray, g: int) -> np.ndarray:
