@@ -461,7 +461,6 @@ def add_at_rows(out, rows, vals):
         out[r, 2] += vals[i, 2]
 
 
-
 @njit(cache=True, nogil=True, error_model="numpy")
 def leaf_fields(out, leaves, level, li, lj, flip, is_quad, corner, values):
     """One patch's field on its lattice, ``out`` (N+1, N+1, 3) (N = its first dimension - 1): per
