@@ -225,8 +225,8 @@ def split_test(
                 sk = qt.sorted_unique(np.concatenate([keys, pk[pvalid]]))
                 fresh = sk[screened.find(sk) < 0]
                 screened.add(fresh, screen(fresh))
-                sy = luminance_of(screened.vals) + emission_y[qt.decode_key(screened.keys, ctx.n)[0]]
                 refl = luminance_of(screened.vals)
+                sy = refl + emission_y[qt.decode_key(screened.keys, ctx.n)[0]]
                 mean_s = min(
                     area_mean(forest, keys, screened.find(keys), refl, ctx), ctx.max_mean_reflected()
                 )
