@@ -254,38 +254,6 @@ def test_refines_most_at_the_shadow_edge(criterion, margin):
     assert sol.stats["interpolation_bias"] > 0.01
 
 
-def test_a_screened_split_test_evaluates_only_the_probes_it_tests():
-    """Stage C's split test screens elements on a cheap estimate first: screened by the exact
-    values themselves it builds the same forest as without a screen; screened by a flat
-    estimate, nothing deviates, nothing splits and no probe is evaluated (only the corners)."""
-    from iat.radiosity.checks import validated_options
-    from iat.radiosity.context import Context
-    from iat.radiosity.meshing import VertexCache, split_test
-    from iat.radiosity.visibility import Visibility
-
-    scene = floor_scene(occluder=True, light_height=2.0)
-    with Visibility.of_scene(scene) as vis:
-        ctx = Context(scene, validated_options(SolveOptions(max_depth=5)), vis)
-        roots = qt.roots(ctx.is_quad, 5)
-
-        def exact(keys):
-            return ctx.direct(keys, lambda: None)
-
-        def meshed(screen):
-            cache = VertexCache()
-            forest, _, _ = split_test(ctx, roots, cache, exact, lambda *_: None, "meshing", (0, 1), screen)
-            return forest, cache
-
-        plain, _ = meshed(None)
-        same, _ = meshed(exact)
-        flat, cache = meshed(lambda keys: np.ones((len(keys), 3)))
-    assert plain.n_leaves > 100
-    for name in ("leaf_patch", "leaf_level", "leaf_i", "leaf_j"):
-        assert np.array_equal(getattr(plain, name), getattr(same, name))
-    assert flat.n_leaves == roots.n_leaves
-    assert np.array_equal(cache.keys, qt.vertex_keys(roots))
-
-
 def test_uniformly_lit_floor_stays_shallow():
     sol = solve(floor_scene(occluder=False, light_height=30.0), SolveOptions(max_depth=6, max_shots=0))
     assert sol.stats["max_depth_reached"] == 0

@@ -9,7 +9,7 @@ from scipy import sparse
 
 from iat.geometry import quadtree as qt
 from iat.radiosity.context import Context, SolveCancelled
-from iat.radiosity.options import ABS_FLOOR, BIG_LEVELS, BIG_TOLERANCE, GAIN_LIMIT, SCREEN_FRACTION
+from iat.radiosity.options import ABS_FLOOR, BIG_LEVELS, BIG_TOLERANCE, GAIN_LIMIT
 from iat.radiosity.sampling import luminance_of
 
 
@@ -172,38 +172,16 @@ class VertexCache:
         self.keys, self.vals = k[order], v[order]
 
 
-def split_test(
-    ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, report, label: str, span, screen=None
-):
+def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, report, label: str, span):
     """Split elements until nothing deviates by more than the tolerance (see the module docstring).
 
     cache : reflected radiance (n, 3) at vertex keys, extended with ``evaluate(new_keys)``.
-    screen : None, or ``screen(keys) -> (n, 3)`` a cheap estimate of what ``evaluate`` gives: each
-      pass then tests every element on it (at its corners and probes alike, so that the estimate's
-      own bias cancels) and evaluates the probes only of those that deviate by more than
-      ``SCREEN_FRACTION`` of the tolerance, which are then tested on their evaluated values.
     Returns (forest, passes, cancelled); on cancel the last forest whose vertices are all
     evaluated (or the given one) is returned.
     """
     opts, D = ctx.opts, ctx.opts.max_depth
     emission_y = luminance_of(ctx.emission)
     good, passes = forest, 0
-
-    def deviation(sub, pvalid, vc, vp):
-        """(L,) each element's score and (L,) the mean it is weighed against, from the luminance
-        of the outgoing radiance at its corners ``vc`` (L, 4) and probes ``vp`` (L, 5)."""
-        vy = np.concatenate([vc, vp], axis=1)
-        vm = np.concatenate([np.ones((sub.n_leaves, 4), dtype=bool), pvalid], axis=1)
-        mean = (vy * vm).sum(axis=1) / vm.sum(axis=1)
-        if opts.criterion == "uniform":
-            return np.full(sub.n_leaves, np.inf), mean
-        if opts.criterion == "variation":
-            return np.where(vm, vy, -np.inf).max(axis=1) - np.where(vm, vy, np.inf).min(axis=1), mean
-        slots = probe_interp(sub)
-        interp = np.take_along_axis(vc, slots.reshape(len(vc), -1), axis=1).reshape(slots.shape).mean(axis=2)
-        return np.where(pvalid, np.abs(vp - interp), 0.0).max(axis=1), mean
-
-    screened = VertexCache()  # the screen's estimates, by key (they do not change between passes)
     try:
         while True:
             keys = qt.vertex_keys(forest)
@@ -216,25 +194,7 @@ def split_test(
                 big = leaf_longest_edge(sub, ctx.corners) > ctx.max_size
                 big &= sub.leaf_level < D - BIG_LEVELS
             pk, pvalid = probe_keys(sub)
-            ck = qt.leaf_corner_keys(sub)
-            tol = np.full(sub.n_leaves, opts.tolerance)
-            if big is not None:  # an element larger than max_size must interpolate more closely
-                tol[big] *= BIG_TOLERANCE
-            test = np.ones(sub.n_leaves, dtype=bool)
-            if screen is not None and sub.n_leaves:  # the elements the estimate finds near or over
-                sk = qt.sorted_unique(np.concatenate([keys, pk[pvalid]]))
-                fresh = sk[screened.find(sk) < 0]
-                screened.add(fresh, screen(fresh))
-                refl = luminance_of(screened.vals)
-                sy = refl + emission_y[qt.decode_key(screened.keys, ctx.n)[0]]
-                mean_s = min(
-                    area_mean(forest, keys, screened.find(keys), refl, ctx), ctx.max_mean_reflected()
-                )
-                score, mean = deviation(sub, pvalid, sy[screened.find(ck)], sy[screened.find(pk)])
-                test = score > SCREEN_FRACTION * tol * (mean + max(ABS_FLOOR * mean_s, 1e-30))
-                need = qt.sorted_unique(np.concatenate([keys, pk[test][pvalid[test]]]))
-            else:
-                need = qt.sorted_unique(np.concatenate([keys, pk[pvalid]]))
+            need = qt.sorted_unique(np.concatenate([keys, pk[pvalid]]))
             new = need[cache.find(need) < 0]
             report(
                 span[0] + (span[1] - span[0]) * passes / (D + 1),
@@ -242,7 +202,7 @@ def split_test(
             )
             cache.add(new, evaluate(new))
             good, passes = forest, passes + 1
-            if not test.any():  # (no candidates, or none that the screen suspects)
+            if not cand.any():
                 break
             # split test on luminance of the outgoing radiance (emission + reflected)
             refl_y = luminance_of(cache.vals)
@@ -251,15 +211,28 @@ def split_test(
             mean_y = min(area_mean(forest, keys, cache.find(keys), refl_y, ctx), ctx.max_mean_reflected())
             eps_abs = max(ABS_FLOOR * mean_y, 1e-30)
             y = refl_y + emission_y[qt.decode_key(cache.keys, ctx.n)[0]]
-            ts = np.flatnonzero(test)
-            score, mean = deviation(
-                sub.take(ts) if screen is not None else sub,
-                pvalid[ts],
-                y[cache.find(ck[ts])],
-                y[cache.find(pk[ts])],
-            )
-            split = np.zeros(sub.n_leaves, dtype=bool)
-            split[ts] = score > tol[ts] * (mean + eps_abs)
+            vy = np.concatenate([y[cache.find(qt.leaf_corner_keys(sub))], y[cache.find(pk)]], axis=1)
+            vm = np.concatenate([np.ones((sub.n_leaves, 4), dtype=bool), pvalid], axis=1)
+            mean = (vy * vm).sum(axis=1) / vm.sum(axis=1)
+            if opts.criterion == "uniform":
+                score = np.full(sub.n_leaves, np.inf)
+            elif opts.criterion == "variation":
+                hi = np.where(vm, vy, -np.inf).max(axis=1)
+                lo = np.where(vm, vy, np.inf).min(axis=1)
+                score = hi - lo
+            else:
+                slots = probe_interp(sub)
+                ck = vy[:, :4]
+                interp = (
+                    np.take_along_axis(ck, slots.reshape(len(ck), -1), axis=1)
+                    .reshape(slots.shape)
+                    .mean(axis=2)
+                )
+                score = np.where(pvalid, np.abs(vy[:, 4:] - interp), 0.0).max(axis=1)
+            tol = np.full(sub.n_leaves, opts.tolerance)
+            if big is not None:  # an element larger than max_size must interpolate more closely
+                tol[big] *= BIG_TOLERANCE
+            split = score > tol * (mean + eps_abs)
             if not split.any():
                 break
             mask = np.zeros(forest.n_leaves, dtype=bool)

@@ -81,13 +81,6 @@ MAX_REFLECTANCE = 0.95
 #: (it was sqrt(convergence), 22 % at the default: a daylit room's indirect light was then 10 %
 #: low against Mitsuba, 2.4 % now; the house: 38.0 k -> 43.6 k elements, 57 -> 78 s, one run)
 REFINE_UNSHOT = 2.0
-#: stage C evaluates the probes of an element only where a hemisphere estimate of the light shot so
-#: far, at its corners and probes, deviates by more than this fraction of the tolerance
-SCREEN_FRACTION = 0.2
-#: cosine-distributed rays per point of that estimate (one pattern for all points)
-SCREEN_RAYS = 64
-#: ... when at least this many patches have shot (with fewer, evaluating every probe costs less)
-SCREEN_SOURCES = 32
 #: side of the coverage grid that tells a panel cell's area samples on its surface from off it
 SHOOTER_COVERAGE = 256
 #: directions per vertex on the sun's disc (soft shadow edges), a count

@@ -34,11 +34,11 @@ from iat.radiosity.options import (
 from iat.radiosity.sampling import concentric_disk, disk_to_hemisphere, pattern_side
 
 
-def hemisphere_rays(ctx, geo, rays: int = AMBIENT_RAYS):
-    """Per block of at most ``GATHER_BLOCK`` vertices: their slice and their ``rays``
+def hemisphere_rays(ctx, geo):
+    """Per block of at most ``GATHER_BLOCK`` vertices: their slice and their ``AMBIENT_RAYS``
     cosine-distributed rays, origins and directions (b k, 3) in vertex order, the same pattern
     at every vertex, and k."""
-    m = pattern_side(rays)
+    m = pattern_side(AMBIENT_RAYS)
     pat = ctx.pattern(ctx.n_patches, m, 0)  # (a patch index no shooter has)
     dx, dy = concentric_disk(pat[None, :, 0], pat[None, :, 1])
     k = pat.shape[0]
@@ -49,10 +49,8 @@ def hemisphere_rays(ctx, geo, rays: int = AMBIENT_RAYS):
         yield sl, np.repeat(geo.origin[sl], k, axis=0), w, k
 
 
-def hemisphere_gather(
-    ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, check, tally: bool, rays: int = AMBIENT_RAYS
-):
-    """(V, 3) each vertex's mean, over its ``rays`` :func:`hemisphere_rays`, of the radiance ``grids``
+def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, check, tally: bool):
+    """(V, 3) each vertex's mean, over its :func:`hemisphere_rays`, of the radiance ``grids``
     ((P, g+1, g+1, 3): each patch's field on a g x g lattice) where they meet a front face, and,
     when ``tally``, the (V, P) CSR fraction of each vertex's rays that meet each patch (else None).
     geo : the vertices' :class:`~iat.radiosity.context.ReceiverGeometry`; tri_patch (T,), tri_uv
@@ -61,7 +59,7 @@ def hemisphere_gather(
     flat = np.ascontiguousarray(grids.reshape(-1, 3))
     mean = np.zeros((len(geo.key), 3))
     per_vertex, cols, counts = [], [], []  # (V, P) CSR by rows: the kernel writes them in vertex order
-    for sl, o, w, k in hemisphere_rays(ctx, geo, rays):
+    for sl, o, w, k in hemisphere_rays(ctx, geo):
         tri, bary = vis.first_hits(o, w, np.full(len(o), 4.0 * ctx.scale))
         r, c, f = np.empty(len(o), np.int64), np.empty(len(o), np.int64), np.empty(len(o))
         m = ambient_hits(tri, bary, w, tri_patch, tri_uv, ctx.normal, flat, g, k, mean[sl], r, c, f)

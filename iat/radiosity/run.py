@@ -24,22 +24,19 @@ from iat.radiosity.meshing import (
 )
 from iat.radiosity.options import (
     ABS_FLOOR,
-    AMBIENT_GRID,
     COARSE_EPS,
     COARSE_SIZE,
     MAX_REFLECTANCE,
     PEAK_RATIO,
     PEAK_SAMPLE_LIMIT,
     REFINE_SAMPLE_FACTOR,
-    SCREEN_RAYS,
-    SCREEN_SOURCES,
     SHOT_FULL_SHARE,
     SHOT_GROUP,
     SHOT_GROUP_RATIO,
     SHOT_SAMPLE_FACTOR,
     SolveOptions,
 )
-from iat.radiosity.remainder import ambient_term, hemisphere_gather
+from iat.radiosity.remainder import ambient_term
 from iat.radiosity.sampling import Lattice, luminance_of, pattern_side, peak_factor
 from iat.radiosity.solution import Solution
 from iat.radiosity.sources import sources_record
@@ -452,30 +449,9 @@ class SolveRun:
                     out += rho * g
             return out
 
-        screen = None
-        if len(sources) >= SCREEN_SOURCES:  # (with few sources, evaluating every probe costs less)
-            g = min(AMBIENT_GRID, ctx.n)
-            shot_grids = lattice_b.coarse_grids(shot_field, g) * self.gain[:, None, None, None]
-            opaque = self.vis.opaque
-            tris = self.scene.world_triangle_patch()[opaque], self.scene.world_triangle_uv()[opaque]
-
-            def screen(pts: np.ndarray) -> np.ndarray:
-                """A cheap estimate of evaluate_total for the split test to screen elements with: the
-                direct light and a hemisphere gather of the light shot so far (``SCREEN_RAYS``)."""
-                out = self.direct_cache.get(pts)
-                missing = self.direct_cache.find(pts) < 0
-                if missing.any():
-                    out[missing] = ctx.direct(pts[missing], self.check)
-                    self.direct_cache.add(pts[missing], out[missing])
-                geo = ctx.geometry(pts)
-                h, _ = hemisphere_gather(
-                    ctx, geo, self.vis, *tris, shot_grids, self.check, False, SCREEN_RAYS
-                )
-                return out + ctx.albedo[geo.patch] * h
-
         old_keys = keys
         forest, passes, _ = split_test(
-            ctx, self.forest, total_cache, evaluate_total, self.report, label, span, screen
+            ctx, self.forest, total_cache, evaluate_total, self.report, label, span
         )
         self.stats["refine_passes"] += passes
         keys = qt.vertex_keys(forest)

@@ -58,11 +58,7 @@ C. **Refinement on the total radiance** (``refine_indirect``), once, after the
    add linearly, so one gather of their sum equals replaying them all; one sample
    pattern for all new vertices, with the samples of the strongest shots,
    ``REFINE_SAMPLE_FACTOR``, since its error is common to them all): never
-   interpolated from its parent. With many sources (``SCREEN_SOURCES``) the split
-   test first screens every element on a cheap estimate (the direct light plus a
-   hemisphere gather of the light shot so far, at corners and probes alike) and
-   evaluates and tests only the probes of those that deviate by more than
-   ``SCREEN_FRACTION`` of the tolerance. A new vertex's unshot radiance is what it received minus
+   interpolated from its parent. Its unshot radiance is what it received minus
    what its patch already shot from there, so light a coarse element could not
    hold is shot again, not lost. Shooting then continues to ``convergence``
    (unshot power over the power the surfaces received in the direct pass: the emitted
