@@ -116,7 +116,6 @@ class SolveRun:
         mesh["geo"] = ctx.geometry(keys)
         mesh["geo"].cache = {}
         mesh["rho"] = ctx.albedo[qt.decode_key(keys, ctx.n)[0]]
-        mesh["nverts"] = np.diff(mesh["start"])
         if self.coarse is None:  # the coarse receiver grids do not depend on the mesh
             self.coarse = []
             for level in range(min(len(COARSE_EPS), ctx.opts.max_depth)):
@@ -135,6 +134,9 @@ class SolveRun:
         mesh["coarse_w"] = [
             coarse_weights(keys, c["keys"], ctx.is_quad, lv, ctx.n) for lv, c in enumerate(self.coarse)
         ]
+        # (P,) bool per coarse level: the patches with more vertices than its grid (worth receiving on it)
+        nverts = np.diff(mesh["start"])
+        mesh["finer"] = [nverts > c["npts"] for c in self.coarse]
 
     @property
     def forest(self) -> qt.Forest:
@@ -342,8 +344,7 @@ class SolveRun:
             size = ctx.radius / np.maximum(dist, 1e-300)
             size[dist <= 0] = np.inf
             # form factors only to the corners of patches small and far enough for some level
-            fewer = np.min([c["npts"] for c in self.coarse], axis=0)
-            may = (size < max(COARSE_SIZE)) & (mesh["nverts"] > fewer)
+            may = (size < max(COARSE_SIZE)) & np.logical_or.reduce(mesh["finer"])
             cgeo = self.coarse[0]["geo"]  # the patches' corners
             idx, f = ctx.form_factors(s, cgeo, patches=may)
             fmax = np.zeros(self.P)
@@ -354,7 +355,7 @@ class SolveRun:
             rel = fmax * lum_mean * luminance_of(ctx.albedo) / (y + max(floor, 1e-30))
             for level in range(len(self.coarse) - 1, -1, -1):  # the coarsest that is fine enough
                 sel = (rel < COARSE_EPS[level]) & (size < COARSE_SIZE[level])
-                sel &= mesh["nverts"] > self.coarse[level]["npts"]
+                sel &= mesh["finer"][level]
                 lvl[sel] = level
         self.levels[s] = lvl
         return lvl
