@@ -462,23 +462,26 @@ def add_at_rows(out, rows, vals):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def leaf_fields(out, leaves, level, li, lj, flip, is_quad, corner, values):
-    """One patch's field on its lattice, ``out`` (N+1, N+1, 3) (N = its first dimension - 1): per
-    leaf in ``leaves`` (in order, so that a finer leaf listed later writes the points it shares
-    with a coarser one), its lattice points interpolated from its corners' ``values`` (V, 3)
-    (``corner`` (L, 4) their rows): bilinear on a quad patch, linear on the leaf's half of its
-    square on a triangle (``flip``: the half with the far corner). level, li, lj (L,): each
-    leaf's level and lattice position."""
-    n = out.shape[0] - 1
+def leaf_fields(out, first, step, leaves, patch, level, li, lj, flip, is_quad, corner, values):
+    """Patches' fields on their lattice, every ``step``-th point a side: ``out`` (Q, N/step + 1,
+    N/step + 1, 3) (N the lattice's side), row ``patch[leaf] - first`` for a leaf's patch. Per leaf in
+    ``leaves`` (in order, so that a finer leaf listed later writes the points it shares with a
+    coarser one), its points interpolated from its corners' ``values`` (V, 3) (``corner`` (L, 4)
+    their rows): bilinear on a quad patch (``is_quad`` (P,)), linear on the leaf's half of its
+    square on a triangle (``flip``: the half with the far corner). patch, level, li, lj (L,): each
+    leaf's patch, level and lattice position."""
+    n = (out.shape[1] - 1) * step
     for t in range(leaves.shape[0]):
         q = leaves[t]
         s = n >> level[q]
         c0, c1, c2, c3 = corner[q, 0], corner[q, 1], corner[q, 2], corner[q, 3]
-        for a in range(s + 1):
+        row = patch[q] - first
+        quad = is_quad[patch[q]]
+        for a in range((step - li[q] % step) % step, s + 1, step):
             x = a / s
-            for b in range(s + 1):
+            for b in range((step - lj[q] % step) % step, s + 1, step):
                 y = b / s
-                if is_quad:
+                if quad:
                     w0, w1, w2, w3 = (1 - x) * (1 - y), x * (1 - y), x * y, (1 - x) * y
                 elif not flip[q]:
                     if a + b > s:
@@ -488,8 +491,9 @@ def leaf_fields(out, leaves, level, li, lj, flip, is_quad, corner, values):
                     if a + b < s:
                         continue
                     w0, w1, w2, w3 = x + y - 1, 1 - x, 1 - y, 0 * x
+                i, j = (li[q] + a) // step, (lj[q] + b) // step
                 for k in range(3):
-                    out[li[q] + a, lj[q] + b, k] = (
+                    out[row, i, j, k] = (
                         w0 * values[c0, k] + w1 * values[c1, k] + w2 * values[c2, k] + w3 * values[c3, k]
                     )
 

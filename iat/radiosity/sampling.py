@@ -174,59 +174,26 @@ class Lattice:
         self.corner = qt.lookup(keys, qt.leaf_corner_keys(forest))  # (L, 4)
         self.order = np.lexsort((forest.leaf_level, forest.leaf_patch))  # by patch, coarse leaves first
         self.starts = np.searchsorted(forest.leaf_patch[self.order], np.arange(forest.n_patches + 1))
-        self._offsets: dict[int, tuple] = {}
-
-    def _points(self, s: int):
-        """A leaf's lattice points ``s`` steps a side: offsets a, b and corner weights (quads: all;
-        triangles: the ``up`` or ``down`` ones, by the leaf's flip)."""
-        if s not in self._offsets:
-            a, b = np.meshgrid(np.arange(s + 1), np.arange(s + 1), indexing="ij")
-            a, b = a.ravel(), b.ravel()
-            x, y = a / s, b / s
-            wq = np.stack([(1 - x) * (1 - y), x * (1 - y), x * y, (1 - x) * y], axis=1)
-            up = np.flatnonzero(a + b <= s)
-            down = np.flatnonzero(a + b >= s)
-            wu = np.stack([1 - x - y, x, y, 0 * x], axis=1)[up]  # corners (0,0), (1,0), (0,1)
-            wd = np.stack([x + y - 1, 1 - x, 1 - y, 0 * x], axis=1)[down]  # (1,1), (0,1), (1,0)
-            self._offsets[s] = (a, b, wq, up, wu, down, wd)
-        return self._offsets[s]
 
     def grid(self, p: int, values: np.ndarray) -> np.ndarray:
         """(N+1, N+1, 3) values of patch p on its lattice, interpolated in its leaves from ``values``."""
-        fo = self.forest
-        g = np.zeros((self.n + 1, self.n + 1, 3))
-        leaves = self.order[self.starts[p] : self.starts[p + 1]]
-        leaf_fields(
-            g, leaves, fo.leaf_level, fo.leaf_i, fo.leaf_j, fo.leaf_flip, bool(fo.patch_is_quad[p]),
-            self.corner, np.ascontiguousarray(values, dtype=np.float64),
-        )  # fmt: skip
-        return g
+        return self._fields(self.order[self.starts[p] : self.starts[p + 1]], 1, p, 1, values)[0]
 
     def coarse_grids(self, values: np.ndarray, g: int) -> np.ndarray:
         """(P, g+1, g+1, 3) every patch's field on the ``g`` x ``g`` lattice (``g`` a power of 2, at
-        most N): :meth:`grid` at every (N / g)-th point, for all patches at once. Points inside a
-        leaf larger than that interpolate its corners; the others are vertices and take their value.
+        most N): :meth:`grid` at every (N / g)-th point, for all patches at once.
         values : (V, 3) at the lattice's vertex keys."""
-        n, fo = self.n, self.forest
-        g = min(int(g), n)
-        step = n // g
-        out = np.zeros((fo.n_patches, g + 1, g + 1, 3))
-        big = np.flatnonzero(fo.leaf_level < g.bit_length() - 1)  # leaves larger than a step
-        lvl = fo.leaf_level[big]
-        for level in np.unique(lvl):
-            sel = big[lvl == level]
-            a, b, wq, up, wu, down, wd = self._points(g >> int(level))
-            vals = values[self.corner[sel]]  # (l, 4, 3)
-            p = fo.leaf_patch[sel][:, None]
-            i0, j0 = fo.leaf_i[sel][:, None] // step, fo.leaf_j[sel][:, None] // step
-            quad, flip = fo.patch_is_quad[fo.leaf_patch[sel]], fo.leaf_flip[sel]
-            for mask, pts, w in ((quad, slice(None), wq), (~quad & ~flip, up, wu), (~quad & flip, down, wd)):
-                if mask.any():
-                    vm = np.einsum("gk,lkc->lgc", w, vals[mask])
-                    out[p[mask], i0[mask] + a[pts], j0[mask] + b[pts]] = vm
-        pk, i, j = qt.decode_key(self.keys, n)
-        on = (i % step == 0) & (j % step == 0)
-        out[pk[on], i[on] // step, j[on] // step] = values[on]
+        g = min(int(g), self.n)
+        return self._fields(self.order, self.forest.n_patches, 0, self.n // g, values)
+
+    def _fields(self, leaves: np.ndarray, count: int, first: int, step: int, values: np.ndarray):
+        """(count, N/step + 1, N/step + 1, 3) the fields of patches ``first`` on from ``leaves``."""
+        fo, side = self.forest, self.n // step + 1
+        out = np.zeros((count, side, side, 3))
+        leaf_fields(
+            out, first, step, leaves, fo.leaf_patch, fo.leaf_level, fo.leaf_i, fo.leaf_j, fo.leaf_flip,
+            fo.patch_is_quad, self.corner, np.ascontiguousarray(values, dtype=np.float64),
+        )  # fmt: skip
         return out
 
 
