@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from iat.radiosity import kernels
-from iat.radiosity.sampling import GAUSS_QUAD, Shooter, sample_lattice
+from iat.radiosity.sampling import GAUSS_QUAD, Shooter, concentric_disk, disk_to_hemisphere, sample_lattice
 
 SQUARE = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
 UP = np.array([0.0, 0.0, 1.0])
@@ -285,3 +285,24 @@ def test_merge_keys_is_the_sorted_union():
     more = rng.integers(0, 10**6, (300, 4))
     np.testing.assert_array_equal(qt.merge_keys(keys, more), np.unique(np.concatenate([keys, more.ravel()])))
     np.testing.assert_array_equal(qt.merge_keys(keys[:0], more[:0]), keys[:0])
+
+
+def test_cosine_rays_are_disk_to_hemisphere_bit_for_bit():
+    # the ambient term's rays: the numpy lift of the disc points, and its float32 rounding for embreex
+    rng = np.random.default_rng(5)
+    dx, dy = concentric_disk(rng.random(16), rng.random(16))
+    normal = rng.normal(size=(7, 3))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    t1 = np.cross(normal, [0.3, 0.5, 0.8])
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(normal, t1)
+    origin32 = rng.normal(size=(7, 3)).astype(np.float32)
+    w, o, d = np.empty((112, 3)), np.empty((112, 3), np.float32), np.empty((112, 3), np.float32)
+    kernels.cosine_rays(dx, dy, t1, t2, normal, origin32, w, o, d)
+    ref = disk_to_hemisphere(dx[None], dy[None], t1, t2, normal).reshape(-1, 3)
+    assert np.array_equal(w, ref)
+    assert np.array_equal(d, ref.astype(np.float32))
+    assert np.array_equal(o, np.repeat(origin32, 16, axis=0))
+    assert np.allclose(
+        np.einsum("ic,ic->i", w, np.repeat(normal, 16, axis=0)), np.sqrt(1 - np.tile(dx**2 + dy**2, 7))
+    )

@@ -655,6 +655,26 @@ def gather_finish(off, ws, vis, us, vs, fb, wsum, has_field, flat, nl, x, geom, 
     return out, seen
 
 
+@njit(cache=True, parallel=True, nogil=True, error_model="numpy")
+def cosine_rays(dx, dy, t1, t2, normal, origin32, w, o, d):
+    """Cosine-distributed rays of b vertices, S each, in vertex order (b S,): the disc points
+    ``dx, dy`` (S,) lifted to the hemisphere (Malley) in each vertex's frame ``t1, t2, normal``
+    (b, 3), as :func:`iat.radiosity.sampling.disk_to_hemisphere` does. Writes the directions to
+    ``w`` (b S, 3) float64 and ``d`` (b S, 3) float32, and the vertex's ray origin ``origin32``
+    (b, 3) float32 to ``o`` (b S, 3) float32 (as embreex takes them)."""
+    b, S = t1.shape[0], dx.shape[0]
+    for i in prange(b):
+        for j in range(S):
+            q = i * S + j
+            x, y = dx[j], dy[j]
+            z = math.sqrt(max(1.0 - x * x - y * y, 0.0))
+            for c in range(3):
+                v = x * t1[i, c] + y * t2[i, c] + z * normal[i, c]
+                w[q, c] = v
+                d[q, c] = np.float32(v)
+                o[q, c] = origin32[i, c]
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def ambient_hits(tri, bary, dirs, tri_patch, tri_uv, normal, flat, g, k, first, rows, cols, counts):
     """The ambient term's rays of a block of vertices, ``k`` each, in vertex order (n * k,): where
@@ -668,6 +688,8 @@ def ambient_hits(tri, bary, dirs, tri_patch, tri_uv, normal, flat, g, k, first, 
     n = tri.shape[0] // k
     found = np.empty(k, dtype=np.int64)
     tally = np.empty(k, dtype=np.int64)
+    owner = np.full(normal.shape[0], -1, dtype=np.int64)  # the last vertex whose rays met patch p ...
+    slot = np.empty(normal.shape[0], dtype=np.int64)  # ... and where in its found / tally
     m = 0
     for v in range(n):
         nf = 0
@@ -693,14 +715,12 @@ def ambient_hits(tri, bary, dirs, tri_patch, tri_uv, normal, flat, g, k, first, 
             for c in range(3):
                 val = flat[ib, c] * wb + flat[i00 + g + 1, c] * w10 + flat[i00 + 1, c] * w01
                 first[v, c] += val / k
-            j = 0
-            while j < nf and found[j] != p:
-                j += 1
-            if j == nf:
+            if owner[p] != v:
+                owner[p], slot[p] = v, nf
                 found[nf] = p
                 tally[nf] = 0
                 nf += 1
-            tally[j] += 1
+            tally[slot[p]] += 1
         for j in range(nf):
             rows[m] = v
             cols[m] = found[j]

@@ -68,6 +68,8 @@ PEAK_RATIO = 4.0
 PEAK_SAMPLE_LIMIT = 3.0
 #: rays per vertex of the ambient term (its final gather of the unshot light), a count
 AMBIENT_RAYS = 64
+#: rays of the ambient term traced and read at a time, a count (their buffers stay in the caches)
+AMBIENT_BLOCK_RAYS = 1 << 17
 #: side of the grid, a power of 2, on which the ambient term reads a patch's unshot light where its rays land
 AMBIENT_GRID = 8
 #: the ambient term's later bounces are summed until a bounce adds under this fraction of the first

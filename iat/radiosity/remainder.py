@@ -22,31 +22,37 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
-from iat.radiosity.kernels import ambient_hits
+from iat.radiosity.kernels import ambient_hits, cosine_rays
 from iat.radiosity.options import (
+    AMBIENT_BLOCK_RAYS,
     AMBIENT_BOUNCE_TOL,
     AMBIENT_GRID,
     AMBIENT_MAX_BOUNCES,
     AMBIENT_RAYS,
-    GATHER_BLOCK,
     MAX_REFLECTANCE,
 )
-from iat.radiosity.sampling import concentric_disk, disk_to_hemisphere, pattern_side
+from iat.radiosity.sampling import concentric_disk, pattern_side
 
 
 def hemisphere_rays(ctx, geo):
-    """Per block of at most ``GATHER_BLOCK`` vertices: their slice and their ``AMBIENT_RAYS``
-    cosine-distributed rays, origins and directions (b k, 3) in vertex order, the same pattern
-    at every vertex, and k."""
+    """Per block of vertices (``AMBIENT_BLOCK_RAYS`` rays at most, or one vertex): their slice,
+    their ``AMBIENT_RAYS`` cosine-distributed rays in vertex order (the same pattern at every
+    vertex) as embreex takes them, origins and directions (b k, 3) float32, the directions (b k, 3)
+    float64, and k. The arrays are reused for the next block."""
     m = pattern_side(AMBIENT_RAYS)
     pat = ctx.pattern(ctx.n_patches, m, 0)  # (a patch index no shooter has)
-    dx, dy = concentric_disk(pat[None, :, 0], pat[None, :, 1])
+    dx, dy = concentric_disk(pat[:, 0], pat[:, 1])
     k = pat.shape[0]
-    for a in range(0, len(geo.key), GATHER_BLOCK):
-        sl = slice(a, min(a + GATHER_BLOCK, len(geo.key)))
+    size = max(1, AMBIENT_BLOCK_RAYS // k)  # vertices a block
+    n = min(size, len(geo.key)) * k
+    w, o, d = np.empty((n, 3)), np.empty((n, 3), np.float32), np.empty((n, 3), np.float32)
+    origin32 = geo.origin32()
+    for a in range(0, len(geo.key), size):
+        sl = slice(a, min(a + size, len(geo.key)))
         t1, t2 = ctx.tangent[geo.patch[sl], 0], ctx.tangent[geo.patch[sl], 1]
-        w = disk_to_hemisphere(dx, dy, t1, t2, geo.normal[sl]).reshape(-1, 3)
-        yield sl, np.repeat(geo.origin[sl], k, axis=0), w, k
+        b = (sl.stop - sl.start) * k
+        cosine_rays(dx, dy, t1, t2, np.ascontiguousarray(geo.normal[sl]), origin32[sl], w[:b], o[:b], d[:b])
+        yield sl, o[:b], d[:b], w[:b], k
 
 
 def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, check, tally: bool):
@@ -59,8 +65,8 @@ def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, check
     flat = np.ascontiguousarray(grids.reshape(-1, 3))
     mean = np.zeros((len(geo.key), 3))
     per_vertex, cols, counts = [], [], []  # (V, P) CSR by rows: the kernel writes them in vertex order
-    for sl, o, w, k in hemisphere_rays(ctx, geo):
-        tri, bary = vis.first_hits(o, w, np.full(len(o), 4.0 * ctx.scale))
+    for sl, o, d, w, k in hemisphere_rays(ctx, geo):
+        tri, bary = vis.first_hits(o, d, np.full(len(o), 4.0 * ctx.scale, dtype=np.float32))
         r, c, f = np.empty(len(o), np.int64), np.empty(len(o), np.int64), np.empty(len(o))
         m = ambient_hits(tri, bary, w, tri_patch, tri_uv, ctx.normal, flat, g, k, mean[sl], r, c, f)
         if tally:
