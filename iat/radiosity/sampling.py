@@ -170,7 +170,6 @@ class Lattice:
     def __init__(self, forest: qt.Forest, keys: np.ndarray):
         self.forest = forest
         self.n = forest.n
-        self.keys = keys
         self.corner = qt.lookup(keys, qt.leaf_corner_keys(forest))  # (L, 4)
         self.order = np.lexsort((forest.leaf_level, forest.leaf_patch))  # by patch, coarse leaves first
         self.starts = np.searchsorted(forest.leaf_patch[self.order], np.arange(forest.n_patches + 1))
