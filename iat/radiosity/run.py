@@ -134,9 +134,11 @@ class SolveRun:
         mesh["coarse_w"] = [
             coarse_weights(keys, c["keys"], ctx.is_quad, lv, ctx.n) for lv, c in enumerate(self.coarse)
         ]
-        # (P,) bool per coarse level: the patches with more vertices than its grid (worth receiving on it)
+        # (P,) bool per coarse level: the patches with more vertices than its grid (worth receiving on
+        # it), and at some level
         nverts = np.diff(mesh["start"])
         mesh["finer"] = [nverts > c["npts"] for c in self.coarse]
+        mesh["finer_any"] = np.logical_or.reduce(mesh["finer"]) if self.coarse else np.zeros(self.P, bool)
 
     @property
     def forest(self) -> qt.Forest:
@@ -344,7 +346,7 @@ class SolveRun:
             size = ctx.radius / np.maximum(dist, 1e-300)
             size[dist <= 0] = np.inf
             # form factors only to the corners of patches small and far enough for some level
-            may = (size < max(COARSE_SIZE)) & np.logical_or.reduce(mesh["finer"])
+            may = (size < max(COARSE_SIZE)) & mesh["finer_any"]
             cgeo = self.coarse[0]["geo"]  # the patches' corners
             idx, f = ctx.form_factors(s, cgeo, patches=may)
             fmax = np.zeros(self.P)
