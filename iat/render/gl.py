@@ -1,8 +1,9 @@
 """GL plumbing shared by the drawers: shader lookup and programs, the one libGL call moderngl
 lacks, and the registry of GL objects a drawer owns.
 
-Shaders live in ``iat/render/shaders/<name>.glsl``, both stages in one file (``#if defined
-VERTEX_SHADER`` / ``#elif defined FRAGMENT_SHADER``). A line ``#include "other.glsl"`` is replaced
+Shaders live in the top-level ``shaders/<name>.glsl`` (a wheel installs them as ``iat/shaders``, see
+:func:`shader_dir`), both stages in one file (``#if defined VERTEX_SHADER`` / ``#elif defined
+FRAGMENT_SHADER``). A line ``#include "other.glsl"`` is replaced
 by that file's text (one level: included files include nothing); GLSL 330 has no ``#include``.
 (moderngl also resolves ``#include "..."`` on any line, comments too, from ``ctx.includes``: so no
 shader text may contain one that this loader does not replace.)
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import importlib.resources
 import re
+from pathlib import Path
 from typing import Any
 
 from iat.errors import RenderError
@@ -24,12 +26,16 @@ _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
 
 # -- shaders ------------------------------------------------------------------------------------
 def shader_dir() -> Any:
-    """The ``.glsl`` files: ``iat/render/shaders`` (package data), as an ``importlib.resources``
-    Traversable (a :class:`pathlib.Path` in a source tree)."""
-    d = importlib.resources.files("iat.render") / "shaders"
-    if not (d / "mesh.glsl").is_file():
-        raise RenderError(f"shader directory not found: {d}")
-    return d
+    """The ``.glsl`` files, as an ``importlib.resources`` Traversable (a :class:`pathlib.Path` on a
+    file system): ``iat/shaders`` inside an installed wheel (``pyproject.toml`` force-includes the
+    top-level ``shaders/`` there), else ``shaders/`` beside the ``iat`` package (a source tree, an
+    editable install)."""
+    tried = []
+    for d in (importlib.resources.files("iat") / "shaders", Path(__file__).resolve().parents[2] / "shaders"):
+        if (d / "mesh.glsl").is_file():
+            return d
+        tried.append(str(d))
+    raise RenderError(f"shader directory not found (looked in {' and '.join(tried)})")
 
 
 def _read_shader(filename: str) -> str:
