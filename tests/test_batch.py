@@ -3,8 +3,10 @@ task is reported on one line while the others finish; a rerun skips what is done
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -263,3 +265,43 @@ def test_presolve_fills_the_solution_cache(client, tmp_path):
         assert info["cached"]
         _same(sol, solve(scene, opts))
     assert presolve(pairs, cache, client=client) is None
+
+
+def test_progress_counts_every_task_and_results_are_freed_once_no_task_needs_them(client, tmp_path):
+    """A merge states job: progress says ``k/5 eta M:SS task`` once per task, in completion order; at
+    each task's report the client holds only the results (and the Scene) an unfinished task still
+    needs: the own solves until the merge is done, the merged mesh until both states are, nothing
+    after the last. A rerun skips everything and reports no progress."""
+    import shutil
+
+    model = shutil.copy(CORNELL, tmp_path / "heldbox.glb")
+    states = "".join(f"{k} = {{ emission = {{ light = {v} }} }}\n" for k, v in (("a", 1.0), ("b", 0.4)))
+    jobs = f'[[job]]\nname = "held"\nmodel = "{model}"\nstates_mesh = "merge"\n[job.states]\n{states}'
+    calls, held = [], {}
+
+    def on_result(r):  # the tasks whose results the client still refers to, and its Scene
+        client.sync(asyncio.sleep, 0)  # after the releases queued on the client's event loop
+        keys = [k for k in client.futures if k.startswith(("held", "load-heldbox-"))]
+        held[r.name] = {"load" if k.startswith("load-") else k.rsplit("-", 2)[0] for k in keys}
+
+    p = _jobs(tmp_path, jobs)
+    report = run_batch(
+        parse_jobs(p), client=client, progress=lambda f, s: calls.append((f, s)), on_result=on_result
+    )
+    assert all(r.status == "ok" for r in report.results)
+    done = list(held)  # completion order
+    assert [f for f, _ in calls] == [k / 5 for k in range(1, 6)]
+    assert [s.split(" ")[0] for _, s in calls] == [f"{k}/5" for k in range(1, 6)]
+    assert [s.split(" ")[-1] for _, s in calls] == done
+    assert calls[-1][1] == f"5/5 eta 0:00 {done[-1]}"
+    assert all(re.fullmatch(r"\d/5 eta (\?|\d+:\d\d) \S+", s) for _, s in calls)
+    assert set(done[:2]) == {"held.own-a", "held.own-b"} and done[2] == "held.mesh"
+    own = {"held.own-a", "held.own-b"}
+    assert held[done[0]] == own | {"load"}  # the merge needs both; the states the Scene
+    assert held[done[1]] == own | {"load", "held.mesh"}  # the merge submitted before the report
+    assert held["held.mesh"] == {"held.mesh", "held-a", "held-b"}  # the Scene: in the states' hands
+    assert held[done[3]] == {"held.mesh", done[4]}
+    assert held[done[4]] == set()
+    calls.clear()
+    again = run_batch(parse_jobs(p), client=client, progress=lambda f, s: calls.append((f, s)))
+    assert [r.status for r in again.results] == ["skipped"] * 5 and calls == []

@@ -33,14 +33,17 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import hashlib
+import itertools
 import json
 import logging
 import os
 import sys
 import tempfile
 import time
+import uuid
 import warnings
-from collections.abc import Callable
+from collections import Counter
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -465,180 +468,281 @@ def run_batch(
     folder = Path(batch.output)
     folder.mkdir(parents=True, exist_ok=True)
     tasks, job_errors = plan(batch)
-    results: dict[str, TaskResult] = {}
-    order = [t.name for t in tasks]
+    log = _Log(folder / LOG_NAME, on_result)
     for name, err in job_errors.items():
-        results[name] = _failed(name, err)
-        order.append(name)
-    log_file = folder / LOG_NAME
-    n_total = len(order)
-
-    def report(r: TaskResult) -> None:
-        results[r.name] = r
-        stamp = time.strftime("%Y-%m-%dT%H:%M:%S")
-        line = f"{stamp}\t{r.name}\t{r.status}\t{r.seconds:.2f}\t{r.error}\n"
-        line += "".join(f"{stamp}\t{r.name}\twarning\t\t{w}\n" for w in r.warnings)
-        with open(log_file, "a", encoding="utf-8") as f:
-            f.write(line)
-        if on_result is not None:
-            on_result(r)
-
-    for name in job_errors:
-        report(results[name])
+        log.report(_failed(name, err))
     todo = []
     for t in tasks:
         if _is_done(folder, t):
-            report(TaskResult(t.name, "skipped", outputs=[str(o) for o in t.outputs(folder)]))
+            log.report(TaskResult(t.name, "skipped", outputs=[str(o) for o in t.outputs(folder)]))
         else:
             todo.append(t)
-    own_client = client is None
-    cluster = None
-    if todo and own_client:
-        client, cluster = start_client(workers, scheduler)
+    order = [t.name for t in tasks] + list(job_errors)
+    n_workers = 0
+    if todo:
+        with _client(client, workers, scheduler) as c:
+            n_workers = len(c.nthreads())
+            counter = _Progress(progress, _Eta(todo, n_workers), len(log.results), len(order))
+            _Scheduler.start(c, folder, tasks, todo, log.report, counter).run()
+    return BatchReport([log.results[n] for n in order], time.perf_counter() - t_start, n_workers, str(folder))
+
+
+@contextlib.contextmanager
+def _client(client, workers: int | None, scheduler: str | None):
+    """``client`` if given (left open), else one of :func:`start_client`, closed with its cluster."""
+    if client is not None:
+        yield client
+        return
+    client, cluster = start_client(workers, scheduler)
     try:
-        n_workers = len(client.nthreads()) if todo else 0
-        if todo:
-            _run_on(client, folder, tasks, todo, report, progress, n_workers, n_total, len(results))
+        yield client
     finally:
-        if own_client and client is not None:
-            client.close()
-            if cluster is not None:
-                cluster.close()
-    return BatchReport([results[n] for n in order], time.perf_counter() - t_start, n_workers, str(folder))
+        client.close()
+        if cluster is not None:
+            cluster.close()
 
 
-def _run_on(client, folder, tasks, todo, report, progress, n_workers, n_total, n_done) -> None:
-    """Run ``todo`` (in dependency order) on ``client``'s workers; write and report each task as it
-    finishes.
+@dataclass
+class _Log:
+    """The tasks' results as they come: kept by name, one line each in the batch's log (and one per
+    warning), handed to ``on_result``."""
+
+    path: Path
+    on_result: Callable[[TaskResult], None] | None = None
+    results: dict[str, TaskResult] = field(default_factory=dict)
+
+    def report(self, r: TaskResult) -> None:
+        self.results[r.name] = r
+        stamp = time.strftime("%Y-%m-%dT%H:%M:%S")
+        line = f"{stamp}\t{r.name}\t{r.status}\t{r.seconds:.2f}\t{r.error}\n"
+        line += "".join(f"{stamp}\t{r.name}\twarning\t\t{w}\n" for w in r.warnings)
+        with open(self.path, "a", encoding="utf-8") as f:
+            f.write(line)
+        if self.on_result is not None:
+            self.on_result(r)
+
+
+@dataclass
+class _Progress:
+    """``callback(fraction of tasks finished, "done/total eta M:SS name")`` as each task run finishes."""
+
+    callback: Callable[[float, str], object] | None
+    eta: _Eta
+    done: int  # tasks finished, those that failed in the plan or were done before included
+    total: int
+
+    def step(self, r: TaskResult) -> None:
+        self.eta.done(r.name, r.seconds if r.status == "ok" else None)
+        self.done += 1
+        if self.callback is not None:
+            eta = _fmt_s(self.eta.remaining_s())
+            self.callback(self.done / self.total, f"{self.done}/{self.total} eta {eta} {r.name}")
+
+
+@dataclass
+class _Scenes:
+    """The Scenes of a run's tasks: each loaded once, by a task on a worker (:func:`load_model`), and
+    let go here once the last task that needs it is submitted (its tasks hold it then: the cluster
+    frees it after the last)."""
+
+    client: object
+    run_id: str  # the run's suffix of every key
+    need: Counter  # scene key (:func:`_scene_key`) -> tasks not submitted yet that need it
+    loading: dict[tuple, object] = field(default_factory=dict)  # scene key -> its load's future
+    loads: Iterator[int] = field(default_factory=itertools.count)
+
+    def take(self, t: Task):
+        """The future of the Scene ``t`` needs (None for a merge), its load submitted if none is."""
+        sk = _scene_key(t)
+        if sk is None:
+            return None
+        if sk not in self.loading:
+            key = f"load-{t.job.model.stem}-{next(self.loads)}-{self.run_id}"
+            lk = t.job.options.load_kwargs()
+            self.loading[sk] = self.client.submit(load_model, str(t.job.model), lk, key=key, pure=False)
+        scene = self.loading[sk]
+        self.need[sk] -= 1
+        if not self.need[sk]:
+            del self.loading[sk]
+        return scene
+
+
+@dataclass
+class _Scheduler:
+    """Runs a batch's tasks on ``client``'s workers; writes and reports each task as it finishes.
 
     The client places the tasks itself: a task is submitted once its inputs are done, to the least
     busy worker, never more at a time than the workers have threads, the longest expected first
-    (:func:`expected_order`). Left to Dask, a task goes where its inputs are (the Scene on the worker that
-    loaded it) and the other workers wait for work stealing: seconds idle per phase of the house's
-    day cycle."""
-    import itertools
-    import uuid
-    from collections import Counter
+    (:func:`expected_order`). Left to Dask, a task goes where its inputs are (the Scene on the worker
+    that loaded it) and the other workers wait for work stealing: seconds idle per phase of the
+    house's day cycle. A result no unfinished task needs is let go (and freed on the cluster) as the
+    last task needing it finishes."""
 
-    from distributed import as_completed
+    client: object
+    folder: Path
+    tasks: dict[str, Task]  # the plan's tasks by name
+    report: Callable[[TaskResult], None]
+    progress: _Progress
+    scenes: _Scenes
+    states_of: dict[str, dict]  # states job -> {state: state dict}
+    run_id: str  # the run's suffix of every key
+    waiting: list[Task]  # not submitted yet, in the plan's order
+    users: dict[str, set[str]]  # task to run -> the unfinished tasks that need its result
+    pending: object  # ``distributed.as_completed`` of the submitted tasks
+    futures: dict[str, object] = field(default_factory=dict)  # running, or finished and still needed
+    running: dict[str, tuple[str, str]] = field(default_factory=dict)  # future key -> (task, worker)
+    computed: set[str] = field(default_factory=set)  # came back from the cluster (written or not)
+    failures: dict[str, TaskResult] = field(default_factory=dict)
+    took: dict[tuple, float] = field(default_factory=dict)  # (job, state) -> seconds of its task
+    warned: set[str] = field(default_factory=set)  # reported once (a model's come with each task)
 
-    by_name = {t.name: t for t in tasks}
-    run = uuid.uuid4().hex[:8]
-    waiting = list(todo)
-    users = {t.name: {u.name for u in todo if t.name in u.deps} for t in todo}  # who needs a result
-    futures: dict[str, object] = {}  # running, or finished and still needed
-    where: dict[str, str] = {}  # running task -> its worker
-    computed: set[str] = set()
-    failures: dict[str, TaskResult] = {}
-    took: dict[tuple, float] = {}  # (job, state) -> seconds of its finished task
-    scenes: dict[tuple, object] = {}
-    loads = itertools.count()
-    scene_need = Counter(_scene_key(t) for t in todo)
-    jobs = {t.job.name: t.job for t in todo}
-    states_of = {name: _job_states(job) for name, job in jobs.items() if job.states is not None}
-    warned: set[str] = set()  # each warning reported once (a model's load warnings come with each task)
-    pending = as_completed()
-    names: dict[str, str] = {}
-    eta = _Eta(todo, n_workers)
-    done = n_done
+    @classmethod
+    def start(cls, client, folder: Path, tasks: list[Task], todo: list[Task], report, progress) -> _Scheduler:
+        """The scheduler of ``todo`` (in dependency order; the other ``tasks`` are done)."""
+        from distributed import as_completed
 
-    def finish(r: TaskResult, task: Task) -> None:
-        nonlocal done
-        if r.status == "failed":
-            failures[r.name] = r
-        eta.done(r.name, r.seconds if r.status == "ok" else None)
-        for n in (r.name, *task.deps):  # results no unfinished task needs are freed on the cluster
-            users.get(n, set()).discard(r.name)
-            if n in futures and not users.get(n):
-                futures.pop(n)
-        done += 1
-        report(r)
-        if progress is not None:
-            progress(done / n_total, f"{done}/{n_total} eta {_fmt_s(eta.remaining_s())} {r.name}")
-
-    def submit(t: Task, worker: str) -> None:
-        job, sk = t.job, _scene_key(t)
-        scene = None
-        if sk is not None:
-            if sk not in scenes:
-                key = f"load-{job.model.stem}-{next(loads)}-{run}"
-                lk = job.options.load_kwargs()
-                scenes[sk] = client.submit(load_model, str(job.model), lk, key=key, pure=False)
-            scene = scenes[sk]
-            scene_need[sk] -= 1
-            if not scene_need[sk]:  # its tasks hold it now: the Scene is freed after the last
-                del scenes[sk]
-        deps = []
-        for d in t.deps:
-            if d in futures:
-                deps.append(futures[d])
-            else:  # done in an earlier run: read here, sent once
-                from iat.radiosity.solution import Solution
-
-                deps.append(client.scatter(Solution.load(folder / f"{d}.npz")))
-        args = (t.kind, scene, job.options, states_of.get(job.name), t.state, job.bake, job.render)
-        key = f"{t.name}-{t.key}-{run}"
-        fut = client.submit(
-            run_task, *args, *deps, key=key, pure=False, workers=[worker], allow_other_workers=True
+        run_id = uuid.uuid4().hex[:8]
+        jobs = {t.job.name: t.job for t in todo}
+        return cls(
+            client,
+            folder,
+            {t.name: t for t in tasks},
+            report,
+            progress,
+            _Scenes(client, run_id, Counter(_scene_key(t) for t in todo)),
+            {name: _job_states(job) for name, job in jobs.items() if job.states is not None},
+            run_id,
+            list(todo),
+            {t.name: {u.name for u in todo if t.name in u.deps} for t in todo},
+            as_completed(),
         )
-        futures[t.name], where[t.name], names[fut.key] = fut, worker, t.name
-        pending.add(fut)
 
-    def dispatch() -> None:
+    def run(self) -> None:
+        self._dispatch()
+        while self._collect_next():
+            pass
+
+    def _collect_next(self) -> bool:
+        """Wait for the next task to finish, submit the tasks it makes ready, then write and report
+        it (the workers need not wait for the writing). False when none is running."""
+        fut = next(self.pending, None)
+        if fut is None:
+            return False
+        name, _ = self.running.pop(fut.key)
+        task = self.tasks[name]
+        res, err = _outcome(fut)
+        del fut  # held by self.futures alone: let go when no unfinished task needs it
+        if res is None:
+            self._finish(_failed(name, err), task)
+            self._dispatch()
+            return True
+        self.computed.add(name)
+        self.took[(task.job.name, task.state)] = res["seconds"]
+        self._dispatch()
+        r = self._written(task, res)
+        del res
+        self._finish(r, task)
+        return True
+
+    def _written(self, task: Task, res: dict) -> TaskResult:
+        """Write a task's result; one that cannot be written is that task's failure."""
+        try:
+            r = TaskResult(task.name, "ok", res["seconds"], outputs=_write_outputs(self.folder, task, res))
+        except Exception as e:
+            return _failed(task.name, e)
+        r.warnings = [w for w in res.get("warnings", []) if w not in self.warned]
+        self.warned.update(r.warnings)
+        return r
+
+    def _finish(self, r: TaskResult, task: Task) -> None:
+        """Report a finished task; let go of the results no unfinished task needs now."""
+        if r.status == "failed":
+            self.failures[r.name] = r
+        for n in (r.name, *task.deps):
+            self.users.get(n, set()).discard(r.name)
+            if n in self.futures and not self.users.get(n):
+                self.futures.pop(n)
+        self.report(r)
+        self.progress.step(r)
+
+    def _dispatch(self) -> None:
         """Report the tasks whose inputs failed (not computed); submit the ready ones to free threads."""
-        for t in list(waiting):
-            bad = next((d for d in t.deps if d in failures and d not in computed), None)
+        self._drop_blocked()
+        # an input not in users was done in an earlier run
+        ready = [t for t in self.waiting if all(d in self.computed or d not in self.users for d in t.deps)]
+        if ready:
+            self._place(ready)
+
+    def _drop_blocked(self) -> None:
+        for t in list(self.waiting):
+            bad = next((d for d in t.deps if d in self.failures and d not in self.computed), None)
             if bad:
-                waiting.remove(t)
+                self.waiting.remove(t)
                 r = TaskResult(t.name, "failed", error=f"not run: {bad} failed")
-                r.user_error = failures[bad].user_error
-                finish(r, t)
-        ready = [t for t in waiting if all(d in computed or d not in users for d in t.deps)]
-        if not ready:
-            return
-        threads = client.nthreads()
-        if not threads and not where:
-            client.wait_for_workers(1)
-            threads = client.nthreads()
-        busy = Counter(where.values())
-        for t in sorted(ready, key=lambda t: expected_order(t, took, states_of)):
+                r.user_error = self.failures[bad].user_error
+                self._finish(r, t)
+
+    def _place(self, ready: list[Task]) -> None:
+        """Submit the ready tasks, the longest expected first, each to the least busy worker with a
+        free thread, until none has one."""
+        threads = self._threads()
+        busy = Counter(w for _, w in self.running.values())
+        for t in sorted(ready, key=lambda t: expected_order(t, self.took, self.states_of)):
             free = [w for w in threads if busy[w] < threads[w]]
             if not free:
                 break
             w = min(free, key=lambda w: busy[w] / threads[w])
             busy[w] += 1
-            waiting.remove(t)
-            submit(t, w)
+            self.waiting.remove(t)
+            self._submit(t, w)
 
-    dispatch()
-    for fut in pending:
-        name = names.pop(fut.key)
-        task = by_name[name]
-        del where[name]
-        res, err = None, None
-        if fut.status == "error":
-            err = fut.exception()
-        else:
-            try:
-                res = fut.result()
-            except Exception as e:
-                err = e
-        del fut
-        if res is None:
-            finish(_failed(name, err), task)
-            dispatch()
-            continue
-        computed.add(name)
-        took[(task.job.name, task.state)] = res["seconds"]
-        dispatch()  # before writing: the workers need not wait for it
-        try:
-            r = TaskResult(name, "ok", res["seconds"], outputs=_write_outputs(folder, task, res))
-            r.warnings = [w for w in res.get("warnings", []) if w not in warned]
-            warned.update(r.warnings)
-        except Exception as e:  # a result that cannot be written is that task's failure
-            r = _failed(name, e)
-        del res
-        finish(r, task)
+    def _threads(self) -> dict[str, int]:
+        """{worker: threads}, waiting for a worker when there is none and nothing runs."""
+        threads = self.client.nthreads()
+        if not threads and not self.running:
+            self.client.wait_for_workers(1)
+            threads = self.client.nthreads()
+        return threads
+
+    def _submit(self, t: Task, worker: str) -> None:
+        job = t.job
+        args = (
+            t.kind,
+            self.scenes.take(t),
+            job.options,
+            self.states_of.get(job.name),
+            t.state,
+            job.bake,
+            job.render,
+        )
+        key = f"{t.name}-{t.key}-{self.run_id}"
+        fut = self.client.submit(
+            run_task, *args, *self._inputs(t), key=key, pure=False, workers=[worker], allow_other_workers=True
+        )
+        self.futures[t.name], self.running[fut.key] = fut, (t.name, worker)
+        self.pending.add(fut)
+
+    def _inputs(self, t: Task) -> list:
+        """The results of ``t``'s inputs: their futures, or those done in an earlier run read here
+        and sent once."""
+        from iat.radiosity.solution import Solution
+
+        return [
+            self.futures[d]
+            if d in self.futures
+            else self.client.scatter(Solution.load(self.folder / f"{d}.npz"))
+            for d in t.deps
+        ]
+
+
+def _outcome(fut) -> tuple[dict | None, BaseException | None]:
+    """``(result, None)`` of a finished future, or ``(None, its error)``."""
+    if fut.status == "error":
+        return None, fut.exception()
+    try:
+        return fut.result(), None
+    except Exception as e:
+        return None, e
 
 
 def expected_order(t: Task, took: dict, states_of: dict) -> tuple:
