@@ -169,7 +169,7 @@ def test_no_light_source_warns_and_still_writes_the_solution(tmp_path):
     r = iat("info", obj, "--json")
     assert r.returncode == 0 and json.loads(r.stdout)["light_sources"] == "no light sources"
     out = tmp_path / "dark.npz"
-    r = iat("solve", obj, "-o", out)
+    r = iat("solve", obj, "-o", out, "--no-daylight")  # (without it: daylight, tests/test_site_daylight.py)
     assert r.returncode == 0 and out.is_file()
     assert r.stderr.splitlines() == [
         f"iat solve: warning: {obj}: no light sources (no lights, no sky, no emissive materials):"

@@ -102,10 +102,13 @@ class ViewerApp:
         swap_hook=None,
         idle: bool = True,
         msaa: int = 0,
+        daylight=None,
     ):
         self.state = state or AppState()
         if solve_options is not None:
             self.state.model.solve_options = solve_options
+        if daylight is not None:  # a DaylightRequest (iat view --sun/--sky/--no-daylight)
+            self.state.model.daylight_request = daylight
         self.initial_path = None if path is None else str(path)
         self.size = (int(size[0]), int(size[1]))
         self.frame_hook = frame_hook
@@ -244,7 +247,13 @@ class ViewerApp:
         s = self.state
         if s.jobs.open_job is not None and not s.jobs.open_job.done:
             s.jobs.open_job.cancel()
-        s.jobs.open_job = OpenJob(path, s.model.solve_options, s.tuning.policy(), use_cache=s.model.use_cache)
+        s.jobs.open_job = OpenJob(
+            path,
+            s.model.solve_options,
+            s.tuning.policy(),
+            use_cache=s.model.use_cache,
+            daylight=s.model.daylight_request,
+        )
         s.messages.set_status(f"opening {path}")
 
     def adopt_next_draw(self, opened: Opened) -> None:
@@ -287,6 +296,7 @@ class ViewerApp:
         s.jobs.requested_policy = opened.policy
         s.model.solve_seconds = opened.solve_seconds
         s.model.from_cache = opened.from_cache
+        s.model.daylight_line = opened.daylight_line
         s.jobs.bake_seconds = opened.bake_seconds
         s.jobs.rebakes += 1
         if opened.bake_error:
@@ -751,6 +761,7 @@ def main(
     frames: int = 120,
     modes=("mesh", "iat"),
     as_json: bool = False,
+    daylight=None,
 ) -> int:
     """``iat view [SOL|MODEL]``: run the viewer; 0 when closed, 2 when there is no display.
 
@@ -759,6 +770,8 @@ def main(
     play : ``--play NAME``: play camera path NAME (or a ``.paths.json`` file) over ``frames`` frames
       in each of ``modes``, print frame-time statistics (JSON when ``as_json``) and exit
       (:func:`viewer.play.play_path`); 1 when the playback failed, 2 for a path that is not there
+    daylight : a :class:`~iat.lighting.daylight_default.DaylightRequest` (``--sun``, ``--sky``,
+      ``--no-daylight``); None: the default (daylight for a model without light sources)
     """
     target = Path(path) if path else default_model()
     try:
@@ -768,7 +781,7 @@ def main(
             from viewer.play import format_play, play_path
 
             def make_app(**kw) -> ViewerApp:
-                return ViewerApp(target, size=size, solve_options=solve_options, **kw)
+                return ViewerApp(target, size=size, solve_options=solve_options, daylight=daylight, **kw)
 
             res = play_path(make_app, target, play, frames=frames, modes=modes, size=size)
             if res["error"]:
@@ -778,7 +791,7 @@ def main(
             elif res["modes"]:
                 print(format_play(res))
             return int(res["exit_code"])
-        ViewerApp(target, size=size, solve_options=solve_options).run()
+        ViewerApp(target, size=size, solve_options=solve_options, daylight=daylight).run()
     except RuntimeError as e:
         print(f"iat view: cannot open a window ({e}); try 'iat render' or xvfb-run", file=sys.stderr)
         return 2

@@ -101,3 +101,36 @@ def sun_label(app_state: AppState) -> str:
         stated = angles(d)
     az, el = stated
     return f"sun: azimuth {az:.0f} deg, elevation {el:.0f} deg"
+
+
+# -- a sun of the scene itself (issue 38: the default daylight, --sun, a file's directional light) --
+def scene_sun(app_state: AppState) -> np.ndarray | None:
+    """(3,) unit vector towards the shown scene's first sun (a directional light with light), or
+    None. The day cycle's sun (:func:`sun_at`) wins when one is shown."""
+    ed = app_state.lighting.editor
+    scene = ed.scene if ed is not None else app_state.model.scene
+    if scene is None:
+        return None
+    for lt in scene.lights:
+        if lt.kind == "directional" and float(np.max(lt.radiant_intensity)) > 0:
+            d = -np.asarray(lt.direction, dtype=np.float64)
+            n = float(np.linalg.norm(d))
+            return d / n if n > 0 else None
+    return None
+
+
+def shown_sun(app_state: AppState) -> np.ndarray | None:
+    """Towards the sun shown: the day cycle's at the slider's time, else the scene's own."""
+    d = sun_at(app_state)
+    return d if d is not None else scene_sun(app_state)
+
+
+def sun_facts(lt) -> str:
+    """What a directional light is, in words: 'azimuth 132.3 deg, elevation 38.1 deg, 826 W/m²'
+    (azimuth from the scene's -Z; the light's intensity times its colour's largest channel, the
+    irradiance on a surface facing it)."""
+    d = -np.asarray(lt.direction, dtype=np.float64)
+    d = d / max(float(np.linalg.norm(d)), 1e-12)
+    az, el = angles(d)
+    lux = float(lt.intensity) * float(np.max(lt.color))
+    return f"azimuth {az:.1f} deg, elevation {el:.1f} deg, {lux:.0f} W/m²"

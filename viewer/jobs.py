@@ -17,6 +17,7 @@ The re-bakes run on :class:`viewer.bake_worker.BakeWorker`, the re-solves after 
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import os
 import threading
@@ -121,6 +122,7 @@ class Opened:
     bake_seconds: float = 0.0
     bake_error: str | None = None
     export: Any = None
+    daylight_line: str = ""
 
     def status(self, mesh_triangles: int) -> str:
         """The status line once shown."""
@@ -131,7 +133,8 @@ class Opened:
             )
         what = "cached solution" if self.from_cache else f"solved in {self.solve_seconds:.1f} s"
         n = self.scene.n_patches
-        return f"opened {self.path} ({n} patches, {mesh_triangles:,} mesh triangles, {what})"
+        opened = f"opened {self.path} ({n} patches, {mesh_triangles:,} mesh triangles, {what})"
+        return f"{opened}; {self.daylight_line}" if self.daylight_line else opened
 
 
 class OpenJob(_Job):
@@ -144,8 +147,17 @@ class OpenJob(_Job):
     (one line) is set.
     """
 
-    def __init__(self, path: str | os.PathLike, options: SolveOptions, policy: BakePolicy, use_cache=True):
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        options: SolveOptions,
+        policy: BakePolicy,
+        use_cache=True,
+        daylight=None,
+    ):
         self.path = str(path)
+        self.daylight = daylight  # a DaylightRequest for a model (None: the default one)
+        self.daylight_line = ""
         self.options = options
         self.policy = policy
         self.use_cache = use_cache
@@ -180,6 +192,7 @@ class OpenJob(_Job):
 
     def _work(self) -> Opened:
         from iat.io.load import load_scene
+        from iat.lighting.daylight_default import apply_daylight
         from iat.radiosity import solve
         from iat.radiosity.inputs import is_solution_path, open_solution
         from iat.render.glb_view import is_iat_export
@@ -199,9 +212,13 @@ class OpenJob(_Job):
             self.message = "loading model"
             self.load_started = time.perf_counter()
             scene = load_scene(p, progress=self.load_progress, **self.options.load_kwargs())
+            self.daylight_line = apply_daylight(scene, self.daylight) or ""  # a model without lights
             self.scene = scene  # the model, before its solve: the viewer shows it unlit meanwhile
             solution = None
             cpath = solution_cache_path(p, self.options) if self.use_cache else None
+            if cpath is not None and self.daylight_line:  # the daylight chosen is part of the key
+                tag = hashlib.sha1(self.daylight_line.encode()).hexdigest()[:10]
+                cpath = cpath.with_name(f"{cpath.stem}-daylight-{tag}{cpath.suffix}")
             solution = load_cached(cpath, scene.n_patches) if cpath is not None else None
             if solution is not None:
                 cached = str(cpath)
@@ -242,6 +259,7 @@ class OpenJob(_Job):
             from_cache=cached,
             bake_seconds=time.perf_counter() - t0,
             bake_error=bake_error,
+            daylight_line=self.daylight_line,
         )
 
     def _open_export(self, p: Path) -> Opened:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 from imgui_bundle import ImVec2, ImVec4, imgui
 
-from viewer.daylight import angles, sun_at
+from viewer.daylight import angles, shown_sun
 from viewer.panels import RED, hud_lines
 from viewer.state import MODE_LABELS, AppState
 
@@ -137,6 +137,7 @@ def _marker_data(ed) -> dict:
             "points": np.concatenate([pos, tips]),
             "colors": cols,
             "spot": [lt.kind == "spot" for lt in lights],
+            "sun": [lt.kind == "directional" for lt in lights],
             "names": [lt.name for lt in lights],
         }
     return _MARKERS[1]
@@ -156,7 +157,7 @@ def light_markers(state: AppState, dl) -> None:
     white = imgui.get_color_u32(ImVec4(1.0, 1.0, 1.0, 1.0))
     gold, dark = imgui.get_color_u32(ImVec4(1.0, 0.85, 0.2, 1.0)), imgui.get_color_u32(ImVec4(0, 0, 0, 0.9))
     for k in range(n):
-        if not ok[k]:
+        if not ok[k] or m["sun"][k]:  # a sun is a direction: the compass shows it, no marker
             continue
         sel = k == state.lighting.selected_light
         edge = gold if sel else dark
@@ -178,7 +179,7 @@ def sun_compass(state: AppState, dl, radius: float = 26.0) -> None:
     """A compass in the view's top right corner: the arrow points where the sun stands, seen from
     above with the camera's heading up; its length is the cosine of the elevation (a short arrow:
     the sun is high)."""
-    d = sun_at(state)
+    d = shown_sun(state)
     cam = state.view.camera
     if d is None or cam is None:
         return

@@ -27,7 +27,7 @@ from imgui_bundle import ImVec2, ImVec4, hello_imgui, imgui, implot
 from iat.bake.flatten import METHODS
 from iat.io.load import SUPPORTED_EXTENSIONS
 from viewer.bake_worker import snap_scale
-from viewer.daylight import sun_label
+from viewer.daylight import sun_facts, sun_label
 from viewer.eta import JobEta
 from viewer.lights import new_light_intensity, new_light_position
 from viewer.navigation import paths_file
@@ -441,7 +441,10 @@ def lighting_panel(state: AppState) -> None:
     imgui.end_disabled()
 
     k = state.lighting.selected_light
-    if 0 <= k < len(ed.lights):
+    if 0 <= k < len(ed.lights) and ed.lights[k].kind == "directional":  # the sun: a direction, no place
+        imgui.text_wrapped(f"sun: {sun_facts(ed.lights[k])}")
+        _help("A direction, not a lamp: set its place, date and time in the Sun & sky panel (or --sun).")
+    elif 0 <= k < len(ed.lights):
         lt = ed.lights[k]
         lo, hi = ed.scene.bounds
         step = float(np.linalg.norm(hi - lo)) * 0.002

@@ -110,6 +110,10 @@ class ModelState:
     use_cache: bool = True
     solve_seconds: float = 0.0
     from_cache: str = ""
+    #: what ``iat view --sun/--sky/--no-daylight`` asked for (a DaylightRequest; None: the default)
+    daylight_request: Any = None
+    #: the one line saying what daylight the model got ("" when none: it has lights of its own)
+    daylight_line: str = ""
     _deepest: tuple[Any, int] | None = field(default=None, init=False, repr=False, compare=False)
     _mesh_calls: tuple[Any, int] | None = field(default=None, init=False, repr=False, compare=False)
 

@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from iat.cli.args import join_negative_values, parse_size, parse_sky, parse_sun, parse_vec
+from iat.cli.args import join_negative_values, parse_size, parse_vec
+from iat.cli.daylight import add_daylight_flags, apply_to, check_solution_flags, daylight_request
 from iat.errors import IATError, IATWarning, OptionError
 from iat.progress import ProgressBar
 from iat.tools.common import policy_dict
@@ -106,14 +107,21 @@ def _bake_policy(args):
 
 
 def _open(args, what: str):
-    from iat.radiosity.inputs import open_solution
+    """(scene, solution) of a solution file, or of a model given its daylight (``--sun``, ``--sky``,
+    ``--no-daylight``: :mod:`iat.cli.daylight`) and solved."""
+    from iat.radiosity import solve
+    from iat.radiosity.inputs import is_solution_path, open_solution
 
     name = Path(args.input).name
-    with (
-        _progress_bar(args, f"load {name}", close_when_done=True) as load_bar,
-        _progress_bar(args, f"solve {name}") as bar,
-    ):
-        return open_solution(args.input, _solve_options(args), progress=bar, load_progress=load_bar)
+    if is_solution_path(args.input):
+        check_solution_flags(args)
+        with _progress_bar(args, f"load {name}", close_when_done=True) as load_bar:
+            return open_solution(args.input, load_progress=load_bar)
+    opts = _solve_options(args)
+    scene = _load(args, args.input, max_edge=opts.max_edge)
+    apply_to(args, scene)
+    with _progress_bar(args, f"solve {name}") as bar:
+        return scene, solve(scene, opts, progress=bar)
 
 
 # -- commands --------------------------------------------------------------------
@@ -142,23 +150,6 @@ def cmd_info(args) -> int:
     }
     _emit(args, info)
     return 0
-
-
-def _daylight(args, scene) -> None:
-    """``--sun`` adds (or replaces) the scene's sun; ``--sky`` puts a sky around it (a Preetham sky
-    towards the sun)."""
-    if getattr(args, "sun", None):
-        sun, az, el = parse_sun(args.sun, getattr(args, "north", None))
-        if el <= 0:
-            raise OptionError(f"--sun: the sun is below the horizon then (elevation {el:.1f} degrees)")
-        scene.lights = [lt for lt in scene.lights if lt.kind != "directional"] + [sun]
-    if getattr(args, "sky", None):
-        scene.sky = parse_sky(args.sky, args.sky_scale)
-        suns = [lt for lt in scene.lights if lt.kind == "directional"]
-        if scene.sky.kind == "preetham":
-            if not suns:
-                raise OptionError("--sky preetham needs a sun (--sun, or a directional light in the model)")
-            scene.sky.sun_direction = -suns[0].direction
 
 
 def _set_output(out: Path, name: str) -> Path:
@@ -209,7 +200,7 @@ def cmd_solve(args) -> int:
             raise OptionError("--workers and --scheduler go with --states (one solve runs in this process)")
         return _solve_states_on_engine(args, opts)
     scene = _load(args, args.input, max_edge=opts.max_edge)
-    _daylight(args, scene)
+    apply_to(args, scene)
     if getattr(args, "states", False):
         from iat.lighting.solution_set import solve_set
 
@@ -457,6 +448,7 @@ def cmd_batch(args) -> int:
     from iat.tools.batch import parse_jobs, print_errors, run_batch
 
     batch = parse_jobs(args.jobs)
+    batch.daylight = daylight_request(args)
     with _progress_bar(args, f"batch {Path(args.jobs).name}") as bar:
         report = run_batch(batch, workers=args.workers, scheduler=args.scheduler, progress=bar)
     if getattr(args, "json", False):
@@ -502,13 +494,15 @@ def cmd_view(args) -> int:
         raise RenderError(
             "no display (DISPLAY is not set): run under xvfb-run or on a desktop, or use 'iat render'"
         )
+    daylight = daylight_request(args)
     if args.play is None:
-        return _app("view")(args.input, size=parse_size(args.size))
+        return _app("view")(args.input, size=parse_size(args.size), daylight=daylight)
     if args.frames < 1:
         raise OptionError(f"--frames must be >= 1, got {args.frames}")
     modes = tuple(m.strip() for m in args.modes.split(",") if m.strip())
     size = parse_size(args.size)
     play = {"play": args.play, "frames": args.frames, "modes": modes, "as_json": args.json}
+    play["daylight"] = daylight
     return _app("view")(args.input, size=size, **play)
 
 
@@ -600,12 +594,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("solve", help="radiosity solution with adaptive quad-tree meshing")
     s.add_argument("input", metavar="MODEL")
-    s.add_argument("--sun", metavar="LAT,LON,DATETIME[,TZ]", help="a sun at that place and time")
-    s.add_argument("--north", metavar="X,Y,Z", help="the model's north (default 0,0,-1)")
-    s.add_argument(
-        "--sky", metavar="KIND[:ARG]", help="uniform[:R,G,B], overcast[:R,G,B], preetham[:T], hdr:FILE"
-    )
-    s.add_argument("--sky-scale", type=float, default=1.0, dest="sky_scale", help="sky radiance factor")
+    add_daylight_flags(s)
     s.add_argument("-o", "--output", required=True, metavar="SOL.npz")
     solve_flags(s)
     s.add_argument(
@@ -641,6 +630,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", required=True, metavar="OUT.glb")
     bake_flags(s)
     solve_flags(s)
+    add_daylight_flags(s)
     s.add_argument("--layered", action="store_true", help="albedo on TEXCOORD_0, illumination on TEXCOORD_1")
     s.add_argument(
         "--no-watertight",
@@ -668,6 +658,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("input", nargs="?", metavar="SOL|MODEL|GLB")
     set_flags(s)
     s.add_argument("-o", "--output", required=True, metavar="OUT.png|OUT.npy")
+    add_daylight_flags(s)
     s.add_argument("--mode", choices=["mesh", "iat", "preview", "split", "diff"], default="iat")
     s.add_argument("--camera", type=int, help="use the file's K-th camera")
     s.add_argument("--eye")
@@ -699,12 +690,14 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("batch", help="solves, bakes and renders of a job file as Dask tasks")
     s.add_argument("jobs", metavar="JOBS.toml")
     s.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
+    add_daylight_flags(s)
     s.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler (tcp://host:8786)")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_batch)
 
     s = sub.add_parser("view", help="the walkthrough viewer")
     s.add_argument("input", nargs="?", metavar="SOL|MODEL")
+    add_daylight_flags(s)
     s.add_argument("--size", default="1280x800", help="window size WxH")
     s.add_argument("--play", metavar="NAME", help="play camera path NAME (or a .paths.json file), then exit")
     s.add_argument("--frames", type=int, default=120, help="frames of the --play playback")

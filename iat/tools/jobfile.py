@@ -60,6 +60,9 @@ class Batch:
     output: Path
     jobs: list[Job]
     source: Path | None = None
+    #: a :class:`iat.lighting.daylight_default.DaylightRequest` for every model (``iat batch``'s
+    #: ``--sun``, ``--sky``, ``--no-daylight``); None: none (the models' own light only)
+    daylight: object = None
 
 
 def _bad(where, why):
