@@ -40,18 +40,18 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from solver_bench import random_rays  # noqa: E402
 
-import iat.radiosity.context as context_module  # noqa: E402
+import iat.radiosity.kernels as kernels_module  # noqa: E402
 from iat.io.load import load_scene  # noqa: E402
 from iat.radiosity import SolveOptions, solve  # noqa: E402
 from iat.radiosity.visibility import Visibility  # noqa: E402
 
 #: the gather's steps timed in part 1: (where the name is looked up, name)
 STEPS = (
-    (context_module, "patch_form_factors"),
-    (context_module, "block_inputs"),
-    (context_module, "gather_rays"),
+    (kernels_module, "patch_form_factors"),
+    (kernels_module, "block_inputs"),
+    (kernels_module, "gather_rays"),
     (Visibility, "visible"),
-    (context_module, "gather_finish"),
+    (kernels_module, "gather_finish"),
 )
 
 

@@ -41,7 +41,7 @@ def test_gauss_rule_agrees_with_contour_far_away():
     x, nr = receivers(height=(4.5, 8.0))
     (gu, gv), gw = GAUSS_QUAD
     exact = kernels.point_polygon(x, nr, SQUARE)
-    args = (ka["geom"], ka["para"], ka["area"], gu.ravel(), gv.ravel(), gw)
+    args = (ka.geom, ka.para, ka.area, gu.ravel(), gv.ravel(), gw)
     far = kernels.patch_form_factors(x, nr, SQUARE, SQUARE.mean(axis=0), 4.0, *args)
     near = kernels.patch_form_factors(x, nr, SQUARE, SQUARE.mean(axis=0), 1e9, *args)
     np.testing.assert_array_equal(near, exact)  # nothing far: the contour integral itself
@@ -74,11 +74,8 @@ def rays(sh, inputs):
         np.empty((n, 3), np.float32),
         np.empty(n, np.float32),
     )
-    out = kernels.gather_rays(
-        pat, rot, x, nr, t1, t2, near, o32, ka["geom"], ka["uvc"], ka["poly_n"], ka["poly_o"], ka["tol"],
-        ka["is_quad"], ka["para"], ka["linear_uv"], ka["area"], ka["mask"], ka["has_mask"], ka["t32"],
-        ka["half_eps"], *buf,
-    )  # fmt: skip
+    rows = kernels.ReceiverRows(rot, x, nr, t1, t2, near, o32, np.zeros(len(x), np.int64))
+    out = kernels.sample_rays(pat, rows, ka, buf)
     return [np.array(a) for a in out]
 
 
@@ -88,10 +85,10 @@ def finish(sh, inputs, r, vis, fb, flat=None, mean=None):
     has = flat is not None
     flat = np.zeros((1, 3)) if flat is None else flat
     nl = int(round(np.sqrt(len(flat)))) - 1
-    return kernels.gather_finish(
-        off, w, vis, u, v, fb, wsum, has, flat, nl, inputs[2], ka["geom"], ka["uvc"], ka["linear_uv"],
-        ka["is_quad"], ka["para"], np.zeros(3) if mean is None else mean, False, False,
-    )  # fmt: skip
+    rows = kernels.ReceiverRows(*inputs[1:], np.zeros(len(inputs[2]), np.int64))
+    smp = kernels.Samples(off, wsum, w, u, v, *r[5:])
+    fld = kernels.ShotField(flat, nl, np.zeros(3) if mean is None else mean, has, False, False)
+    return kernels.finish_rows(smp, vis, fb, rows, ka, fld)
 
 
 @pytest.mark.parametrize("is_quad", [True, False])
@@ -103,7 +100,7 @@ def test_rays_end_on_the_shooter(is_quad):
     assert np.all(np.diff(off) <= 2 * len(inputs[0]))
     np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-6)
     # origin + (tfar + eps/2) d is the target of (u, v): on the square (pulled in by <= eps), eps above it
-    end = o + (tfar + sh.kernel_args()["half_eps"])[:, None] * d
+    end = o + (tfar + sh.kernel_args().half_eps)[:, None] * d
     target = sh.origin + u[:, None] * sh.e1 + v[:, None] * sh.e2
     np.testing.assert_allclose(end[:, :2], target[:, :2], atol=2e-4)
     np.testing.assert_allclose(end[:, 2], 1e-4, atol=1e-5)

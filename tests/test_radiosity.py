@@ -281,8 +281,8 @@ def test_point_light_touching_a_wall_shoots_what_the_wall_received():
     with Visibility(scene.world_triangles()) as vis:
         run = SolveRun(scene, opts, None, vis, 0.0)
         run.mesh_by_direct_light()
-        shot = run.patch_power(run.unshot).sum()
-        peak = run.patch_power(run.reflected).sum()
+        shot = run.patch_power(run.rad.unshot).sum()
+        peak = run.patch_power(run.rad.reflected).sum()
     light = scene.lights[0]
     received = float(light.radiant_intensity @ LUMINANCE) * 2 * np.pi * 0.6  # rho = 0.6, d << floor
     assert shot == pytest.approx(received, rel=0.01)

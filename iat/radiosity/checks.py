@@ -22,7 +22,7 @@ def validated_options(options) -> SolveOptions:
 def check_scene(scene) -> None:
     """Raise OptionError for a scene the solver cannot solve (an in-memory scene is not checked
     by a loader): non-finite geometry or light, non-finite albedo, negative emission. Albedo
-    outside [0, 1] is clamped by the solve (:func:`iat.radiosity.context.solver_albedo`) with an
+    outside [0, 1] is clamped by the solve (:func:`iat.radiosity.patches.solver_albedo`) with an
     :class:`iat.errors.IATWarning` naming the materials."""
     c = scene.corner_positions
     if not np.isfinite(c).all():

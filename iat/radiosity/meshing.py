@@ -8,8 +8,10 @@ import numpy as np
 from scipy import sparse
 
 from iat.geometry import quadtree as qt
-from iat.radiosity.context import Context, SolveCancelled
+from iat.radiosity.context import Context
 from iat.radiosity.options import ABS_FLOOR, BIG_LEVELS, BIG_TOLERANCE, GAIN_LIMIT
+from iat.radiosity.patches import Patches
+from iat.radiosity.progress import SolveCancelled
 from iat.radiosity.sampling import luminance_of
 
 
@@ -179,19 +181,19 @@ def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, re
     Returns (forest, passes, cancelled); on cancel the last forest whose vertices are all
     evaluated (or the given one) is returned.
     """
-    opts, D = ctx.opts, ctx.opts.max_depth
-    emission_y = luminance_of(ctx.emission)
+    opts, D, pt = ctx.opts, ctx.opts.max_depth, ctx.patches
+    emission_y = luminance_of(pt.emission)
     good, passes = forest, 0
     try:
         while True:
             keys = qt.vertex_keys(forest)
-            cand = (forest.leaf_level < D) & ctx.leaf_has_surface(forest)
-            if ctx.min_size > 0 and cand.any():
-                cand[cand] = leaf_longest_edge(forest.take(cand), ctx.corners) / 2 >= ctx.min_size
+            cand = (forest.leaf_level < D) & pt.leaf_has_surface(forest)
+            if pt.min_size > 0 and cand.any():
+                cand[cand] = leaf_longest_edge(forest.take(cand), pt.corners) / 2 >= pt.min_size
             sub = forest.take(cand)
             big = None
-            if ctx.max_size > 0 and sub.n_leaves:
-                big = leaf_longest_edge(sub, ctx.corners) > ctx.max_size
+            if pt.max_size > 0 and sub.n_leaves:
+                big = leaf_longest_edge(sub, pt.corners) > pt.max_size
                 big &= sub.leaf_level < D - BIG_LEVELS
             pk, pvalid = probe_keys(sub)
             need = qt.sorted_unique(np.concatenate([keys, pk[pvalid]]))
@@ -208,9 +210,11 @@ def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, re
             refl_y = luminance_of(cache.vals)
             # (the mean is capped by the most the scene can reflect on average: a point light touching a
             # wall puts I / d^2 on one vertex, which would lift the floor above all other light)
-            mean_y = min(area_mean(forest, keys, cache.find(keys), refl_y, ctx), ctx.max_mean_reflected())
+            mean_y = min(
+                area_mean(forest, keys, cache.find(keys), refl_y, pt), ctx.light.max_mean_reflected()
+            )
             eps_abs = max(ABS_FLOOR * mean_y, 1e-30)
-            y = refl_y + emission_y[qt.decode_key(cache.keys, ctx.n)[0]]
+            y = refl_y + emission_y[qt.decode_key(cache.keys, pt.n)[0]]
             vy = np.concatenate([y[cache.find(qt.leaf_corner_keys(sub))], y[cache.find(pk)]], axis=1)
             vm = np.concatenate([np.ones((sub.n_leaves, 4), dtype=bool), pvalid], axis=1)
             mean = (vy * vm).sum(axis=1) / vm.sum(axis=1)
@@ -244,14 +248,14 @@ def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, re
 
 
 def measure_interpolation_bias(
-    keys: np.ndarray, old_keys: np.ndarray, cache: VertexCache, ctx: Context
+    keys: np.ndarray, old_keys: np.ndarray, cache: VertexCache, patches: Patches
 ) -> tuple[float, int]:
     """Mean relative error (sum |interpolated - exact| / sum exact, luminance of reflected radiance)
     that parent interpolation would have given the vertices of ``keys`` not in ``old_keys``."""
     late = keys[qt.lookup(old_keys, keys) < 0]
     if len(late) == 0:
         return 0.0, 0
-    pkeys, pw = parent_interpolation(late, ctx.is_quad, ctx.n)
+    pkeys, pw = parent_interpolation(late, patches.is_quad, patches.n)
     pi = cache.find(pkeys)
     ok = (pi >= 0).all(axis=1) & (cache.find(late) >= 0)
     if not ok.any():
@@ -263,7 +267,9 @@ def measure_interpolation_bias(
     return (float(np.abs(interp - exact).sum() / tot) if tot > 0 else 0.0), int(ok.sum())
 
 
-def area_mean(forest: qt.Forest, keys: np.ndarray, kidx: np.ndarray, y: np.ndarray, ctx: Context) -> float:
+def area_mean(
+    forest: qt.Forest, keys: np.ndarray, kidx: np.ndarray, y: np.ndarray, patches: Patches
+) -> float:
     """Area-weighted mean over the scene of per-vertex values ``y[kidx]`` (leaf-corner means)."""
     if forest.n_leaves == 0:
         return 0.0
@@ -272,17 +278,17 @@ def area_mean(forest: qt.Forest, keys: np.ndarray, kidx: np.ndarray, y: np.ndarr
     q = forest.leaf_is_quad
     vals = yv[corner]
     leaf_mean = np.where(q, vals.mean(axis=1), vals[:, :3].mean(axis=1))
-    la = qt.leaf_area(forest, ctx.corners)
+    la = qt.leaf_area(forest, patches.corners)
     return float((leaf_mean * la).sum() / max(la.sum(), 1e-300))
 
 
-def probe_shot_gain(forest: qt.Forest, cache: VertexCache, ctx: Context) -> np.ndarray:
+def probe_shot_gain(forest: qt.Forest, cache: VertexCache, patches: Patches) -> np.ndarray:
     """(P,) ratio of each patch's reflected power integrated with the probes (a quadratic rule per
     leaf: 3 x 3 Simpson on quads, the edge midpoints on triangles) to the power of its piecewise
     linear interpolant (the corner means), from the luminance values in ``cache``; leaves without
     all their probes evaluated (the last level, below the minimum size) count as linear. Within
     ``GAIN_LIMIT``; 1 for a patch with no reflected light."""
-    P = len(ctx.area)
+    P = len(patches.area)
     if forest.n_leaves == 0 or len(cache.keys) == 0:
         return np.ones(P)
     y = luminance_of(cache.vals)
@@ -300,7 +306,7 @@ def probe_shot_gain(forest: qt.Forest, cache: VertexCache, ctx: Context) -> np.n
         q, (yc.sum(axis=1) + 4.0 * yp[:, 1:5].sum(axis=1) + 16.0 * yp[:, 0]) / 36.0, yp[:, :3].mean(axis=1)
     )
     quad = np.where(have, quad, lin)
-    la = qt.leaf_area(forest, ctx.corners)
+    la = qt.leaf_area(forest, patches.corners)
     num = np.bincount(forest.leaf_patch, weights=la * quad, minlength=P)
     den = np.bincount(forest.leaf_patch, weights=la * lin, minlength=P)
     gain = np.where(den > 0, num / np.where(den > 0, den, 1.0), 1.0)

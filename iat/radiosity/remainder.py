@@ -32,6 +32,7 @@ from iat.radiosity.options import (
     MAX_REFLECTANCE,
 )
 from iat.radiosity.sampling import concentric_disk, pattern_side
+from iat.radiosity.state import Mesh
 
 
 def hemisphere_rays(ctx, geo):
@@ -40,7 +41,7 @@ def hemisphere_rays(ctx, geo):
     vertex) as embreex takes them, origins and directions (b k, 3) float32, the directions (b k, 3)
     float64, and k. The arrays are reused for the next block."""
     m = pattern_side(AMBIENT_RAYS)
-    pat = ctx.pattern(ctx.n_patches, m, 0)  # (a patch index no shooter has)
+    pat = ctx.gathers.pattern(ctx.patches.n_patches, m, 0)  # (a patch index no shooter has)
     dx, dy = concentric_disk(pat[:, 0], pat[:, 1])
     k = pat.shape[0]
     size = max(1, AMBIENT_BLOCK_RAYS // k)  # vertices a block
@@ -49,7 +50,7 @@ def hemisphere_rays(ctx, geo):
     origin32 = geo.origin32()
     for a in range(0, len(geo.key), size):
         sl = slice(a, min(a + size, len(geo.key)))
-        t1, t2 = ctx.tangent[geo.patch[sl], 0], ctx.tangent[geo.patch[sl], 1]
+        t1, t2 = ctx.patches.tangent[geo.patch[sl], 0], ctx.patches.tangent[geo.patch[sl], 1]
         b = (sl.stop - sl.start) * k
         cosine_rays(dx, dy, t1, t2, np.ascontiguousarray(geo.normal[sl]), origin32[sl], w[:b], o[:b], d[:b])
         yield sl, o[:b], d[:b], w[:b], k
@@ -59,16 +60,16 @@ def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, check
     """(V, 3) each vertex's mean, over its :func:`hemisphere_rays`, of the radiance ``grids``
     ((P, g+1, g+1, 3): each patch's field on a g x g lattice) where they meet a front face, and,
     when ``tally``, the (V, P) CSR fraction of each vertex's rays that meet each patch (else None).
-    geo : the vertices' :class:`~iat.radiosity.context.ReceiverGeometry`; tri_patch (T,), tri_uv
+    geo : the vertices' :class:`~iat.radiosity.patches.ReceiverGeometry`; tri_patch (T,), tri_uv
     (T, 3, 2): the patch and lattice (u, v) of each of ``vis``'s opaque triangles."""
     g = grids.shape[1] - 1
     flat = np.ascontiguousarray(grids.reshape(-1, 3))
     mean = np.zeros((len(geo.key), 3))
     per_vertex, cols, counts = [], [], []  # (V, P) CSR by rows: the kernel writes them in vertex order
     for sl, o, d, w, k in hemisphere_rays(ctx, geo):
-        tri, bary = vis.first_hits(o, d, np.full(len(o), 4.0 * ctx.scale, dtype=np.float32))
+        tri, bary = vis.first_hits(o, d, np.full(len(o), 4.0 * ctx.patches.scale, dtype=np.float32))
         r, c, f = np.empty(len(o), np.int64), np.empty(len(o), np.int64), np.empty(len(o))
-        m = ambient_hits(tri, bary, w, tri_patch, tri_uv, ctx.normal, flat, g, k, mean[sl], r, c, f)
+        m = ambient_hits(tri, bary, w, tri_patch, tri_uv, ctx.patches.normal, flat, g, k, mean[sl], r, c, f)
         if tally:
             per_vertex.append(np.bincount(r[:m], minlength=sl.stop - sl.start))
             cols.append(c[:m].astype(np.int32))
@@ -77,28 +78,26 @@ def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, check
     if not tally:
         return mean, None
     indptr = np.concatenate([[0], np.cumsum(np.concatenate(per_vertex))])
-    shape = (len(geo.key), ctx.n_patches)
+    shape = (len(geo.key), ctx.patches.n_patches)
     return mean, sparse.csr_matrix((np.concatenate(counts), np.concatenate(cols), indptr), shape=shape)
 
 
-def ambient_term(ctx, mesh: dict, vis, scene, unshot: np.ndarray, gain: np.ndarray, check) -> np.ndarray:
+def ambient_term(ctx, mesh: Mesh, vis, scene, unshot: np.ndarray, gain: np.ndarray, check) -> np.ndarray:
     """(V, 3) the reflected radiance the unshot light adds over all its later bounces (see the
-    module docstring).
+    module docstring), on the solve's ``mesh`` (V vertices).
 
-    mesh : the solve's mesh (``geo`` the vertices' geometry, ``M`` the (P, V) averaging matrix,
-    ``rho`` (V, 3) the vertices' albedo, ``lattice`` its :class:`~iat.radiosity.sampling.Lattice`)
     unshot : (V, 3) unshot radiance; gain : (P,) each patch's shot gain."""
-    geo, avg, rho, lattice = mesh["geo"], mesh["M"], mesh["rho"], mesh["lattice"]
-    g = min(AMBIENT_GRID, ctx.n)
+    geo, avg, rho, lattice = mesh.geo, mesh.M, mesh.rho, mesh.lattice
+    g = min(AMBIENT_GRID, ctx.patches.n)
     tris = scene.world_triangle_patch()[vis.opaque], scene.world_triangle_uv()[vis.opaque]
     grids = lattice.coarse_grids(unshot, g) * gain[:, None, None, None]
     first, fv = hemisphere_gather(ctx, geo, vis, *tris, grids, check, True)
     r1 = rho * first
     grids = lattice.coarse_grids(r1, g)
-    grids[ctx.clipped] = np.asarray(avg @ r1)[ctx.clipped][:, None, None, :]
+    grids[ctx.patches.clipped] = np.asarray(avg @ r1)[ctx.patches.clipped][:, None, None, :]
     second, _ = hemisphere_gather(ctx, geo, vis, *tris, grids, check, False)  # the same rays again
     r2 = rho * second
-    rho_p = np.minimum(np.asarray(ctx.albedo, dtype=np.float64), MAX_REFLECTANCE)
+    rho_p = np.minimum(np.asarray(ctx.patches.albedo, dtype=np.float64), MAX_REFLECTANCE)
     src = np.asarray(avg @ r2)
 
     def bounce(x):  # rho F x, F = M F_v (P, P) not formed: in a large building it holds every

@@ -12,12 +12,15 @@ from iat.color import LUMINANCE_WEIGHTS
 from iat.errors import OptionError
 from iat.progress import Progress
 from iat.radiosity.checks import check_mesh, check_scene, validated_options
-from iat.radiosity.context import SolveCancelled, emitter_shares, light_power, solver_albedo
+from iat.radiosity.direct import light_power
 from iat.radiosity.options import RESOLVE_MAX_CHANGE, SolveOptions
+from iat.radiosity.patches import emitter_shares, solver_albedo
+from iat.radiosity.progress import SolveCancelled
 from iat.radiosity.run import SolveRun
 from iat.radiosity.solution import Solution
 from iat.radiosity.solver import solve
 from iat.radiosity.sources import light_from_record, light_record, light_signature
+from iat.radiosity.state import Shoot
 from iat.radiosity.visibility import Visibility
 
 
@@ -92,38 +95,39 @@ def resolve(
         run = SolveRun(scene, opts, progress, vis, t_start)
         ctx = run.ctx
         run.take_mesh(previous)
-        keys, geo = run.keys, run.mesh["geo"]
+        keys, geo = run.keys, run.mesh.geo
         old_reflected = np.asarray(previous.vert_radiance, dtype=np.float64) - old_emission[geo.patch]
         t0 = time.perf_counter()
         try:
             n_changed = len(changed_patches) + len(added) + len(removed)
-            run.report(0.0, f"resolving: direct light of {n_changed} changed sources")
+            run.progress.report(0.0, f"resolving: direct light of {n_changed} changed sources")
             incoming = np.zeros((len(keys), 3))
             old_share = emitter_shares(old_emission, area)
             for e in changed_patches:  # the old light off and the new on, each sampled as solved
-                was, now = ctx.emitter_side(old_share[e]), ctx.emitter_side(ctx.emitter_share[e])
+                was, now = (
+                    ctx.light.emitter_side(old_share[e]),
+                    ctx.light.emitter_side(ctx.patches.emitter_share[e]),
+                )
                 if was == now:
-                    incoming += ctx.emitter_gather(int(e), geo, now)[:, None] * diff[e]
+                    incoming += ctx.light.emitter_gather(int(e), geo, now)[:, None] * diff[e]
                 else:
                     for side, e_rad in ((now, emission[e]), (was, -old_emission[e])):
                         if e_rad.any():
-                            incoming += ctx.emitter_gather(int(e), geo, side)[:, None] * e_rad
+                            incoming += ctx.light.emitter_gather(int(e), geo, side)[:, None] * e_rad
                 run.check()
             for sign, group in ((1.0, added), (-1.0, removed)):
                 for lt in group:
-                    incoming += sign * ctx.light_irradiance(lt, geo) / np.pi
+                    incoming += sign * ctx.light.light_irradiance(lt, geo) / np.pi
                     run.check()
-            delta = ctx.albedo[geo.patch] * incoming
+            delta = ctx.patches.albedo[geo.patch] * incoming
         except SolveCancelled:
             delta = np.zeros((len(keys), 3))
-        run.timings["meshing_s"] = time.perf_counter() - t0
-        run.reflected = old_reflected + delta
-        run.offset = run.light_correction(
+        offset = run.light_correction(
             lights=added + removed, signs=[1.0] * len(added) + [-1.0] * len(removed)
         )
-        run.unshot = delta + run.offset
-        if not run.state["cancelled"]:
-            run.run_plan([("shoot", opts.convergence * min(run.power0, delta_power), (0.2, 1.0))])
+        run.set_direct(old_reflected + delta, offset, delta + offset, time.perf_counter() - t0)
+        if not run.progress.cancelled:
+            run.run_plan([Shoot(opts.convergence * min(run.power0, delta_power), (0.2, 1.0))])
         return run.finish(
             mode="resolve",
             fallback_reflectance=previous.stats.get("reflectance"),

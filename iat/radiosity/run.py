@@ -11,12 +11,10 @@ import time
 import numpy as np
 
 from iat.geometry import quadtree as qt
-from iat.radiosity.context import Context, SolveCancelled, ranges_of
+from iat.radiosity.context import Context
 from iat.radiosity.kernels import add_at_rows, rows_product
 from iat.radiosity.meshing import (
     VertexCache,
-    averaging_matrix,
-    coarse_keys,
     coarse_weights,
     measure_interpolation_bias,
     probe_shot_gain,
@@ -36,23 +34,28 @@ from iat.radiosity.options import (
     SHOT_SAMPLE_FACTOR,
     SolveOptions,
 )
+from iat.radiosity.patches import ranges_of
+from iat.radiosity.progress import SolveCancelled, SolveProgress
 from iat.radiosity.remainder import ambient_term
-from iat.radiosity.sampling import Lattice, luminance_of, pattern_side, peak_factor
+from iat.radiosity.sampling import luminance_of, pattern_side, peak_factor
 from iat.radiosity.solution import Solution
 from iat.radiosity.sources import sources_record
+from iat.radiosity.state import CoarseGrid, Mesh, Radiance, Refine, Shoot
 from iat.radiosity.visibility import Visibility
 
 
 class SolveRun:
-    """The state of one solve: the mesh, per-vertex reflected and unshot radiance, stats."""
+    """The state of one solve, one owner for each piece: ``ctx`` (:class:`Context`, what does
+    not change), ``progress`` (:class:`SolveProgress`), ``mesh`` (:class:`Mesh`, replaced when
+    stage C refines), ``coarse`` (the :class:`CoarseGrid` receivers and what they received),
+    ``rad`` (:class:`Radiance` at the mesh's vertices), the shot counters and the stats."""
 
     def __init__(self, scene, opts: SolveOptions, progress, vis: Visibility, t_start: float):
         self.scene, self.opts, self.vis, self.t_start = scene, opts, vis, t_start
-        self.progress = progress
+        self.progress = SolveProgress(progress)
         self.ctx = ctx = Context(scene, opts, vis)
-        self.P = len(ctx.area)
+        self.P = ctx.patches.n_patches
         self.m_side = pattern_side(opts.samples)
-        self.state = {"cancelled": False, "last": 0.0, "fraction": 0.0, "message": ""}
         self.stats: dict = {
             "interpolation_bias": 0.0,
             "interpolation_bias_vertices": 0,
@@ -66,116 +69,70 @@ class SolveRun:
         self.shot_index = np.ones(self.P, dtype=np.int64)  # jitter index per patch; 0 was the direct pass
         self.shot_power = np.zeros(self.P)  # luminance power each patch has shot so far
         self.shot_log: list[tuple[np.ndarray, np.ndarray]] = []  # (shot, received-and-reflected) power
-        self.power0 = ctx.emitted_power()
+        self.power0 = ctx.light.emitted_power()
         # what convergence and sample shares are measured against: the power the scene received
         # from its sources in the direct pass (the emitted power until then; in an open scene
         # most of that escapes, and the rest would look converged before any bounce)
         self.power_ref = self.power0
-        self.mesh: dict = {}
-        self.coarse: list[dict] | None = None  # coarse receiver grids, with what they received
+        self.u_start = 1e-300  # the unshot power when the plan began (progress is on a log scale)
+        self.mesh: Mesh | None = None
+        self.coarse: list[CoarseGrid] | None = None  # made at the first mesh (they depend on none)
         self.levels: dict[int, np.ndarray] = {}  # per shooter: receiver level of each patch (-1: vertices)
-        self.reflected = np.zeros((0, 3))
-        self.unshot = np.zeros((0, 3))
-        # what a vertex's patch shoots is reflected + offset (the element-integrated light of the
-        # point lights instead of its exact vertex value, see :meth:`light_correction`); what it
-        # has shot so far is reflected + offset - unshot
-        self.offset = np.zeros((0, 3))
-        # per patch: what it shoots is its unshot field times this (:meth:`shot_gain`)
-        self.gain = np.ones(self.P)
+        self.direct_cache = VertexCache()  # reflected direct radiance at every point evaluated
+        self.rad = Radiance.zeros(0, self.P)
 
-    # -- progress -----------------------------------------------------------------
-    def report(self, fraction: float, message: str) -> None:
-        st = self.state
-        st["fraction"], st["message"] = fraction, message
-        if self.progress is not None and self.progress(float(min(max(fraction, 0.0), 1.0)), message) is False:
-            st["cancelled"] = True
-            raise SolveCancelled
-
-    def _step(self, message: str) -> None:
-        """Report a new stage at the current fraction (so a big model is never silent for long);
-        nothing once the solve was cancelled (it is finishing with what it has)."""
-        if not self.state["cancelled"]:
-            try:
-                self.report(self.state["fraction"], message)
-            except SolveCancelled:
-                pass  # the stages below see state["cancelled"] and keep what was evaluated
-
-    def check(self) -> None:  # cheap poll inside long loops, at most 20 times a second
-        now = time.perf_counter()
-        if self.progress is not None and now - self.state["last"] > 0.05:
-            self.state["last"] = now
-            self.report(self.state["fraction"], self.state["message"])
+    def check(self) -> None:
+        """The progress poll the stages call inside long loops."""
+        self.progress.check()
 
     # -- the mesh -----------------------------------------------------------------
     def set_mesh(self, forest: qt.Forest, keys: np.ndarray) -> None:
-        ctx, mesh = self.ctx, self.mesh
-        mesh["forest"], mesh["keys"] = forest, keys
-        mesh["M"] = averaging_matrix(forest, keys, ctx.corners, ctx.area)
-        mesh["lattice"] = Lattice(forest, keys)
-        mesh["start"] = np.searchsorted(keys, qt.make_key(np.arange(self.P + 1), 0, 0, ctx.n))
-        mesh["geo"] = ctx.geometry(keys)
-        mesh["geo"].cache = {}
-        mesh["rho"] = ctx.albedo[qt.decode_key(keys, ctx.n)[0]]
-        if self.coarse is None:  # the coarse receiver grids do not depend on the mesh
-            self.coarse = []
-            for level in range(min(len(COARSE_EPS), ctx.opts.max_depth)):
-                ck = coarse_keys(ctx.is_quad, level, ctx.n)
-                cgeo = ctx.geometry(ck)
-                cgeo.cache = {}
-                self.coarse.append(
-                    {
-                        "keys": ck,
-                        "geo": cgeo,
-                        "npts": np.diff(cgeo.start),
-                        "rho": ctx.albedo[cgeo.patch],
-                        "acc": np.zeros((len(ck), 3)),
-                    }
-                )
-        mesh["coarse_w"] = [
-            coarse_weights(keys, c["keys"], ctx.is_quad, lv, ctx.n) for lv, c in enumerate(self.coarse)
-        ]
-        # (P,) bool per coarse level: the patches with more vertices than its grid (worth receiving on
-        # it), and at some level
-        nverts = np.diff(mesh["start"])
-        mesh["finer"] = [nverts > c["npts"] for c in self.coarse]
-        mesh["finer_any"] = np.logical_or.reduce(mesh["finer"]) if self.coarse else np.zeros(self.P, bool)
+        if self.coarse is None:
+            self.coarse = CoarseGrid.levels(self.ctx.patches, self.opts.max_depth)
+        self.mesh = Mesh.build(self.ctx.patches, forest, keys, self.coarse)
 
     @property
     def forest(self) -> qt.Forest:
-        return self.mesh["forest"]
+        return self.mesh.forest
 
     @property
     def keys(self) -> np.ndarray:
-        return self.mesh["keys"]
+        return self.mesh.keys
+
+    def set_direct(
+        self, reflected: np.ndarray, offset: np.ndarray, unshot: np.ndarray, seconds: float
+    ) -> None:
+        """Start shooting from this direct light (V, 3) each, found in ``seconds`` (a re-solve's
+        difference of the sources: :func:`iat.radiosity.resolving.resolve`)."""
+        self.rad = Radiance(reflected, unshot, offset, self.rad.gain)
+        self.timings["meshing_s"] = seconds
 
     def mesh_by_direct_light(self) -> None:
         """Stage A."""
-        ctx = self.ctx
+        ctx, pg = self.ctx, self.progress
         t0 = time.perf_counter()
-        roots = qt.roots(ctx.is_quad, self.opts.max_depth)
-        self.direct_cache = VertexCache()
+        roots = qt.roots(ctx.patches.is_quad, self.opts.max_depth)
         forest, passes, _ = split_test(
             ctx,
             roots,
             self.direct_cache,
-            lambda k: ctx.direct(k, self.check),
-            self.report,
+            lambda k: ctx.light.direct(k, self.check),
+            pg.report,
             "meshing",
             (0.0, 0.2),
         )
         keys = qt.vertex_keys(forest)
-        bias, bias_n = measure_interpolation_bias(keys, qt.vertex_keys(roots), self.direct_cache, ctx)
+        bias, bias_n = measure_interpolation_bias(keys, qt.vertex_keys(roots), self.direct_cache, ctx.patches)
         self.stats.update(
             mesh_passes=int(passes), interpolation_bias=bias, interpolation_bias_vertices=bias_n
         )
-        self._step(f"meshing: {forest.n_leaves} elements, vertex table")
+        pg.step(f"meshing: {forest.n_leaves} elements, vertex table")
         self.set_mesh(forest, keys)
-        self.reflected = self.direct_cache.get(keys)  # 0 where a cancel left a vertex unevaluated
-        self._step("meshing: light the elements receive")
-        self.offset = self.light_correction()
-        self.unshot = self.reflected + self.offset
-        self._step("meshing: power each patch shoots")
-        self.gain = self.shot_gain(self.direct_cache)
+        reflected = self.direct_cache.get(keys)  # 0 where a cancel left a vertex unevaluated
+        pg.step("meshing: light the elements receive")
+        offset = self.light_correction()
+        pg.step("meshing: power each patch shoots")
+        self.rad = Radiance(reflected, reflected + offset, offset, self.shot_gain(self.direct_cache, offset))
         self.power_ref = self.received_power()
         self.timings["meshing_s"] = time.perf_counter() - t0
 
@@ -191,20 +148,18 @@ class SolveRun:
             np.asarray(sol.leaf_flip, dtype=bool),
         )
         self.set_mesh(forest, np.asarray(sol.vert_key, dtype=np.int64))
-        self.reflected = np.zeros((len(self.keys), 3))
-        self.unshot = np.zeros((len(self.keys), 3))
-        self.offset = np.zeros((len(self.keys), 3))
+        self.rad = Radiance.zeros(len(self.keys), self.P)
 
     def direct_on_mesh(self) -> None:
         """Direct light at every vertex of the given mesh (no subdivision)."""
         t0 = time.perf_counter()
-        self.report(0.0, f"direct light on the given mesh: {len(self.keys)} vertices")
+        self.progress.report(0.0, f"direct light on the given mesh: {len(self.keys)} vertices")
         try:
-            self.reflected = self.ctx.direct(self.keys, self.check, self.mesh["geo"])
+            reflected = self.ctx.light.direct(self.keys, self.check, self.mesh.geo)
         except SolveCancelled:
-            self.reflected = np.zeros((len(self.keys), 3))
-        self.offset = self.light_correction()
-        self.unshot = self.reflected + self.offset
+            reflected = np.zeros((len(self.keys), 3))
+        offset = self.light_correction()
+        self.rad = Radiance(reflected, reflected + offset, offset, self.rad.gain)
         self.power_ref = self.received_power()
         self.timings["meshing_s"] = time.perf_counter() - t0
 
@@ -214,37 +169,37 @@ class SolveRun:
         nothing and do not count. In a closed scene this is the emitted power."""
         if not len(self.keys):
             return 0.0
-        rho = self.ctx.albedo
-        mean = self.mesh["M"] @ np.abs(self.reflected + self.offset)
+        rho = self.ctx.patches.albedo
+        mean = self.mesh.M @ np.abs(self.rad.reflected + self.rad.offset)
         incident = np.where(rho > 1e-6, mean / np.maximum(rho, 1e-6), 0.0)
-        return float(np.pi * (luminance_of(incident) * self.ctx.area).sum())
+        return float(np.pi * (luminance_of(incident) * self.ctx.patches.area).sum())
 
     def light_correction(self, forest=None, keys=None, geo=None, lights=None, signs=None) -> np.ndarray:
-        """(V, 3) :meth:`Context.light_correction` on the current mesh (or the given one): added to
-        the exact reflected direct radiance, it gives the unshot radiance whose power is what the
+        """(V, 3) :meth:`DirectLight.light_correction` on the current mesh (or the given one): added
+        to the exact reflected direct radiance, it gives the unshot radiance whose power is what the
         elements received from the point / spot lights. Zero when cancelled."""
         forest = self.forest if forest is None else forest
         keys = self.keys if keys is None else keys
-        geo = self.mesh["geo"] if geo is None else geo
-        if self.state["cancelled"]:
+        geo = self.mesh.geo if geo is None else geo
+        if self.progress.cancelled:
             return np.zeros((len(keys), 3))
         try:
-            return self.ctx.light_correction(forest, keys, geo, lights, signs)
+            return self.ctx.light.light_correction(forest, keys, geo, lights, signs)
         except SolveCancelled:
             return np.zeros((len(keys), 3))
 
-    def shot_gain(self, cache: VertexCache) -> np.ndarray:
+    def shot_gain(self, cache: VertexCache, offset: np.ndarray) -> np.ndarray:
         """(P,) :func:`probe_shot_gain` of the current mesh from the values in ``cache``: the power of each
         patch's light integrated with its probes over that of its linear interpolant, which its
         shots multiply (an element that stays coarse under concave light interpolates below it).
-        1 on patches lit by point or spot lights (their ``offset`` already shoots the light the
-        elements hold) and when the solve was cancelled."""
-        if self.state["cancelled"]:
+        1 on patches lit by point or spot lights (whose ``offset`` (V, 3) already shoots the light
+        the elements hold) and when the solve was cancelled."""
+        if self.progress.cancelled:
             return np.ones(self.P)
-        gain = probe_shot_gain(self.forest, cache, self.ctx)
-        if len(self.offset) and np.any(self.offset):
+        gain = probe_shot_gain(self.forest, cache, self.ctx.patches)
+        if len(offset) and np.any(offset):
             lit = np.zeros(self.P, dtype=bool)
-            lit[qt.decode_key(self.keys, self.ctx.n)[0][np.any(self.offset != 0, axis=1)]] = True
+            lit[qt.decode_key(self.keys, self.ctx.patches.n)[0][np.any(offset != 0, axis=1)]] = True
             gain[lit] = 1.0
         return gain
 
@@ -253,60 +208,68 @@ class SolveRun:
         """(P,) luminance power of each patch's unshot field (by magnitude: it may be signed);
         ``m_abs`` (P, 3): ``M @ |unshot|`` when the caller keeps it (then ``unshot`` is not read)."""
         if m_abs is None:
-            m_abs = self.mesh["M"] @ np.abs(unshot)
-        return np.pi * luminance_of(m_abs) * self.ctx.area
+            m_abs = self.mesh.M @ np.abs(unshot)
+        return np.pi * luminance_of(m_abs) * self.ctx.patches.area
 
-    def shoot(self, span, target: float) -> None:
-        """Shoot until the unshot power is below ``target`` or max_shots, a :meth:`shot_group`
+    def shoot(self, step: Shoot) -> None:
+        """Shoot until the unshot power is below ``step.target`` or max_shots, a :meth:`shot_group`
         at a time."""
-        ctx, mesh, opts = self.ctx, self.mesh, self.opts
+        ctx, mesh, opts, rad = self.ctx, self.mesh, self.opts, self.rad
         if self.power_ref <= 0 or len(self.keys) == 0:
             return
         t0 = time.perf_counter()
-        u_start = self.u_start
+        span, target, u_start = step.span, step.target, self.u_start
         span_log = math.log(u_start / target) if u_start > target > 0 else 1.0  # progress on a log scale
-        avg, vpatch = mesh["M"], mesh["geo"].patch
-        csr = (avg.indptr, avg.indices, avg.data)
         # M @ |unshot| (P, 3) (what :meth:`patch_power` weighs), kept up to date by the shots' rows
-        m_abs = avg @ np.abs(self.unshot)
+        m_abs = mesh.M @ np.abs(rad.unshot)
         # (V,) what a unit of reflected radiance at a vertex is in power: pi M^T area
-        vertex_power = np.pi * (avg.T @ ctx.area)
-        reached = np.zeros(self.P, dtype=bool)
+        vertex_power = np.pi * (mesh.M.T @ ctx.patches.area)
         try:
             while self.shots < opts.max_shots:
-                power = self.patch_power(self.unshot, m_abs)
+                power = self.patch_power(rad.unshot, m_abs)
                 total = float(power.sum())
                 if total <= target:
                     break
                 done = min(1.0, max(0.0, math.log(u_start / max(total, 1e-300)) / span_log))
-                self.state["fraction"] = span[0] + (span[1] - span[0]) * done
-                self.state["message"] = (
-                    f"shooting: {self.shots} shots, unshot {total / self.power_ref:.3g} of received"
+                self.progress.set(
+                    span[0] + (span[1] - span[0]) * done,
+                    f"shooting: {self.shots} shots, unshot {total / self.power_ref:.3g} of received",
                 )
                 self.check()
                 group = self.shot_group(power, opts.max_shots - self.shots)
                 jobs = [(s, float(power[s])) for s in group]  # each shot's field is taken in its task
-                shots = list(ctx.imap(lambda job: self.shot_gather(*job), jobs, self.check))
+                shots = list(ctx.pool.imap(lambda job: self.shot_gather(*job), jobs, self.check))
                 for s in group:  # (the light one shooter of the group sends another stays unshot there)
-                    self.unshot[mesh["start"][s] : mesh["start"][s + 1]] = 0.0
-                for s, (rows, dv, acc, field_mean) in zip(group, shots, strict=True):
-                    for k, ci, got in acc:
-                        add_at_rows(self.coarse[k]["acc"], ci, got)
-                    self.shot_index[s] += 1
-                    self.shot_power[s] += float(power[s])
-                    self.shots += 1
-                    add_at_rows(self.reflected, rows, dv)
-                    add_at_rows(self.unshot, rows, dv)
-                    # the rows of M @ |unshot| that changed: the patches it reached, and s
-                    reached[vpatch[rows]] = True
-                    reached[s] = True
-                    touched = np.flatnonzero(reached)
-                    reached[touched] = False
-                    m_abs[touched] = rows_product(*csr, self.unshot, touched, True)
-                    received = vertex_power[rows] @ dv  # (rows are distinct)
-                    self.shot_log.append((np.pi * ctx.area[s] * field_mean, received))
+                    rad.unshot[mesh.start[s] : mesh.start[s + 1]] = 0.0
+                for s, shot in zip(group, shots, strict=True):
+                    self.apply_shot(s, float(power[s]), shot, m_abs, vertex_power)
         finally:
             self.timings["shooting_s"] += time.perf_counter() - t0
+
+    def apply_shot(
+        self, s: int, power: float, shot: tuple, m_abs: np.ndarray, vertex_power: np.ndarray
+    ) -> None:
+        """Add what one :meth:`shot_gather` from s (of luminance ``power``) returned: to the coarse
+        grids, the vertices' reflected and unshot radiance, and the rows of ``m_abs`` ((P, 3),
+        ``M @ |unshot|``) that changed; log what it shot and what the vertices it reached
+        received (``vertex_power`` (V,): the power of a unit of reflected radiance at each)."""
+        mesh, rad, P = self.mesh, self.rad, self.ctx.patches
+        rows, dv, acc, field_mean = shot
+        for k, ci, got in acc:
+            add_at_rows(self.coarse[k].acc, ci, got)
+        self.shot_index[s] += 1
+        self.shot_power[s] += power
+        self.shots += 1
+        add_at_rows(rad.reflected, rows, dv)
+        add_at_rows(rad.unshot, rows, dv)
+        # the rows of M @ |unshot| that changed: the patches it reached, and s
+        reached = np.zeros(self.P, dtype=bool)
+        reached[mesh.geo.patch[rows]] = True
+        reached[s] = True
+        touched = np.flatnonzero(reached)
+        m_abs[touched] = rows_product(mesh.M.indptr, mesh.M.indices, mesh.M.data, rad.unshot, touched, True)
+        received = vertex_power[rows] @ dv  # (rows are distinct)
+        self.shot_log.append((np.pi * P.area[s] * field_mean, received))
 
     def samples_by_power(self, m_hi: int, power: float, field: np.ndarray) -> int:
         """Samples per side of a gather of a shooter's ``field`` ((N+1, N+1, 3) lattice radiance)
@@ -342,22 +305,22 @@ class SolveRun:
         ctx, mesh = self.ctx, self.mesh
         lvl = np.full(self.P, -1, dtype=np.int8)
         if self.coarse:
-            dist = np.linalg.norm(ctx.centre - ctx.centre[s], axis=1) - ctx.radius[s]
-            size = ctx.radius / np.maximum(dist, 1e-300)
+            dist = np.linalg.norm(ctx.patches.centre - ctx.patches.centre[s], axis=1) - ctx.patches.radius[s]
+            size = ctx.patches.radius / np.maximum(dist, 1e-300)
             size[dist <= 0] = np.inf
             # form factors only to the corners of patches small and far enough for some level
-            may = (size < max(COARSE_SIZE)) & mesh["finer_any"]
-            cgeo = self.coarse[0]["geo"]  # the patches' corners
-            idx, f = ctx.form_factors(s, cgeo, patches=may)
+            may = (size < max(COARSE_SIZE)) & mesh.finer_any
+            cgeo = self.coarse[0].geo  # the patches' corners
+            idx, f = ctx.gathers.form_factors(s, cgeo, patches=may)
             fmax = np.zeros(self.P)
             np.maximum.at(fmax, cgeo.patch[idx], f)
-            y = mesh["M"] @ luminance_of(self.reflected) + luminance_of(ctx.emission)
-            floor = ABS_FLOOR * float((y * ctx.area).sum() / max(ctx.area.sum(), 1e-300))
+            y = mesh.M @ luminance_of(self.rad.reflected) + luminance_of(ctx.patches.emission)
+            floor = ABS_FLOOR * float((y * ctx.patches.area).sum() / max(ctx.patches.area.sum(), 1e-300))
             lum_mean = float(luminance_of(np.abs(field_mean)))
-            rel = fmax * lum_mean * luminance_of(ctx.albedo) / (y + max(floor, 1e-30))
+            rel = fmax * lum_mean * luminance_of(ctx.patches.albedo) / (y + max(floor, 1e-30))
             for level in range(len(self.coarse) - 1, -1, -1):  # the coarsest that is fine enough
                 sel = (rel < COARSE_EPS[level]) & (size < COARSE_SIZE[level])
-                sel &= mesh["finer"][level]
+                sel &= mesh.finer[level]
                 lvl[sel] = level
         self.levels[s] = lvl
         return lvl
@@ -371,137 +334,87 @@ class SolveRun:
         ``acc``; ``field_mean`` (3,) the mean radiance it shot. A shot reads no state that another
         shot of its group writes (the caller applies them once all have returned)."""
         ctx, mesh = self.ctx, self.mesh
-        avg = mesh["M"]
-        field = mesh["lattice"].grid(s, self.unshot) * self.gain[s]
-        field_mean = rows_product(avg.indptr, avg.indices, avg.data, self.unshot, np.array([s]), False)[0]
-        field_mean = field_mean * self.gain[s]
+        avg = mesh.M
+        field = mesh.lattice.grid(s, self.rad.unshot) * self.rad.gain[s]
+        field_mean = rows_product(avg.indptr, avg.indices, avg.data, self.rad.unshot, np.array([s]), False)[0]
+        field_mean = field_mean * self.rad.gain[s]
         m = self.samples_by_power(SHOT_SAMPLE_FACTOR * self.m_side, power, field)
         shot = int(self.shot_index[s])
         lvl = self.receiver_levels(s, field_mean)
         # the vertices of the patches it lights noticeably, and a coarse grid per level of the others
         levels = [k for k in range(len(self.coarse or [])) if (lvl == k).any()]
-        parts = [(mesh["geo"], lvl < 0)] + [(self.coarse[k]["geo"], lvl == k) for k in levels]
-        (idx, g), *got = ctx.gathers(s, parts, m, shot, field, field_mean, correlated=False, cull=True)
-        rows, dv, acc = [idx], [mesh["rho"][idx] * g], []
+        parts = [(mesh.geo, lvl < 0)] + [(self.coarse[k].geo, lvl == k) for k in levels]
+        (idx, g), *got = ctx.gathers.gathers(
+            s, parts, m, shot, field, field_mean, correlated=False, cull=True
+        )
+        rows, dv, acc = [idx], [mesh.rho[idx] * g], []
         for k, (ci, g) in zip(levels, got, strict=True):
-            c, w = self.coarse[k], mesh["coarse_w"][k]
-            got_c = c["rho"][ci] * g
+            c, w = self.coarse[k], mesh.coarse_w[k]
+            got_c = c.rho[ci] * g
             acc.append((k, ci, got_c))
-            gc = np.zeros_like(c["acc"])  # dense: the interpolation weights index grid points
+            gc = np.zeros_like(c.acc)  # dense: the interpolation weights index grid points
             gc[ci] = got_c
             # the vertices of the patches at this level whose grid received take what it received
             # (a vertex interpolates its own patch's grid)
             got_any = np.zeros(self.P, dtype=bool)
-            got_any[c["geo"].patch[ci]] = True
-            rows.append(ranges_of(mesh["start"], np.flatnonzero(got_any & (lvl == k))))
+            got_any[c.geo.patch[ci]] = True
+            rows.append(ranges_of(mesh.start, np.flatnonzero(got_any & (lvl == k))))
             dv.append(rows_product(w.indptr, w.indices, w.data, gc, rows[-1], False))
         return np.concatenate(rows), np.concatenate(dv), acc, field_mean
 
-    def refine_total(self, label: str, span) -> None:
+    def refine_total(self, step: Refine) -> None:
         """Stage C: refine on the total radiance. New vertices get their direct light and a
         gather of everything each patch has shot so far (exact: shots are linear, so one
-        gather of their sum equals replaying them all), never an interpolated value. Their
-        unshot radiance is what they received minus what their patch already shot from
-        there, so energy the coarser mesh could not hold is shot again, not lost."""
-        ctx, mesh = self.ctx, self.mesh
+        gather of their sum equals replaying them all), never an interpolated value
+        (:class:`TotalLight`). Their unshot radiance is what they received minus what their
+        patch already shot from there (:meth:`Radiance.remap`), so energy the coarser mesh could
+        not hold is shot again, not lost."""
+        ctx = self.ctx
         t0 = time.perf_counter()
-        keys = self.keys
-        shot_field = self.reflected + self.offset - self.unshot
-        lattice_b = mesh["lattice"]
-        sources = np.flatnonzero(self.shot_index > 1)
-        # what each source shot: its shot field times the gain its shots had
-        grids = {int(p): lattice_b.grid(int(p), shot_field) * self.gain[p] for p in sources}
-        means = (mesh["M"] @ shot_field) * self.gain[:, None]
-        total_cache = VertexCache(keys, self.reflected.copy())
-        # samples per source by the power it has shot (as the shots themselves), but
-        # REFINE_SAMPLE_FACTOR x more per side: one pattern serves all new vertices, so its error
-        # is a coherent offset of them all, which the shots' per-vertex patterns average out
-        m_ref = REFINE_SAMPLE_FACTOR * self.m_side
-        m_src = {int(p): self.samples_by_power(m_ref, self.shot_power[p], grids[int(p)]) for p in sources}
-        n_pass = self.stats["refine_passes"]
-
-        def evaluate_total(new: np.ndarray) -> np.ndarray:
-            out = self.direct_cache.get(new)
-            missing = self.direct_cache.find(new) < 0
-            if missing.any():
-                out[missing] = ctx.direct(new[missing], self.check)
-            if len(new):
-                geo = ctx.geometry(new)
-                rho = ctx.albedo[geo.patch]
-                on = np.zeros(self.P, dtype=bool)
-                on[geo.patch] = True
-                # what the coarse grids received, interpolated as at the old vertices
-                for level, c in enumerate(self.coarse or []):
-                    out += coarse_weights(new, c["keys"], ctx.is_quad, level, ctx.n) @ c["acc"]
-                # and a gather of what each source shot at the vertices of these patches
-                calls = []  # the sources that can reach these vertices (most reach none of a few)
-                for p in sources:
-                    p = int(p)
-                    fine = self.levels[p] < 0 if p in self.levels else None
-                    if (ctx.receiver_patches(p, True, fine) & on).any():
-                        calls.append((p, fine))
-
-                def gather(call):
-                    p, fine = call
-                    jitter = int(self.shot_index[p]) + 1_000_000 * (1 + n_pass)
-                    return ctx.gather(
-                        p, geo, m_src[p], jitter, grids[p], means[p], correlated=True, cull=True, patches=fine
-                    )
-
-                for g in ctx.imap(gather, calls, self.check):
-                    out += rho * g
-            return out
-
-        old_keys = keys
+        old_keys = self.keys
+        total = TotalLight(self)
         forest, passes, _ = split_test(
-            ctx, self.forest, total_cache, evaluate_total, self.report, label, span
+            ctx, self.forest, total.cache, total.evaluate, self.progress.report, step.label, step.span
         )
         self.stats["refine_passes"] += passes
         keys = qt.vertex_keys(forest)
         self.timings["refining_s"] += time.perf_counter() - t0
         if len(keys) == len(old_keys):
-            self.gain = self.shot_gain(total_cache)
+            self.rad.gain = self.shot_gain(total.cache, self.rad.offset)
             return
-        b, bn = measure_interpolation_bias(keys, old_keys, total_cache, ctx)
-        n_old = self.stats["interpolation_bias_total_vertices"]
-        if bn:  # vertex-weighted mean over the refinement stages
-            self.stats["interpolation_bias_total"] = (
-                self.stats["interpolation_bias_total"] * n_old + b * bn
-            ) / (n_old + bn)
-        self.stats["interpolation_bias_total_vertices"] = n_old + bn
-        old_idx = qt.lookup(old_keys, keys)
-        new_unshot = np.zeros((len(keys), 3))
-        new_unshot[old_idx >= 0] = self.unshot[old_idx[old_idx >= 0]]
-        self.reflected = total_cache.get(keys)
-        p_new, i_new, j_new = qt.decode_key(keys, ctx.n)
+        self.add_refine_bias(*measure_interpolation_bias(keys, old_keys, total.cache, ctx.patches))
         # new vertices shoot the element-integrated light of the point lights, not its vertex peak
         light_corr = (
-            self.light_correction(forest, keys, ctx.geometry(keys))
-            if ctx.lights
+            self.light_correction(forest, keys, ctx.patches.geometry(keys))
+            if ctx.light.lights
             else np.zeros((len(keys), 3))
         )
-        for p in np.unique(p_new[old_idx < 0]):
-            sel = np.flatnonzero((old_idx < 0) & (p_new == p))
-            shot_here = grids[int(p)][i_new[sel], j_new[sel]] if int(p) in grids else 0.0
-            new_unshot[sel] = np.maximum(self.reflected[sel] + light_corr[sel] - shot_here, 0.0)
-        self.unshot = new_unshot
-        new_offset = np.zeros((len(keys), 3))
-        new_offset[old_idx >= 0] = self.offset[old_idx[old_idx >= 0]]
-        new_offset[old_idx < 0] = light_corr[old_idx < 0]
-        self.offset = new_offset
+        old_idx = qt.lookup(old_keys, keys)
+        self.rad = self.rad.remap(
+            keys, old_idx, total.cache.get(keys), light_corr, total.grids, ctx.patches.n
+        )
         self.set_mesh(forest, keys)
-        self.gain = self.shot_gain(total_cache)
+        self.rad.gain = self.shot_gain(total.cache, self.rad.offset)
 
-    def run_plan(self, plan) -> None:
-        self.u_start = max(float(self.patch_power(self.unshot).sum()), 1e-300)
+    def add_refine_bias(self, bias: float, n: int) -> None:
+        """Fold one refinement's interpolation bias over its n late vertices into the stats (a
+        vertex-weighted mean over the refinement stages)."""
+        n_old = self.stats["interpolation_bias_total_vertices"]
+        if n:
+            mean = self.stats["interpolation_bias_total"]
+            self.stats["interpolation_bias_total"] = (mean * n_old + bias * n) / (n_old + n)
+        self.stats["interpolation_bias_total_vertices"] = n_old + n
+
+    def run_plan(self, plan: list[Shoot | Refine]) -> None:
+        self.u_start = max(float(self.patch_power(self.rad.unshot).sum()), 1e-300)
         try:
-            for kind, arg, span in plan:
-                if self.state["cancelled"]:
+            for step in plan:
+                if self.progress.cancelled:
                     break
-                if kind == "shoot":
-                    self.shoot(span, arg)
+                if isinstance(step, Shoot):
+                    self.shoot(step)
                 elif self.opts.refine_indirect and self.shots:
-                    self.refine_total(arg, span)
+                    self.refine_total(step)
         except SolveCancelled:
             pass
 
@@ -523,33 +436,31 @@ class SolveRun:
     def finish(self, mode="solve", fallback_reflectance=None, extra=None) -> Solution:
         ctx, opts = self.ctx, self.opts
         forest, keys = self.forest, self.keys
-        unshot_power = self.patch_power(self.unshot)
-        vpatch = qt.decode_key(keys, ctx.n)[0]
-        reflected = self.reflected
+        unshot_power = self.patch_power(self.rad.unshot)
+        vpatch = qt.decode_key(keys, ctx.patches.n)[0]
+        reflected = self.rad.reflected
         amb = np.zeros((len(keys), 3))
-        if opts.ambient and opts.max_shots > 0 and len(keys) and not self.state["cancelled"]:
+        if opts.ambient and opts.max_shots > 0 and len(keys) and not self.progress.cancelled:
             try:
-                amb = ambient_term(ctx, self.mesh, self.vis, self.scene, self.unshot, self.gain, self.check)
+                amb = ambient_term(
+                    ctx, self.mesh, self.vis, self.scene, self.rad.unshot, self.rad.gain, self.check
+                )
             except SolveCancelled:
                 amb = np.zeros((len(keys), 3))
             reflected = reflected + amb
-        radiance = ctx.emission[vpatch] + reflected
+        radiance = ctx.patches.emission[vpatch] + reflected
         if not np.isfinite(radiance).all():
             raise FloatingPointError("radiosity produced non-finite radiance (a solver bug)")
         radiance = np.maximum(radiance, 0.0)
         unshot_fraction = float(unshot_power.sum() / self.power_ref) if self.power_ref > 0 else 0.0
-        if not self.state["cancelled"]:
-            try:
-                self.report(1.0, f"done: {self.shots} shots, {len(keys)} vertices")
-            except SolveCancelled:
-                pass
+        self.progress.finish(f"done: {self.shots} shots, {len(keys)} vertices")
         elapsed = time.perf_counter() - self.t_start
         vis = self.vis
         sol = Solution.from_forest(
             forest,
-            ctx.corners,
+            ctx.patches.corners,
             self.scene.patch_material,
-            ctx.albedo,
+            ctx.patches.albedo,
             keys,
             radiance,
             options=opts.to_dict(),
@@ -558,7 +469,7 @@ class SolveRun:
             clip_patch=self.scene.clip_patch,
             patch_transmission=self.scene.patch_transmission.astype(np.float32),
         )
-        area_tot = float(ctx.area.sum())
+        area_tot = float(ctx.patches.area.sum())
         sol.stats = {
             "elements": int(forest.n_leaves),
             "vertices": int(len(keys)),
@@ -571,20 +482,81 @@ class SolveRun:
             "unshot_fraction": unshot_fraction,
             **self.stats,
             "max_depth_reached": int(forest.leaf_level.max()) if forest.n_leaves else 0,
-            "min_element_size": float(ctx.min_size),
+            "min_element_size": float(ctx.patches.min_size),
             "emitted_power": float(self.power0),
             "received_power": float(self.power_ref),
             "ambient_luminance_fraction": float(
-                np.pi * (ctx.area * luminance_of(self.mesh["M"] @ amb)).sum() / self.power_ref
+                np.pi * (ctx.patches.area * luminance_of(self.mesh.M @ amb)).sum() / self.power_ref
             )
             if self.power_ref > 0 and area_tot > 0
             else 0.0,
             "reflectance": [float(x) for x in self.reflected_fraction(fallback_reflectance)],
-            "culled_pairs": float(ctx.culled_fraction()),
+            "culled_pairs": float(ctx.gathers.culled_fraction()),
             "mode": mode,
             "sources": sources_record(ctx),
-            "cancelled": bool(self.state["cancelled"]),
+            "cancelled": bool(self.progress.cancelled),
             "options": opts.to_dict(),
             **(extra or {}),
         }
         return sol
+
+
+class TotalLight:
+    """Stage C's evaluation of new points (:meth:`evaluate`): their direct light, what the coarse
+    grids of their patch received (interpolated, as at the old vertices) and one gather of what
+    each source has shot so far (its shot field times its gain, ``grids``). One sample pattern per
+    source for all new vertices, with ``REFINE_SAMPLE_FACTOR`` x the samples a side its shots had
+    (its error is a coherent offset of them all, which the shots' per-vertex patterns average
+    out). ``cache`` holds the total reflected radiance of every point evaluated."""
+
+    def __init__(self, run: SolveRun):
+        self.run = run
+        rad, mesh = run.rad, run.mesh
+        shot_field = rad.shot()
+        self.sources = [int(p) for p in np.flatnonzero(run.shot_index > 1)]
+        self.grids = {p: mesh.lattice.grid(p, shot_field) * rad.gain[p] for p in self.sources}
+        self.means = (mesh.M @ shot_field) * rad.gain[:, None]
+        self.cache = VertexCache(mesh.keys, rad.reflected.copy())
+        m_ref = REFINE_SAMPLE_FACTOR * run.m_side
+        self.m_src = {p: run.samples_by_power(m_ref, run.shot_power[p], self.grids[p]) for p in self.sources}
+        self.n_pass = run.stats["refine_passes"]
+
+    def evaluate(self, new: np.ndarray) -> np.ndarray:
+        """(n, 3) the total reflected radiance at the new vertex keys (n,)."""
+        run, ctx = self.run, self.run.ctx
+        out = run.direct_cache.get(new)
+        missing = run.direct_cache.find(new) < 0
+        if missing.any():
+            out[missing] = ctx.light.direct(new[missing], run.check)
+        if not len(new):
+            return out
+        geo = ctx.patches.geometry(new)
+        rho = ctx.patches.albedo[geo.patch]
+        on = np.zeros(run.P, dtype=bool)
+        on[geo.patch] = True
+        for level, c in enumerate(run.coarse or []):
+            out += coarse_weights(new, c.keys, ctx.patches.is_quad, level, ctx.patches.n) @ c.acc
+        calls = []  # the sources that can reach these vertices (most reach none of a few)
+        for p in self.sources:
+            fine = run.levels[p] < 0 if p in run.levels else None
+            if (ctx.gathers.receiver_patches(p, True, fine) & on).any():
+                calls.append((geo, p, fine))
+        for g in ctx.pool.imap(self.gather, calls, run.check):
+            out += rho * g
+        return out
+
+    def gather(self, call: tuple) -> np.ndarray:
+        """(n, 3) what source p shot, gathered at ``geo`` (on its ``fine`` patches, None: all)."""
+        geo, p, fine = call
+        jitter = int(self.run.shot_index[p]) + 1_000_000 * (1 + self.n_pass)
+        return self.run.ctx.gathers.gather(
+            p,
+            geo,
+            self.m_src[p],
+            jitter,
+            self.grids[p],
+            self.means[p],
+            correlated=True,
+            cull=True,
+            patches=fine,
+        )

@@ -9,7 +9,7 @@ import numpy as np
 
 from iat.color import LUMINANCE_WEIGHTS
 from iat.geometry import quadtree as qt
-from iat.radiosity.kernels import hash_keys, leaf_fields
+from iat.radiosity.kernels import ShooterArrays, hash_keys, leaf_fields
 
 
 def hash_uniform(keys: np.ndarray, salt: int, k: int = 2) -> np.ndarray:
@@ -118,28 +118,25 @@ class Shooter:
         k = 1.0 - self.shrink
         base = k * self.origin + eps * normal + self.shrink * self.centre
         rows = [self.origin, normal, self.e1, self.e2, self.e3, self.a1, self.a2, *self.frame]
-        self._kargs = {
-            "geom": np.vstack([*rows, self.gram, self.cgram, self.bn]).astype(np.float64),
-            "uvc": np.ascontiguousarray(np.stack([e, f, g]), dtype=np.float64),
-            "linear_uv": bool(linear),
-            "poly_n": np.ascontiguousarray(self.edge_n, dtype=np.float64),
-            "poly_o": np.ascontiguousarray(self.edge_o, dtype=np.float64),
-            "tol": float(self.tol),
-            "is_quad": bool(is_quad),
-            "para": bool(self.parallelogram),
-            "area": float(area),
-            "mask": np.zeros((1, 1), dtype=bool) if mask is None else np.ascontiguousarray(mask, dtype=bool),
-            "has_mask": mask is not None,
-            "t32": np.stack([base, k * self.e1, k * self.e2, k * self.e3]).astype(np.float32),
-            "half_eps": np.float32(0.5 * eps),
-        }
+        self._kargs = ShooterArrays(
+            geom=np.vstack([*rows, self.gram, self.cgram, self.bn]).astype(np.float64),
+            uvc=np.ascontiguousarray(np.stack([e, f, g]), dtype=np.float64),
+            poly_n=np.ascontiguousarray(self.edge_n, dtype=np.float64),
+            poly_o=np.ascontiguousarray(self.edge_o, dtype=np.float64),
+            tol=float(self.tol),
+            is_quad=bool(is_quad),
+            para=bool(self.parallelogram),
+            linear_uv=bool(linear),
+            area=float(area),
+            mask=np.zeros((1, 1), dtype=bool) if mask is None else np.ascontiguousarray(mask, dtype=bool),
+            has_mask=mask is not None,
+            t32=np.stack([base, k * self.e1, k * self.e2, k * self.e3]).astype(np.float32),
+            half_eps=np.float32(0.5 * eps),
+        )
 
-    def kernel_args(self) -> dict:
-        """The shooter as :mod:`iat.radiosity.kernels` takes it: ``geom`` (16, 3) and ``uvc``
-        (3, 2) (rows in that module's docstring), the edges ``poly_n, poly_o`` (k, 3), the flags
-        and scalars, the coverage ``mask`` ((1, 1) and ``has_mask`` False when none) and the
-        float32 ray-target terms ``t32`` (4, 3) (``base, k e1, k e2, k e3``, ``k = 1 - shrink``:
-        the targets of points p(u, v)), ``half_eps`` (taken off the rays' length)."""
+    def kernel_args(self) -> ShooterArrays:
+        """The shooter as :mod:`iat.radiosity.kernels` takes it (``k = 1 - shrink`` in ``t32``:
+        the targets of points p(u, v))."""
         return self._kargs
 
 

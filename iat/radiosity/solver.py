@@ -38,7 +38,7 @@ B. **Progressive refinement on the settled mesh.** Each vertex's unshot radiance
    shots) times the visible fraction and the shooter's radiance, estimated from
    stratified samples on the shooter's area and, for near receivers, cosine-distributed
    directions from the vertex (multiple importance sampling, see
-   :meth:`Context.gather`), with embreex shadow rays (:mod:`.visibility`). Whole
+   :meth:`Gathers.gather`), with embreex shadow rays (:mod:`.visibility`). Whole
    patches are culled per shot first: behind the shooter or facing away, or -- for a
    shooter's later shots -- found fully occluded by its earlier ones (at least
    ``CULL_RAYS`` rays, none unoccluded). Faint shots use fewer samples. *Receiver
@@ -104,6 +104,7 @@ from iat.radiosity.context import Context
 from iat.radiosity.options import REFINE_UNSHOT, SolveOptions
 from iat.radiosity.run import SolveRun
 from iat.radiosity.solution import Solution
+from iat.radiosity.state import Refine, Shoot
 from iat.radiosity.visibility import Visibility
 
 
@@ -143,14 +144,17 @@ def solve(
             run.mesh_by_direct_light()
             target = opts.convergence * run.power_ref  # of what the scene received (open scenes)
             first_target = max(target, REFINE_UNSHOT * opts.convergence * run.power_ref)
-            plan = [("shoot", first_target, (0.2, 0.6)), ("refine", "refining", (0.6, 0.75))]
-            plan += [("shoot", target, (0.75, 1.0))]
+            plan = [
+                Shoot(first_target, (0.2, 0.6)),
+                Refine("refining", (0.6, 0.75)),
+                Shoot(target, (0.75, 1.0)),
+            ]
         else:
             run.take_mesh(mesh)
-            if not run.state["cancelled"]:
+            if not run.progress.cancelled:
                 run.direct_on_mesh()
-            plan = [("shoot", opts.convergence * run.power_ref, (0.2, 1.0))]
-        if not run.state["cancelled"]:
+            plan = [Shoot(opts.convergence * run.power_ref, (0.2, 1.0))]
+        if not run.progress.cancelled:
             run.run_plan(plan)
         return run.finish(mode="solve" if mesh is None else "mesh")
 
@@ -163,4 +167,4 @@ def evaluate_direct(scene, keys: np.ndarray, options: SolveOptions | None = None
     opts = (SolveOptions() if options is None else options).validate()
     with Visibility.of_scene(scene) as vis:
         ctx = Context(scene, opts, vis)
-        return ctx.direct(np.asarray(keys, dtype=np.int64), lambda: None)
+        return ctx.light.direct(np.asarray(keys, dtype=np.int64), lambda: None)

@@ -15,11 +15,11 @@ def sources_record(ctx) -> dict:
     (:func:`sun_record`) and its sky (:meth:`iat.io.scene.Sky.spec`, None without one or for an HDR
     image): what a scene reloaded from the model lacks when ``--sun`` / ``--sky`` gave them."""
     return {
-        "lights": [light_record(lt) for lt in ctx.lights],
-        "emitters": [[int(p), *(float(x) for x in ctx.emission[p])] for p in ctx.emitters],
-        "daylight": bool(ctx.suns or ctx.sky is not None),
-        "suns": [sun_record(lt) for lt in ctx.suns],
-        "sky": ctx.sky.spec() if ctx.sky is not None else None,
+        "lights": [light_record(lt) for lt in ctx.light.lights],
+        "emitters": [[int(p), *(float(x) for x in ctx.patches.emission[p])] for p in ctx.patches.emitters],
+        "daylight": bool(ctx.light.suns or ctx.light.sky is not None),
+        "suns": [sun_record(lt) for lt in ctx.light.suns],
+        "sky": ctx.light.sky.spec() if ctx.light.sky is not None else None,
     }
 
 

@@ -1,0 +1,244 @@
+"""Direct light (:class:`DirectLight`): what emitting patches, point and spot lights, the sun and
+the sky put at the vertices, with ray-traced visibility, the element-integrated correction of
+point lights (:mod:`.pointlight`), and the scene's emitted power."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from iat.color import LUMINANCE_WEIGHTS
+from iat.geometry import quadtree as qt
+from iat.radiosity.gathers import Gathers
+from iat.radiosity.options import DIRECT_SAMPLE_FACTOR, GATHER_BLOCK, SKY_SAMPLES, SUN_SAMPLES, SolveOptions
+from iat.radiosity.patches import Patches, ReceiverGeometry
+from iat.radiosity.pointlight import lumped_light
+from iat.radiosity.sampling import disk_to_hemisphere, hash_uniform, luminance_of, pattern_side, rotated_disk
+from iat.radiosity.sky import sky_radiance
+from iat.radiosity.tasks import TaskPool
+from iat.radiosity.visibility import Visibility
+
+
+class DirectLight:
+    """The light sources of a scene (``lights``: its point and spot lights, ``suns``: its
+    directional lights that shine, ``sky``: its sky or None) and the direct light they put on
+    receivers, gathered with :class:`~iat.radiosity.gathers.Gathers` for emitting patches."""
+
+    def __init__(
+        self, scene, patches: Patches, opts: SolveOptions, vis: Visibility, pool: TaskPool, gathers: Gathers
+    ):
+        self.patches, self.opts, self.vis, self.pool, self.gathers = patches, opts, vis, pool, gathers
+        self.lights = [lt for lt in scene.lights if lt.kind in ("point", "spot")]
+        self.suns = [lt for lt in scene.lights if lt.kind == "directional" and np.any(lt.radiant_intensity)]
+        self.sky = getattr(scene, "sky", None)
+
+    def light_kernel(self, light, geo: ReceiverGeometry) -> tuple[np.ndarray, np.ndarray]:
+        """(n,) ``cos * att * vis / r^2`` at the vertices of ``geo`` for a point or spot light (the
+        irradiance per unit intensity, with visibility), and (n,) ``max(cos, 0) / r^2`` (no cone, no
+        visibility): what :func:`.pointlight.lumped_light` weighs an element's solid angle with."""
+        d = light.position[None, :] - geo.pos
+        r = np.linalg.norm(d, axis=1)
+        u = d / np.maximum(r, 1e-300)[:, None]
+        cos = np.einsum("nc,nc->n", u, geo.normal)
+        att = np.ones(len(r))
+        if light.kind == "spot":
+            di = light.direction / max(np.linalg.norm(light.direction), 1e-300)
+            cd = -(u @ di)
+            co, ci = math.cos(light.outer_cone), math.cos(light.inner_cone)
+            scale = 1.0 / max(1e-3, ci - co)
+            att = np.clip((cd - co) * scale, 0.0, 1.0) ** 2
+        near = r > 1e-12 * self.patches.scale
+        free = np.where((cos > 0) & near, cos / np.maximum(r * r, 1e-300), 0.0)
+        ok = np.flatnonzero((cos > 0) & (att > 0) & near)
+        k = np.zeros(len(r))
+        if len(ok) == 0:
+            return k, free
+        do = light.position[None, :] - geo.origin[ok]
+        ro = np.linalg.norm(do, axis=1)
+        vis = self.vis.visible(
+            geo.origin[ok],
+            do / ro[:, None],
+            np.maximum(ro - 0.5 * self.patches.eps_patch[geo.patch[ok]], 0.0),
+        )
+        k[ok] = cos[ok] * att[ok] / (r[ok] * r[ok]) * vis
+        return k, free
+
+    def light_irradiance(self, light, geo: ReceiverGeometry) -> np.ndarray:
+        """(n, 3) irradiance from a point or spot light, with visibility (exact at each vertex)."""
+        return self.light_kernel(light, geo)[0][:, None] * light.radiant_intensity[None, :]
+
+    def light_correction(
+        self, forest: qt.Forest, keys: np.ndarray, geo: ReceiverGeometry, lights=None, signs=None
+    ) -> np.ndarray:
+        """(V, 3) what to add to the reflected direct radiance of the vertices ``keys`` of
+        ``forest`` to get the radiance their patches must *shoot* for the point / spot lights
+        (``lights``, default all, each times its sign in ``signs``): ``rho / pi`` times the
+        element-integrated irradiance (:func:`.pointlight.lumped_light`: each element receives
+        ``I x`` its solid angle from the light x its visible fraction, finite even when the light
+        touches it) minus the exact vertex irradiance (whose 1/d^2 peak next to a light, spread
+        over whole elements, would re-emit far more power than the wall received: defect D3)."""
+        lights = self.lights if lights is None else lights
+        signs = [1.0] * len(lights) if signs is None else signs
+        out = np.zeros((len(keys), 3))
+        if not lights or forest.n_leaves == 0:
+            return out
+        corner_idx = qt.lookup(keys, qt.leaf_corner_keys(forest))
+        leaf_world = qt.lattice_to_world(
+            self.patches.corners,
+            forest.patch_is_quad,
+            np.repeat(forest.leaf_patch, 4),
+            *(c.ravel() for c in np.moveaxis(qt.leaf_corner_lattice(forest), 2, 0)),
+            forest.n,
+        ).reshape(-1, 4, 3)
+        la = qt.leaf_area(forest, self.patches.corners)
+        for light, sign in zip(lights, signs, strict=True):
+            k, free = self.light_kernel(light, geo)
+            lumped = lumped_light(
+                light.position,
+                leaf_world,
+                self.patches.normal[forest.leaf_patch],
+                forest.leaf_is_quad,
+                corner_idx,
+                la,
+                k,
+                free,
+                len(keys),
+            )
+            out += sign * (lumped - k)[:, None] * light.radiant_intensity[None, :]
+        return self.patches.albedo[geo.patch] * out / np.pi
+
+    def emitter_side(self, share: float) -> int:
+        """Samples per side of the direct pass's gathers from an emitter with ``share`` of the emitted
+        power: ``DIRECT_SAMPLE_FACTOR`` x the per-side samples times ``sqrt(share)`` (samples by
+        power, as the shots'), at least the per-side samples."""
+        side = pattern_side(self.opts.samples)
+        return max(side, round(DIRECT_SAMPLE_FACTOR * side * math.sqrt(share)))
+
+    def emitter_gather(self, e: int, geo: ReceiverGeometry, side: int) -> np.ndarray:
+        """(n,) ``F * vis`` from emissive patch e, as the direct pass computes it (per-vertex
+        rotated patterns, shot 0), ``side`` samples per side (:meth:`emitter_side`)."""
+        return self.gathers.gather(int(e), geo, side)
+
+    def direct(
+        self, keys: np.ndarray, check: Callable[[], None], geo: ReceiverGeometry | None = None
+    ) -> np.ndarray:
+        """(n, 3) reflected direct radiance (emission excluded) at vertex keys."""
+        out = np.zeros((len(keys), 3))
+        if len(keys) == 0:
+            return out
+        geo = self.patches.geometry(keys) if geo is None else geo
+        incoming = np.zeros((len(keys), 3))  # radiance-weighted: rho * incoming = reflected
+        for e in self.patches.emitters:
+            side = self.emitter_side(self.patches.emitter_share[e])
+            incoming += self.emitter_gather(e, geo, side)[:, None] * self.patches.emission[e]
+            check()
+        for light in self.lights:
+            incoming += self.light_irradiance(light, geo) / np.pi
+            check()
+        for sun in self.suns:
+            incoming += self.sun_irradiance(sun, geo, check) / np.pi
+        if self.sky is not None:
+            incoming += self.sky_irradiance(geo, check) / np.pi
+        return self.patches.albedo[geo.patch] * incoming
+
+    def _escape(self, geo: ReceiverGeometry, idx: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+        """(k, S) float: what of the rays from vertices ``idx`` (k,) along ``dirs`` (k, S, 3) leaves
+        the scene (1 free, 0 blocked, a glass's transmittance through it)."""
+        k, S = dirs.shape[:2]
+        o = np.repeat(geo.origin32()[idx], S, axis=0)
+        free = self.vis.visible(
+            o, dirs.reshape(-1, 3), np.full(k * S, 4.0 * self.patches.scale, dtype=np.float32)
+        )
+        return free.reshape(k, S)
+
+    def sun_irradiance(self, sun, geo: ReceiverGeometry, check: Callable[[], None]) -> np.ndarray:
+        """(n, 3) irradiance from a directional light (the sun): ``E cos`` times the fraction of
+        its disc (``angular_diameter``) each vertex sees, from ``SUN_SAMPLES`` directions
+        stratified on the disc and rotated per vertex (soft shadow edges, exact where it is
+        fully seen or hidden)."""
+        to_sun = -np.asarray(sun.direction, dtype=np.float64)
+        to_sun /= max(float(np.linalg.norm(to_sun)), 1e-300)
+        out = np.zeros((len(geo.key), 3))
+        cos = geo.normal @ to_sun
+        lit = np.flatnonzero(cos > 0)
+        if len(lit) == 0:
+            return out
+        helper = np.array([1.0, 0.0, 0.0]) if abs(to_sun[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        t1 = np.cross(to_sun, helper)
+        t1 /= np.linalg.norm(t1)
+        t2 = np.cross(to_sun, t1)
+        m = pattern_side(SUN_SAMPLES)
+        pat = self.gathers.pattern(self.patches.n_patches, m, 1)
+        half = math.tan(0.5 * max(float(sun.angular_diameter), 0.0))
+
+        def block(idx: np.ndarray) -> np.ndarray:  # the fraction of the disc each vertex sees
+            rot = hash_uniform(geo.key[idx], int(self.opts.seed) * 7919 + 17, 2)
+            dx, dy = rotated_disk(pat, rot[:, :1], rot[:, 1:2])
+            d = to_sun + half * (dx[..., None] * t1 + dy[..., None] * t2)
+            d /= np.linalg.norm(d, axis=-1, keepdims=True)
+            return self._escape(geo, idx, d).mean(axis=1)
+
+        blocks = [lit[a : a + GATHER_BLOCK // 4] for a in range(0, len(lit), GATHER_BLOCK // 4)]
+        for idx, frac in zip(blocks, self.pool.imap(block, blocks, check), strict=True):
+            out[idx] = (cos[idx] * frac)[:, None] * sun.radiant_intensity[None, :]
+        return out
+
+    def sky_irradiance(self, geo: ReceiverGeometry, check: Callable[[], None]) -> np.ndarray:
+        """(n, 3) irradiance from the sky through whatever of each vertex's hemisphere is open:
+        ``pi`` times the mean sky radiance over ``SKY_SAMPLES`` cosine-distributed directions
+        (stratified, rotated per vertex) that leave the scene."""
+        out = np.zeros((len(geo.key), 3))
+        m = pattern_side(SKY_SAMPLES)
+        pat = self.gathers.pattern(self.patches.n_patches, m, 2)
+        size = max(1, GATHER_BLOCK * 16 // (m * m))
+
+        def block(idx: np.ndarray) -> np.ndarray:  # the irradiance at these vertices
+            rot = hash_uniform(geo.key[idx], int(self.opts.seed) * 7919 + 29, 2)
+            dx, dy = rotated_disk(pat, rot[:, :1], rot[:, 1:2])
+            t1, t2 = self.patches.tangent[geo.patch[idx], 0], self.patches.tangent[geo.patch[idx], 1]
+            w = disk_to_hemisphere(dx, dy, t1, t2, geo.normal[idx])
+            free = self._escape(geo, idx, w)
+            L = sky_radiance(self.sky, w.reshape(-1, 3)).reshape(len(idx), m * m, 3)
+            return np.pi * np.einsum("ks,ksc->kc", free, L) / (m * m)
+
+        blocks = [np.arange(a, min(a + size, len(geo.key))) for a in range(0, len(geo.key), size)]
+        for idx, e in zip(blocks, self.pool.imap(block, blocks, check), strict=True):
+            out[idx] = e
+        return out
+
+    def max_mean_reflected(self) -> float:
+        """Upper bound of the scene's area-mean reflected luminance radiance: all the emitted power
+        received and reflected with the largest albedo, over the scene's area (inf for no area)."""
+        a = float(self.patches.area.sum())
+        if a <= 0 or not len(self.patches.albedo):
+            return math.inf
+        return float(luminance_of(self.patches.albedo).max()) * self.emitted_power() / (np.pi * a)
+
+    def emitted_power(self) -> float:
+        """Luminance power emitted by emissive patches and lights (W, luminance-weighted); for the
+        sun and the sky, what would reach the surfaces if nothing shadowed them (an upper bound)."""
+        p = float(np.pi * (self.patches.emission @ LUMINANCE_WEIGHTS * self.patches.area).sum())
+        for lt in self.lights:
+            p += light_power(lt)
+        for sun in self.suns:
+            cos = np.maximum(self.patches.normal @ -np.asarray(sun.direction, dtype=np.float64), 0.0)
+            p += abs(float(sun.radiant_intensity @ LUMINANCE_WEIGHTS)) * float(
+                (cos * self.patches.area).sum()
+            )
+        if self.sky is not None:  # the brightest of 1024 directions over the whole area
+            k = np.arange(1024) + 0.5
+            z = 1.0 - 2.0 * k / 1024
+            phi = np.pi * (1.0 + 5.0**0.5) * k
+            r = np.sqrt(1.0 - z * z)
+            dirs = np.stack([r * np.cos(phi), z, r * np.sin(phi)], axis=1)
+            peak = float((sky_radiance(self.sky, dirs) @ LUMINANCE_WEIGHTS).max())
+            p += np.pi * max(peak, 0.0) * float(self.patches.area.sum())
+        return p
+
+
+def light_power(lt) -> float:
+    """Luminance power of a light (by magnitude: a difference of two lights may be negative)."""
+    solid = 4 * np.pi if lt.kind == "point" else 2 * np.pi * (1 - math.cos(lt.outer_cone))
+    return abs(float(lt.radiant_intensity @ LUMINANCE_WEIGHTS)) * solid
