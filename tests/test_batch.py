@@ -192,7 +192,7 @@ def test_cli_reports_each_failed_task_on_one_line(client, tmp_path, capsys):
     p = _jobs(tmp_path, _seed_jobs([5]) + '[[job]]\nname = "gone"\nmodel = "missing.glb"\n')
     run_batch(parse_jobs(p), client=client)  # seed5 done, gone failed
     capsys.readouterr()
-    assert main(["batch", str(p), "--json"]) == 2
+    assert main(["batch", str(p), "--json", "--no-daylight"]) == 2  # (run_batch's default: no daylight)
     cap = capsys.readouterr()
     report = json.loads(cap.out)
     assert [t["status"] for t in report["tasks"]] == ["skipped", "failed"]
@@ -221,7 +221,7 @@ def test_worker_warnings_reach_the_report_log_and_cli(client, tmp_path, capsys):
     assert log.count("\twarning\t") == 2 and clamp in log
     for f in (tmp_path / "out").glob("*.npz"):
         f.unlink()
-    assert main(["batch", str(p), "--workers", "1"]) == 0
+    assert main(["batch", str(p), "--workers", "1", "--no-daylight"]) == 0  # (the model has no light)
     err = capsys.readouterr().err.strip().splitlines()
     assert [line.split(": ", 2)[1] for line in err] == ["warning", "warning"]
     assert {line.split(": ", 3)[3] for line in err} == {clamp, dark}

@@ -6,7 +6,7 @@ import numba
 import numpy as np
 import pytest
 
-from iat.radiosity import kernels
+from iat.radiosity import bundles, kernels
 from iat.radiosity.sampling import GAUSS_QUAD, Shooter, concentric_disk, disk_to_hemisphere, sample_lattice
 
 SQUARE = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
@@ -74,8 +74,8 @@ def rays(sh, inputs):
         np.empty((n, 3), np.float32),
         np.empty(n, np.float32),
     )
-    rows = kernels.ReceiverRows(rot, x, nr, t1, t2, near, o32, np.zeros(len(x), np.int64))
-    out = kernels.sample_rays(pat, rows, ka, buf)
+    rows = bundles.ReceiverRows(rot, x, nr, t1, t2, near, o32, np.zeros(len(x), np.int64))
+    out = bundles.sample_rays(pat, rows, ka, buf)
     return [np.array(a) for a in out]
 
 
@@ -85,10 +85,10 @@ def finish(sh, inputs, r, vis, fb, flat=None, mean=None):
     has = flat is not None
     flat = np.zeros((1, 3)) if flat is None else flat
     nl = int(round(np.sqrt(len(flat)))) - 1
-    rows = kernels.ReceiverRows(*inputs[1:], np.zeros(len(inputs[2]), np.int64))
-    smp = kernels.Samples(off, wsum, w, u, v, *r[5:])
-    fld = kernels.ShotField(flat, nl, np.zeros(3) if mean is None else mean, has, False, False)
-    return kernels.finish_rows(smp, vis, fb, rows, ka, fld)
+    rows = bundles.ReceiverRows(*inputs[1:], np.zeros(len(inputs[2]), np.int64))
+    smp = bundles.Samples(off, wsum, w, u, v, *r[5:])
+    fld = bundles.ShotField(flat, nl, np.zeros(3) if mean is None else mean, has, False, False)
+    return bundles.finish_rows(smp, vis, fb, rows, ka, fld)
 
 
 @pytest.mark.parametrize("is_quad", [True, False])

@@ -11,8 +11,8 @@ from typing import NamedTuple
 import numpy as np
 
 from iat.radiosity import kernels
+from iat.radiosity.bundles import ShooterArrays, ShotField, finish_rows, receiver_rows, sample_rays
 from iat.radiosity.formfactor import point_polygon
-from iat.radiosity.kernels import ShooterArrays, ShotField
 from iat.radiosity.options import (
     CULL_RAYS,
     F_DIRECTION,
@@ -329,17 +329,17 @@ class Gathers:
         fb = np.ascontiguousarray(f[sl], dtype=np.float64)
         # per row: its rotation (one for all when correlated), point, normal, tangents, whether
         # it takes direction samples too, ray origin, patch
-        rows = kernels.receiver_rows(
+        rows = receiver_rows(
             idx[sl], geo.key, shot.salt, shot.correlated, geo.ff, geo.normal, geo.patch, self.patches.tangent,
             fb, F_DIRECTION, geo.origin32(),
         )  # fmt: skip
         # the samples' weights and rays (float32, as embreex takes them: origins and targets
         # are off the surfaces by at least 32 float32 steps, so the rounding never crosses one)
-        smp = kernels.sample_rays(shot.pat, rows, shot.shooter, self._scratch(2 * len(fb) * len(shot.pat)))
+        smp = sample_rays(shot.pat, rows, shot.shooter, self._scratch(2 * len(fb) * len(shot.pat)))
         if len(smp.w) == 0:
             return None
         vis = self.vis.visible(smp.o, smp.d, smp.tfar)
-        val, seen = kernels.finish_rows(smp, vis, fb, rows, shot.shooter, shot.field)
+        val, seen = finish_rows(smp, vis, fb, rows, shot.shooter, shot.field)
         P = self.patches.n_patches
         return (
             val if shot.field.has_field else val[:, 0],

@@ -9,7 +9,8 @@ import numpy as np
 
 from iat.color import LUMINANCE_WEIGHTS
 from iat.geometry import quadtree as qt
-from iat.radiosity.kernels import ShooterArrays, hash_keys, leaf_fields
+from iat.radiosity.bundles import ShooterArrays
+from iat.radiosity.kernels import hash_keys, leaf_fields
 
 
 def hash_uniform(keys: np.ndarray, salt: int, k: int = 2) -> np.ndarray:

@@ -38,16 +38,15 @@ import json
 import logging
 import os
 import sys
-import tempfile
 import time
 import uuid
-import warnings
 from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from iat.errors import IATError, OptionError
+from iat.tools.batch_work import load_model, run_task
 from iat.tools.jobfile import NAME, Batch, Job, parse_jobs
 
 #: per-task records of a batch's output folder
@@ -166,6 +165,8 @@ def plan(batch: Batch) -> tuple[list[Task], dict[str, BaseException]]:
                 "render": job.render if t.kind in ("solve", "state") else None,
                 "deps": [keys[d] for d in t.deps],
             }
+            if batch.daylight is not None:  # (absent otherwise: the keys of earlier runs stay)
+                spec["daylight"] = batch.daylight.to_dict()
             t.key = hashlib.sha256(json.dumps(spec, sort_keys=True, default=str).encode()).hexdigest()[:16]
             keys[t.name] = t.key
         tasks.extend(new)
@@ -184,119 +185,6 @@ def _state_tasks(job: Job, states: dict[str, dict]) -> list[Task]:
     else:
         own, mesh = [], Task(f"{n}.mesh", "mesh", job)
     return [*own, mesh] + [Task(f"{n}-{s}", "state", job, s, [mesh.name]) for s in names]
-
-
-# -- work done on the workers ----------------------------------------------------
-def load_model(model: str, load_kwargs: dict):
-    """``(Scene of model, [one-line warnings])`` (a task: its result stays on the cluster for the
-    tasks that need it; the warnings reach the client through the first of them)."""
-    from iat.io.load import load_scene
-
-    with _warnings_caught() as caught:
-        scene = load_scene(model, **load_kwargs)
-    return scene, caught
-
-
-@contextlib.contextmanager
-def _warnings_caught():
-    """Collect the warnings raised inside as one-line strings (a worker's warnings are not seen by
-    the client otherwise); a repeated message is kept once."""
-    out: list[str] = []
-    with warnings.catch_warnings(record=True) as rec:
-        warnings.simplefilter("always")
-        yield out
-    for w in rec:
-        text = " ".join(str(w.message).split())
-        if text not in out:
-            out.append(text)
-
-
-def _solution(x):
-    return x["solution"] if isinstance(x, dict) else x
-
-
-def _state_scene(scene, states: dict, state: str | None):
-    from iat.lighting.states import apply_lighting_state, union_lighting
-
-    if state is not None:
-        return apply_lighting_state(scene, states[state])
-    return union_lighting([apply_lighting_state(scene, st) for st in states.values()])
-
-
-def run_task(kind: str, loaded, options, states, state, bake, render, *deps) -> dict:
-    """One task's work (on a worker): ``{"solution", "glb" (bytes or None), "image" (linear (h, w, 3)
-    or None), "seconds", "warnings"}``. ``loaded`` is :func:`load_model`'s result (None for a merge);
-    ``deps`` are the results (or Solutions) of its inputs' tasks. ``warnings``: the one-line warnings
-    of its model's loading and of its own work."""
-    scene, load_warnings = loaded if loaded is not None else (None, [])
-    with _warnings_caught() as caught:
-        out = _run_task(kind, scene, options, states, state, bake, render, *deps)
-    out["warnings"] = [*load_warnings, *(w for w in caught if w not in load_warnings)]
-    return out
-
-
-def _run_task(kind: str, scene, options, states, state, bake, render, *deps) -> dict:
-    from iat.radiosity import solve
-
-    t0 = time.perf_counter()
-    if kind == "mesh" and deps:  # merge: the union of the states' own trees
-        from iat.lighting.solution_set import merge_meshes
-
-        sol = merge_meshes([_solution(d) for d in deps])
-    elif kind == "solve":
-        sol = solve(scene, options)
-    else:
-        sc = _state_scene(scene, states, state)
-        mesh = _solution(deps[0]) if (kind == "state" and deps) else None
-        sol = solve(sc, options, mesh=mesh)
-        if kind == "state":
-            from iat.lighting.states import state_times
-
-            t = dict(zip(states, state_times(states), strict=True))[state]
-            sol.stats = {**sol.stats, "lighting_state": state, "lighting_time": float(t)}
-            scene = sc
-    sol.model_path = str(scene.path) if getattr(scene, "path", None) else sol.model_path
-    out = {"solution": sol, "glb": None, "image": None}
-    if kind in ("solve", "state") and (bake is not None or render is not None):
-        out.update(_bake_and_render(sol, scene, bake, render))
-    out["seconds"] = time.perf_counter() - t0
-    return out
-
-
-def _bake_and_render(sol, scene, bake, render) -> dict:
-    from iat.bake.baker import Baker
-    from iat.bake.policy import BakePolicy
-
-    out = {}
-    policy = BakePolicy(**bake) if bake is not None else BakePolicy()
-    baked = None
-    if bake is not None:
-        from iat.export.gltf import export_glb
-
-        baked = Baker(sol, scene).bake(policy)
-        with tempfile.TemporaryDirectory() as d:
-            glb = export_glb(baked, Path(d) / "out.glb", scene=scene)
-            out["glb"] = glb.read_bytes()
-    if render is not None:
-        from iat.render.renderer import Renderer
-
-        cams = scene.cameras
-        k = render.get("camera")
-        if k is not None and not (0 <= k < len(cams)):
-            raise OptionError(f"render camera {k}: the file has {len(cams)} camera(s)")
-        cam = cams[k if k is not None else 0] if cams else scene.default_camera()
-        r = Renderer()
-        try:
-            r.set_scene(scene)
-            r.set_sky(scene.sky)
-            if render["mode"] != "preview":
-                r.set_solution(sol)
-            if render["mode"] == "iat":
-                r.set_baked(baked if baked is not None else Baker(sol, scene).bake(policy))
-            out["image"] = r.render(cam, size=tuple(render["size"]), mode=render["mode"])
-        finally:
-            r.release()
-    return out
 
 
 # -- running ---------------------------------------------------------------------
@@ -483,7 +371,7 @@ def run_batch(
         with _client(client, workers, scheduler) as c:
             n_workers = len(c.nthreads())
             counter = _Progress(progress, _Eta(todo, n_workers), len(log.results), len(order))
-            _Scheduler.start(c, folder, tasks, todo, log.report, counter).run()
+            _Scheduler.start(c, folder, tasks, todo, log.report, counter, batch.daylight).run()
     return BatchReport([log.results[n] for n in order], time.perf_counter() - t_start, n_workers, str(folder))
 
 
@@ -550,6 +438,7 @@ class _Scenes:
     need: Counter  # scene key (:func:`_scene_key`) -> tasks not submitted yet that need it
     loading: dict[tuple, object] = field(default_factory=dict)  # scene key -> its load's future
     loads: Iterator[int] = field(default_factory=itertools.count)
+    daylight: object = None  # the batch's :class:`~iat.lighting.daylight_default.DaylightRequest`
 
     def take(self, t: Task):
         """The future of the Scene ``t`` needs (None for a merge), its load submitted if none is."""
@@ -559,7 +448,9 @@ class _Scenes:
         if sk not in self.loading:
             key = f"load-{t.job.model.stem}-{next(self.loads)}-{self.run_id}"
             lk = t.job.options.load_kwargs()
-            self.loading[sk] = self.client.submit(load_model, str(t.job.model), lk, key=key, pure=False)
+            self.loading[sk] = self.client.submit(
+                load_model, str(t.job.model), lk, self.daylight, key=key, pure=False
+            )
         scene = self.loading[sk]
         self.need[sk] -= 1
         if not self.need[sk]:
@@ -597,8 +488,11 @@ class _Scheduler:
     warned: set[str] = field(default_factory=set)  # reported once (a model's come with each task)
 
     @classmethod
-    def start(cls, client, folder: Path, tasks: list[Task], todo: list[Task], report, progress) -> _Scheduler:
-        """The scheduler of ``todo`` (in dependency order; the other ``tasks`` are done)."""
+    def start(
+        cls, client, folder: Path, tasks: list[Task], todo: list[Task], report, progress, daylight=None
+    ) -> _Scheduler:
+        """The scheduler of ``todo`` (in dependency order; the other ``tasks`` are done); the models
+        load with ``daylight`` (a :class:`~iat.lighting.daylight_default.DaylightRequest` or None)."""
         from distributed import as_completed
 
         run_id = uuid.uuid4().hex[:8]
@@ -609,7 +503,7 @@ class _Scheduler:
             {t.name: t for t in tasks},
             report,
             progress,
-            _Scenes(client, run_id, Counter(_scene_key(t) for t in todo)),
+            _Scenes(client, run_id, Counter(_scene_key(t) for t in todo), daylight=daylight),
             {name: _job_states(job) for name, job in jobs.items() if job.states is not None},
             run_id,
             list(todo),
