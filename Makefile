@@ -16,13 +16,13 @@ setup: .stamp-venv
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq xvfb xauth libegl1 libgl1 libegl-mesa0 >/dev/null; \
 	fi
 	@if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && ! command -v chromium >/dev/null; then \
-	  echo "installing Debian packages (chromium, for the three.js client tests)"; \
+	  echo "installing Debian packages (chromium, for the three.js and Babylon.js client tests)"; \
 	  apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; \
 	fi
 	@touch $@
 
 .stamp-node:
-	@if command -v npm >/dev/null; then PUPPETEER_SKIP_DOWNLOAD=1 npm install --prefix .node --no-save --no-audit --no-fund --loglevel=error gltf-validator three@0.187 puppeteer-core >/dev/null && echo "installed gltf-validator, three, puppeteer-core (npm)"; fi
+	@if command -v npm >/dev/null; then PUPPETEER_SKIP_DOWNLOAD=1 npm install --prefix .node --no-save --no-audit --no-fund --loglevel=error gltf-validator three@0.187 puppeteer-core babylonjs@9.28.0 babylonjs-loaders@9.28.0 >/dev/null && echo "installed gltf-validator, three, puppeteer-core, babylonjs, babylonjs-loaders (npm)"; fi
 	@touch $@
 
 .stamp-venv: .stamp-apt .stamp-node pyproject.toml

@@ -1,10 +1,11 @@
-"""Exports in the clients people use: three.js r187 in headless Chromium (and Blender's importer).
+"""Exports in the clients people use: three.js r187 and Babylon.js 9.28 in headless Chromium (and
+Blender's importer).
 
-Each model (the Cornell box, the pool) is solved quickly (the cached solve of
-tests/test_iat_acceptance.py), baked with the default policy and exported; the client draws the
-file from its own first camera and is compared with our renderer's IAT image of the same bake, both
-at the file's exposure (sRGB codes of ``radiance / radiance_scale``, clipped): PSNR >= 40 dB, and,
-cleared to magenta, no see-through pixel where our renderer shows a surface.
+Each model (the Cornell box, the pool, the house; Blender: the first two) is solved quickly (the
+cached solve of tests/test_iat_acceptance.py), baked with the default policy and exported; the
+client draws the file from its own first camera and is compared with our renderer's IAT image of the
+same bake, both at the file's exposure (sRGB codes of ``radiance / radiance_scale``, clipped):
+PSNR >= 40 dB, and, cleared to magenta, no see-through pixel where our renderer shows a surface.
 """
 
 from __future__ import annotations
@@ -29,9 +30,11 @@ from iat.measure.metrics import psnr
 from iat.radiosity import SolveOptions
 from iat.radiosity.cache import cached_solve
 from tests.support.clients import (
+    BABYLON_PLUGIN,
     BLENDER_SCRIPT,
     MAGENTA,
     THREE_PLUGIN,
+    draw_babylon,
     draw_blender,
     draw_three,
     file_codes,
@@ -44,7 +47,8 @@ OUT = ROOT / "out" / "acceptance"  # the solution cache shared with tests/test_i
 QUICK = SolveOptions(
     max_depth=4, samples=1, max_shots=30, convergence=0.2, refine_indirect=False, tolerance=0.1
 )
-MODELS = ["cornell_box", "pool"]
+MODELS = ["cornell_box", "pool", "house"]
+BLENDER_MODELS = ["cornell_box", "pool"]  # Cycles is slow: the house is left to the browsers
 SIZE = (320, 240)
 
 
@@ -256,6 +260,61 @@ def test_three_js_draws_the_layered_export_with_the_shipped_plugin(bakes, three_
     assert holes == 0
 
 
+@pytest.fixture(scope="module")
+def babylon_images(three_images):
+    """{(model, kind): (Babylon.js image (h, w, 3) uint8, info)} of the files three.js drew:
+    "default", "layered" (with the shipped glTF loader extension) and "bare" (the layered file
+    without it); all in one browser session."""
+    files = three_images[1]
+    keys = [(k, n) for k in ("default", "layered", "bare") for n in MODELS]
+    jobs = [
+        {
+            "glb": files["default" if k == "default" else "layered", n],
+            "width": SIZE[0],
+            "height": SIZE[1],
+            "camera": 0,
+            "plugin": BABYLON_PLUGIN if k == "layered" else None,
+        }
+        for k, n in keys
+    ]
+    return {(n, k): r for (k, n), r in zip(keys, draw_babylon(jobs), strict=True)}
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_babylon_js_draws_the_default_export_as_our_renderer(bakes, babylon_images, name):
+    """No code: Babylon's loader makes KHR_materials_unlit an unlit PBRMaterial with COLOR_0."""
+    img, info = babylon_images[name, "default"]
+    assert info["warnings"] == []
+    assert info["materials"] == ["PBRMaterial+unlit"]
+    db, holes = _compare(bakes, name, img)
+    print(f"{name}: Babylon.js default {db:.2f} dB, {holes} see-through")
+    assert db >= 40.0
+    assert holes == 0
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_babylon_js_draws_the_layered_export_with_the_shipped_extension(bakes, babylon_images, name):
+    """MOZ_lightmap through the shipped extension: albedo (TEXCOORD_0) x lightmap (TEXCOORD_1); without
+    it the detail materials are lit PBR materials in a scene with no light: black."""
+    img, info = babylon_images[name, "layered"]
+    assert info["warnings"] == []
+    _, bk, _ = bakes[name]
+    db, holes = _compare(bakes, name, img)
+    bare_db, _ = _compare(bakes, name, babylon_images[name, "bare"][0])
+    print(
+        f"{name}: Babylon.js layered + extension {db:.2f} dB, {holes} see-through; "
+        f"without it {bare_db:.2f} dB"
+    )
+    assert db >= 40.0
+    assert holes == 0
+    if bk.detail_textures:  # the pool's tiles
+        assert info["materials"] == ["PBRMaterial+unlit", "PBRMaterial+unlit+lightmap"]
+        assert babylon_images[name, "bare"][1]["materials"] == ["PBRMaterial", "PBRMaterial+unlit"]
+        assert bare_db < db - 10
+    else:
+        assert info["materials"] == ["PBRMaterial+unlit"] and bare_db == db
+
+
 @pytest.mark.parametrize("name", MODELS)
 def test_export_has_no_t_junction(bakes, name):
     """Before: edges of either part with a vertex inside them; after: none, same area."""
@@ -299,7 +358,7 @@ def blender_images(three_images, tmp_path_factory):
     alone) and the layered one (through the shipped script only)."""
     d = tmp_path_factory.mktemp("blender")
     out = {}
-    for name in MODELS:
+    for name in BLENDER_MODELS:
         for kind in ("default", "layered", "hdr"):
             script = BLENDER_SCRIPT if kind != "default" else None
             glb = three_images[1][kind, name]
@@ -308,7 +367,7 @@ def blender_images(three_images, tmp_path_factory):
 
 
 @pytest.mark.parametrize("kind", ["default", "layered", "hdr"])
-@pytest.mark.parametrize("name", MODELS)
+@pytest.mark.parametrize("name", BLENDER_MODELS)
 def test_blender_cycles_renders_the_export_as_our_renderer(bakes, blender_images, name, kind):
     img, wired = blender_images[name, kind]
     _, bk, _ = bakes[name]

@@ -40,8 +40,9 @@ clients use the files: docs/export.md):
   illumination(TEXCOORD_1) x radiance_scale. The lightmap is a PNG of its own when
   plain patches use the page too (Blender's importer would make the shared image
   Non-Color). Not unlit: the validator warns of ``KHR_materials_unlit`` beside another
-  extension. three.js draws it with ``iat/export/clients/three/iat_lightmap.js``, Blender
-  with ``iat/export/clients/blender/iat_import.py``. Patches without a detail texture
+  extension. three.js draws it with ``iat/export/clients/three/iat_lightmap.js``, Babylon.js
+  with ``iat/export/clients/babylon/iat_lightmap.js``, Blender with
+  ``iat/export/clients/blender/iat_import.py``. Patches without a detail texture
   are written as in the default. ``hdr=True``: the lightmap is an RGBM PNG (alpha = multiplier,
   up to ``RGBM_RANGE`` x white; ``iat_illumination.encoding = "rgbm"``, ``rgbm_range``).
 - ``match_clip=True`` (``iat bake``): mesh-part triangles cut where a channel crosses white,
@@ -69,6 +70,7 @@ from iat.export.texels import RGBM_RANGE, place_texels, rgbm_encode, scale_tiles
 from iat.io.glb import GlbBuilder
 
 __all__ = [
+    "BABYLON_PLUGIN",
     "BLENDER_SCRIPT",
     "LIGHTMAP_EXTENSION",
     "LIGHTMAP_INTENSITY",
@@ -82,9 +84,10 @@ __all__ = [
 LIGHTMAP_EXTENSION = "MOZ_lightmap"
 #: its ``intensity``: three.js multiplies a lightmap by intensity / pi, so pi shows it as stored
 LIGHTMAP_INTENSITY = float(np.pi)
-#: the client code shipped in the package (docs/export.md): a three.js GLTFLoader plugin and a
-#: Blender import script for the layered export's lightmaps
+#: the client code shipped in the package (docs/export.md): a three.js GLTFLoader plugin, a
+#: Babylon.js glTF loader extension and a Blender import script for the layered export's lightmaps
 THREE_PLUGIN = Path(__file__).resolve().parent / "clients" / "three" / "iat_lightmap.js"
+BABYLON_PLUGIN = Path(__file__).resolve().parent / "clients" / "babylon" / "iat_lightmap.js"
 BLENDER_SCRIPT = Path(__file__).resolve().parent / "clients" / "blender" / "iat_import.py"
 
 _LINEAR = 9729

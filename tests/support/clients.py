@@ -1,8 +1,10 @@
-"""Drive the clients people open an export in: three.js in headless Chromium (and Blender's bpy).
+"""Drive the clients people open an export in: three.js and Babylon.js in headless Chromium (and
+Blender's bpy).
 
-``three_env()`` skips the test (with the reason) when node, Chromium or the npm packages are
-missing; ``draw_three(jobs)`` draws GLB files with ``tests/support/three_render.js`` in one browser
-session and returns 8-bit sRGB images.
+``three_env()`` / ``babylon_env()`` skip the test (with the reason) when node, Chromium or the npm
+packages are missing; ``draw_three(jobs)`` / ``draw_babylon(jobs)`` draw GLB files with
+``tests/support/three_render.js`` / ``babylon_render.js`` in one browser session and return 8-bit
+sRGB images.
 """
 
 from __future__ import annotations
@@ -20,12 +22,22 @@ import pytest
 from PIL import Image
 
 from iat.color import srgb_encode
-from iat.export.gltf import BLENDER_SCRIPT, THREE_PLUGIN
+from iat.export.gltf import BABYLON_PLUGIN, BLENDER_SCRIPT, THREE_PLUGIN
 
-__all__ = ["BLENDER_SCRIPT", "THREE_PLUGIN", "draw_blender", "draw_three", "file_codes", "see_through"]
+__all__ = [
+    "BABYLON_PLUGIN",
+    "BLENDER_SCRIPT",
+    "THREE_PLUGIN",
+    "draw_babylon",
+    "draw_blender",
+    "draw_three",
+    "file_codes",
+    "see_through",
+]
 
 ROOT = Path(__file__).resolve().parents[2]
 THREE_JS = ROOT / "tests" / "support" / "three_render.js"
+BABYLON_JS = ROOT / "tests" / "support" / "babylon_render.js"
 NODE_MODULES = [os.environ.get("IAT_NODE_PATH", ""), str(ROOT / ".node" / "node_modules")]
 MAGENTA = np.array([255, 0, 255])
 #: console lines that are Chromium's own (SwiftShader's read-back notes, the favicon request)
@@ -40,23 +52,40 @@ def chromium() -> str | None:
     return None
 
 
-def three_env() -> dict:
-    """Environment for ``node three_render.js``; skips (with the reason) when a part is missing."""
+def _node_env(client: str, packages: tuple[str, ...]) -> dict:
+    """Environment for ``node <client>_render.js``; skips (with the reason) when a part is missing."""
     if shutil.which("node") is None:
-        pytest.skip("node is missing (apt-get install nodejs): the three.js client test is skipped")
+        pytest.skip(f"node is missing (apt-get install nodejs): the {client} client test is skipped")
     if chromium() is None:
-        pytest.skip("chromium is missing (make test installs it when root): the three.js test is skipped")
+        pytest.skip(f"chromium is missing (make test installs it when root): the {client} test is skipped")
     env = dict(os.environ, NODE_PATH=os.pathsep.join(d for d in NODE_MODULES if d))
-    for pkg in ("puppeteer-core", "three"):
+    for pkg in ("puppeteer-core", *packages):
         r = subprocess.run(["node", "-e", f"require.resolve('{pkg}')"], env=env, capture_output=True)
         if r.returncode:
-            pytest.skip(f"npm package {pkg} not found (make setup installs it into .node)")
+            pytest.skip(f"npm package {pkg} not found (`rm .stamp-node; make setup` installs it into .node)")
     return env
 
 
-def three_dir(env: dict) -> str:
+def three_env() -> dict:
+    return _node_env("three.js", ("three",))
+
+
+def babylon_env() -> dict:
+    return _node_env("Babylon.js", ("babylonjs", "babylonjs-loaders"))
+
+
+def package_dir(env: dict, pkg: str) -> str:
+    """The folder of npm package ``pkg`` on ``env``'s NODE_PATH."""
+    find = (
+        "const fs = require('fs'), path = require('path');"
+        f"let d = path.dirname(require.resolve('{pkg}'));"
+        "const named = (d) => { const f = path.join(d, 'package.json');"
+        f" return fs.existsSync(f) && JSON.parse(fs.readFileSync(f, 'utf8')).name === '{pkg}'; }};"
+        "while (!named(d) && path.dirname(d) !== d) d = path.dirname(d);"
+        "console.log(d)"
+    )
     r = subprocess.run(
-        ["node", "-e", "console.log(require('path').resolve(require.resolve('three'), '..', '..'))"],
+        ["node", "-e", find],
         env=env,
         capture_output=True,
         text=True,
@@ -70,8 +99,19 @@ def draw_three(jobs: list[dict]) -> list[tuple[np.ndarray, dict]]:
     with three.js; returns ``(image (h, w, 3) uint8 sRGB, info)`` per job, info = ``{"warnings":
     [the page's console warnings and errors, Chromium's own notes left out], "materials": [...]}``."""
     env = three_env()
-    with tempfile.TemporaryDirectory(prefix="iat-three-") as tmp:
-        spec = {"three": three_dir(env), "chromium": chromium(), "jobs": []}
+    return _draw(THREE_JS, {"three": package_dir(env, "three")}, jobs, env)
+
+
+def draw_babylon(jobs: list[dict]) -> list[tuple[np.ndarray, dict]]:
+    """:func:`draw_three` with Babylon.js (``plugin``: the shipped glTF loader extension)."""
+    env = babylon_env()
+    libs = {"babylon": package_dir(env, "babylonjs"), "loaders": package_dir(env, "babylonjs-loaders")}
+    return _draw(BABYLON_JS, libs, jobs, env)
+
+
+def _draw(script: Path, libs: dict, jobs: list[dict], env: dict) -> list[tuple[np.ndarray, dict]]:
+    with tempfile.TemporaryDirectory(prefix="iat-client-") as tmp:
+        spec = {**libs, "chromium": chromium(), "jobs": []}
         for k, j in enumerate(jobs):
             spec["jobs"].append(
                 {
@@ -83,7 +123,7 @@ def draw_three(jobs: list[dict]) -> list[tuple[np.ndarray, dict]]:
             )
         (Path(tmp) / "jobs.json").write_text(json.dumps(spec))
         r = subprocess.run(
-            ["node", str(THREE_JS), str(Path(tmp) / "jobs.json")],
+            ["node", str(script), str(Path(tmp) / "jobs.json")],
             env=env,
             capture_output=True,
             text=True,
@@ -95,7 +135,7 @@ def draw_three(jobs: list[dict]) -> list[tuple[np.ndarray, dict]]:
         for j, info in zip(spec["jobs"], infos, strict=True):
             img = np.asarray(Image.open(j["out"]).convert("RGB"))
             info["warnings"] = [w for w in info["warnings"] if not any(x in w for x in _NOISE)]
-            assert not info.get("blank"), f"three.js drew nothing for {j['glb']} (WebGL context lost?)"
+            assert not info.get("blank"), f"{script.stem} drew nothing for {j['glb']} (WebGL context lost?)"
             out.append((img, info))
         return out
 

@@ -9,16 +9,10 @@
 // Prints one JSON line: [{"out": ..., "warnings": [console warnings and errors], "materials":
 //   [three.js material types], "attempts": n, "blank": whether the canvas stayed blank}, ...]
 // (a blank canvas is drawn again, at most three times); exit 0, or 2 with the error on stderr.
-// Needs puppeteer-core on the module path (NODE_PATH, see the Makefile); Chromium runs with
-// SwiftShader (--use-gl=swiftshader --enable-unsafe-swiftshader), no GPU needed.
+// Needs puppeteer-core on the module path (NODE_PATH, see the Makefile); the browser side is
+// browser_jobs.js, shared with babylon_render.js.
 "use strict";
-const fs = require("fs");
-const http = require("http");
-const path = require("path");
-const puppeteer = require("puppeteer-core");
-
-const spec = JSON.parse(fs.readFileSync(process.argv[2], "utf8"));
-const TYPES = { ".js": "text/javascript", ".html": "text/html", ".glb": "model/gltf-binary" };
+const { main } = require("./browser_jobs.js");
 
 const PAGE = `<!doctype html><html><body style="margin:0">
 <script type="importmap">{"imports": {"three": "/three/build/three.module.js",
@@ -64,63 +58,4 @@ window.renderJob = async (job) => {
 window.ready = true;
 </script></body></html>`;
 
-function serve(files) {
-  return http.createServer((req, res) => {
-    const url = decodeURIComponent(req.url.split("?")[0]);
-    let file = null;
-    if (url === "/favicon.ico") { res.writeHead(204); return res.end(); }
-    if (url === "/" || url === "/index.html") {
-      res.writeHead(200, { "Content-Type": "text/html" });
-      return res.end(PAGE);
-    }
-    if (url.startsWith("/three/")) file = path.join(spec.three, url.slice(7));
-    else if (url.startsWith("/f/")) file = files[Number(url.slice(3).split(".")[0])];
-    if (!file || !fs.existsSync(file) || (url.startsWith("/three/") && !path.resolve(file).startsWith(path.resolve(spec.three)))) {
-      res.writeHead(404);
-      return res.end();
-    }
-    res.writeHead(200, { "Content-Type": TYPES[path.extname(file)] || "application/octet-stream" });
-    fs.createReadStream(file).pipe(res);
-  });
-}
-
-async function main() {
-  const files = [];
-  const add = (p) => { files.push(path.resolve(p)); return "/f/" + (files.length - 1) + path.extname(p); };
-  const jobs = spec.jobs.map((j) => ({ ...j, glb: add(j.glb), plugin: j.plugin ? add(j.plugin) : null,
-    clear: j.clear || "#ff00ff", camera: j.camera || 0 }));
-  const server = serve(files);
-  await new Promise((ok) => server.listen(0, "127.0.0.1", ok));
-  const base = "http://127.0.0.1:" + server.address().port;
-  const browser = await puppeteer.launch({
-    executablePath: spec.chromium || "/usr/bin/chromium",
-    headless: true,
-    args: ["--no-sandbox", "--use-gl=swiftshader", "--enable-unsafe-swiftshader", "--disable-gpu-sandbox"],
-  });
-  const out = [];
-  try {
-    for (const [i, job] of jobs.entries()) {
-      // a blank canvas (SwiftShader's context lost on a loaded machine) is drawn again, twice at most
-      for (let attempt = 0; attempt < 3; attempt++) {
-        const page = await browser.newPage();
-        const warnings = [];
-        page.on("console", (m) => { if (m.type() === "warn" || m.type() === "error") warnings.push(m.text()); });
-        page.on("pageerror", (e) => warnings.push(String(e)));
-        await page.goto(base + "/index.html");
-        await page.waitForFunction("window.ready === true", { timeout: 60000 });
-        const r = await page.evaluate((j) => window.renderJob(j), job);
-        await page.close();
-        if (r.blank && attempt < 2) continue;
-        fs.writeFileSync(spec.jobs[i].out, Buffer.from(r.png.split(",")[1], "base64"));
-        out.push({ out: spec.jobs[i].out, warnings, materials: r.materials, attempts: attempt + 1, blank: r.blank });
-        break;
-      }
-    }
-  } finally {
-    await browser.close();
-    server.close();
-  }
-  console.log(JSON.stringify(out));
-}
-
-main().catch((e) => { console.error(String(e && e.stack ? e.stack : e)); process.exit(2); });
+main(PAGE, (spec) => ({ three: spec.three }));
