@@ -38,6 +38,8 @@ class Baked:
     mesh_patch : (M,) int32, the patch of each mesh-part vertex. The mesh part is sorted by patch
       depth (stable), so each threshold's mesh part is a prefix of the same read-only arrays
     patch_emissive : (P,) bool, patches whose material emits (empty when baked without a scene)
+    patch_twin : (P,) bool, patches with a coincident twin facing the other way (a back face of its
+      own, :func:`iat.geometry.sides.twin_patches`): the renderer draws them from their front only
     patch_textured : (P,) bool; memory : MemoryReport; policy : the policy baked (budget resolved)
     timings : seconds per stage
     lod : the :class:`~iat.bake.lod.LodChain` of every textured tile's levels (None unless the
@@ -65,6 +67,7 @@ class Baked:
     tex_patch: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     mesh_patch: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     patch_emissive: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    patch_twin: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     gpu_pages: np.ndarray | None = field(default=None, repr=False, compare=False)
     gpu_format: str | None = field(default=None, repr=False, compare=False)
     pages_source: Any = field(default=None, repr=False, compare=False)
@@ -142,6 +145,7 @@ class BakedSet:
         "tex_patch",
         "mesh_patch",
         "patch_emissive",
+        "patch_twin",
         "patch_textured",
         "detail_textures",
         "page_scale",

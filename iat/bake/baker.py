@@ -61,6 +61,7 @@ from iat.bake.memory import MIB, check_host_memory, lod_report, memory_report, s
 from iat.bake.policy import BakePolicy
 from iat.bake.polygons import depth_sorted_mesh, mesh_prefix, textured_polygons
 from iat.errors import BakeError, Cancelled
+from iat.geometry.sides import twin_patches
 
 __all__ = ["CACHE_BYTES", "Baker", "SeamCache", "bake"]
 
@@ -170,6 +171,8 @@ class Baker:
             self._patch_uv = np.asarray(scene.patch_uv, dtype=np.float32)
             detail_ok = scene.detail_patches(albedo)
         self._detail_ok = detail_ok
+        self._twin = twin_patches(solution.patch_corners, solution.patch_is_quad)
+        self._twin.flags.writeable = False
         self._emissive = np.zeros(0, bool)  # unknown without a scene
         if scene is not None:
             self._emissive = np.asarray(scene.patch_emission, dtype=np.float64).reshape(P, 3).max(axis=1) > 0
@@ -549,6 +552,7 @@ class Baker:
             tex_patch=tpatch,
             mesh_patch=mesh_patch,
             patch_emissive=self._emissive,
+            patch_twin=self._twin,
             gpu_pages=entry.gpu,
             gpu_format=policy.pixel_format,
             pages_source=entry.float32,

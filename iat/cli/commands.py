@@ -74,6 +74,7 @@ def _load(args, path, max_edge=None):
             progress=bar,
             panels=not getattr(args, "no_panels", False),
             discontinuity=getattr(args, "discontinuity", False),
+            sides=getattr(args, "sides", None) or "auto",
         )
 
 
@@ -148,6 +149,22 @@ def cmd_info(args) -> int:
         "bounds": scene.bounds.tolist(),
         "area": float(scene.patch_area.sum()),
     }
+    if scene.sides is not None:  # inside-out solids, open sheets, back faces (iat.geometry.sides)
+        sd = scene.sides
+        info.update(
+            {
+                "sides": sd.mode,
+                "closed_solids": sd.closed_solids,
+                "inside_out_solids": sd.inside_out,
+                "faces_turned": sd.flipped_faces,
+                "enclosures": sd.enclosures,
+                "open_sheets": sd.open_sheets,
+                "back_faces": sd.back_faces,
+                "back_patches": sd.twin_patches,
+                "paired_faces": sd.paired_faces,
+                "coincident_faces": sd.coincident_faces,
+            }
+        )
     _emit(args, info)
     return 0
 
@@ -557,6 +574,16 @@ def build_parser() -> argparse.ArgumentParser:
             help="cut patches along the hard shadows of the model's point, spot and sun lights",
         )
 
+    def sides_flag(sp):
+        sp.add_argument(
+            "--sides",
+            choices=["auto", "both", "front"],
+            default="auto",
+            help="auto: IFC's inside-out solids turned outward and its open sheets given a back face "
+            "(other formats: glTF doubleSided materials only); both: every format so; "
+            "front: faces as the file has them (all count them)",
+        )
+
     def set_flags(sp):
         sp.add_argument(
             "--set",
@@ -589,6 +616,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("info", help="counts: triangles, patches, materials, lights, cameras")
     s.add_argument("input", metavar="MODEL")
     s.add_argument("--no-panels", action="store_true", dest="no_panels", help="count without panels")
+    sides_flag(s)
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_info)
 
@@ -597,6 +625,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_daylight_flags(s)
     s.add_argument("-o", "--output", required=True, metavar="SOL.npz")
     solve_flags(s)
+    sides_flag(s)
     s.add_argument(
         "--states",
         action="store_true",

@@ -212,6 +212,7 @@ class GltfDocument:
             emission=emission,
             detail=detail,
             transmission=float(np.clip(transmission, 0.0, 1.0)),
+            double_sided=bool(m.doubleSided),
         )
         self._material_cache[index] = mat
         return mat

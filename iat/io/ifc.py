@@ -111,9 +111,10 @@ def _material(style, element_type: str) -> tuple[tuple, Material]:
     return (name, albedo.tobytes(), glass), Material(name=name, albedo=albedo, transmission=tau)
 
 
-def read_ifc(path: Path, report, start: float, end: float):
+def read_ifc(path: Path, report, start: float, end: float, counts: list | None = None):
     """Mesh an IFC file: vertices (n, 3) float64 metres Y up, faces (f, 3) int64, face_material
-    (f,) int64, face_uv (f, 3, 2) zeros, materials.
+    (f,) int64, face_uv (f, 3, 2) zeros, materials. ``counts`` (a list) gets each element's face
+    count, in the order of the faces (:mod:`iat.geometry.sides` classifies per element).
 
     ``report(fraction, message)`` is called about 50 times across the elements,
     fractions from ``start`` to ``end`` in proportion to the elements meshed.
@@ -174,6 +175,8 @@ def read_ifc(path: Path, report, start: float, end: float):
                 materials.append(mat)
             local[s + 1] = keys[key]
         Vs.append(V @ UP_TO_Y[b"Z"].T)
+        if counts is not None:
+            counts.append(len(F))
         Fs.append(F + offset)
         Ms.append(local[mids + 1])
         offset += len(V)

@@ -38,8 +38,16 @@ import numpy as np
 
 from iat.errors import Cancelled, IATWarning, LoadError, OptionError
 from iat.geometry.discontinuity import split_discontinuities
-from iat.geometry.mesh import compact_vertices, degenerate_faces, merge_quads, split_patches, weld_vertices
+from iat.geometry.mesh import (
+    compact_vertices,
+    corner_positions,
+    degenerate_faces,
+    merge_quads,
+    split_patches,
+    weld_vertices,
+)
 from iat.geometry.panels import make_panels
+from iat.geometry.sides import SIDES, add_back_faces, classify_sides, object_ids, twin_patches
 from iat.io.dae import dae_frame
 from iat.io.gltf import GltfDocument
 from iat.io.ifc import read_ifc
@@ -199,11 +207,12 @@ def _instances(tscene, path: Path, gl: GltfDocument | None, world: dict | None):
     return out
 
 
-def _collect(tscene, path: Path, gl: GltfDocument | None, world: dict | None = None):
+def _collect(tscene, path: Path, gl: GltfDocument | None, world: dict | None = None, counts=None):
     """Flatten a trimesh Scene to world arrays.
 
     Returns vertices (n, 3) float64, faces (f, 3) int64, face_material (f,) int64,
     face_uv (f, 3, 2) float64 (glTF convention: v down from the image top), materials.
+    counts : a list that gets each placed geometry's face count (its faces come one after the other).
     """
     import trimesh
     from trimesh.path.path import Path as LinePath
@@ -275,6 +284,8 @@ def _collect(tscene, path: Path, gl: GltfDocument | None, world: dict | None = N
             else:
                 mi = material_index(_trimesh_material_key(tm), lambda tm=tm: _trimesh_material(tm, path))
         Vs.append(W)
+        if counts is not None:
+            counts.append(len(F))
         Fs.append(F + offset)
         Ms.append(np.full(len(F), mi, dtype=np.int64))
         UVs.append(uvc)
@@ -328,6 +339,7 @@ def load_scene(
     progress: Progress | None = None,
     panels: bool = True,
     discontinuity: bool = False,
+    sides: str = "auto",
 ) -> Scene:
     """Load a model file (glTF/GLB, OBJ+MTL, PLY, STL, OFF) into a :class:`Scene`.
 
@@ -345,6 +357,10 @@ def load_scene(
     discontinuity : cut the roots along the hard shadow boundaries of the file's point, spot and
       directional lights (:func:`iat.geometry.discontinuity.split_discontinuities`; last, after
       the lights are read).
+    sides : ``"auto"`` (default): IFC's inside-out closed solids are turned outward and its open
+      sheets get a back face (its own patch); elsewhere only faces of glTF ``doubleSided``
+      materials get one. ``"both"``: every format as IFC. ``"front"``: the faces as the file has
+      them. :data:`iat.geometry.sides.SIDES`; what was found is ``Scene.sides``.
     progress : ``progress(fraction, message) -> bool``, called at the start of each
       stage (parse, weld, quad merge, pre-split) and with 1.0 at the end, fractions
       non-decreasing; returning False raises :class:`iat.errors.Cancelled`.
@@ -358,6 +374,8 @@ def load_scene(
 
     if max_edge is not None and not (max_edge > 0 and np.isfinite(max_edge)):
         raise OptionError(f"max_edge must be a positive number, got {max_edge!r}")
+    if sides not in SIDES:
+        raise OptionError(f"sides must be one of {', '.join(SIDES)}, got {sides!r}")
     if not path.exists():
         raise LoadError("file not found", path)
     if not path.is_file():
@@ -370,10 +388,11 @@ def load_scene(
         raise LoadError("empty file", path)
 
     report(0.0, f"reading {path.name}")
+    counts: list[int] = []  # faces per object (IFC element, placed glTF primitive, OBJ group)
     gl = GltfDocument(path) if ext in (".gltf", ".glb") else None
     world = None
     if ext == ".ifc":
-        V, F, M, UV, materials = read_ifc(path, report, 0.0, _STAGES["collect"])
+        V, F, M, UV, materials = read_ifc(path, report, 0.0, _STAGES["collect"], counts=counts)
     else:
         if ext == ".obj":
             check_obj_textures(path)
@@ -382,11 +401,12 @@ def load_scene(
         tscene = _load_trimesh(path, ext, gl)
         report(_STAGES["parse"], "placing geometry")
         world = gl.node_world() if gl is not None else None
-        V, F, M, UV, materials = _collect(tscene, path, gl, world)
+        V, F, M, UV, materials = _collect(tscene, path, gl, world, counts)
         del tscene
         if ext in (".dae", ".zae"):
             V = V @ dae_frame(path).T
     _clamp_albedo(materials, path)
+    objects = np.repeat(np.arange(len(counts)), counts) if sum(counts) == len(F) else object_ids(F)
 
     report(_STAGES["collect"], "welding vertices")
     V, F = weld_vertices(V, F)
@@ -395,7 +415,24 @@ def load_scene(
         raise LoadError("only degenerate faces", path)
     if bad.any():
         log.info("%s: dropped %d zero-area faces of %d", path, int(bad.sum()), len(F))
-        F, M, UV = F[~bad], M[~bad], UV[~bad]
+        F, M, UV, objects = F[~bad], M[~bad], UV[~bad], objects[~bad]
+    side = classify_sides(
+        V,
+        F,
+        objects,
+        M,
+        UV,
+        mode=sides,
+        double_sided=np.array([m.double_sided for m in materials], dtype=bool),
+        one_sided=np.array([m.emission.max() > 0 or m.transmission > 0 for m in materials], dtype=bool),
+        sheets_two_sided=ext == ".ifc",  # IFC elements are physical; other files are one-sided by convention
+        turn_solids=ext == ".ifc",
+        enclosures=ext != ".ifc",
+        probes=None if gl is None else [lt.position for lt in gl.lights(world) if lt.kind != "directional"],
+    )
+    F, UV = side.faces, side.face_uv
+    n_mat = len(materials)  # faces that get a back face carry material + n_mat until the patches are made
+    M = np.where(side.back, M + n_mat, M)
     report(_STAGES["weld"], "merging quads")
     corners, pmat, puv = merge_quads(V, F, M, UV)
     if max_edge is not None:
@@ -405,9 +442,17 @@ def load_scene(
     if panels:
         report(_STAGES["split"], "making panels")
         has_detail = np.array([m.detail is not None for m in materials], dtype=bool)
-        roots = make_panels(V, corners, pmat, puv, has_detail, cell_max=max_edge)
+        roots = make_panels(V, corners, pmat, puv, np.tile(has_detail, 2), cell_max=max_edge)
         V, corners, pmat, puv = roots.vertices, roots.corners, roots.material, roots.uv
         clip_uv, clip_patch = roots.clip_uv, roots.clip_patch
+    twin = pmat >= n_mat
+    pmat = np.where(twin, pmat - n_mat, pmat)
+    if twin.any():  # a back the file has already (split along another diagonal) is kept, not doubled
+        twin &= ~twin_patches(corner_positions(V, corners), corners[:, 3] >= 0)
+        corners, pmat, puv, clip_uv, clip_patch = add_back_faces(
+            corners, pmat, puv, clip_uv, clip_patch, twin
+        )
+    side.report.twin_patches = int(twin.sum())
     V, corners = compact_vertices(V, corners)  # dropped faces and panels leave vertices unused
 
     scene = Scene(
@@ -419,6 +464,7 @@ def load_scene(
         path=str(path),
         clip_uv=clip_uv,
         clip_patch=clip_patch,
+        sides=side.report,
     )
     if gl is not None:
         report(_STAGES["split"], "reading lights and cameras")

@@ -27,6 +27,7 @@ from iat.camera import Camera
 from iat.errors import OptionError
 from iat.geometry.mesh import corner_positions, patch_areas, patch_normals
 from iat.geometry.quadtree import bilinear
+from iat.geometry.sides import SideReport
 
 
 @dataclass
@@ -38,6 +39,8 @@ class Material:
     detail : (h, w, 3) float32 linear RGB albedo texture repeated on the surface, or None
     transmission : float in [0, 1], the transmittance of a thin glass (0: opaque); light
       crossing it is multiplied by it, and it reflects and stores nothing
+    double_sided : the file says both faces are surface (glTF ``doubleSided``): its open sheets
+      get a back face (:mod:`iat.geometry.sides`)
     """
 
     name: str = ""
@@ -45,6 +48,7 @@ class Material:
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     detail: np.ndarray | None = None
     transmission: float = 0.0
+    double_sided: bool = False
 
     def __post_init__(self):
         self.albedo = np.asarray(self.albedo, dtype=np.float64).reshape(3)
@@ -172,6 +176,8 @@ class Scene:
     clip_uv : (C, 3, 2) float64 clip triangles in their patch's lattice (u, v), sorted by patch
     clip_patch : (C,) int64 the (quad) patch each clip triangle belongs to; a patch with none is whole
     sky : a :class:`Sky` around the model, or None
+    sides : the loader's :class:`~iat.geometry.sides.SideReport` (inside-out solids turned, open
+      sheets given a back face), or None for a scene built in memory
     """
 
     vertices: np.ndarray
@@ -186,6 +192,7 @@ class Scene:
     clip_uv: np.ndarray | None = None
     clip_patch: np.ndarray | None = None
     sky: Sky | None = None
+    sides: SideReport | None = None
 
     def __post_init__(self):
         self.vertices = np.asarray(self.vertices, dtype=np.float64).reshape(-1, 3)

@@ -60,6 +60,7 @@ from typing import Any
 import numpy as np
 
 from iat.errors import RenderError
+from iat.geometry.sides import twin_patches
 from iat.radiosity.solution import drawn_mesh
 from iat.render import gl
 from iat.render.buffers import Geometry, upload_buffer
@@ -73,6 +74,18 @@ MODES = ("preview", "mesh", "iat", "split", "diff")
 PREVIEW_AMBIENT = 0.5
 #: columns of the sky's equirectangular image drawn behind the model (0.7 degrees a texel)
 SKY_WIDTH = 512
+#: added to the draw-call key of triangles whose patch has a twin (a back face of its own,
+#: :mod:`iat.geometry.sides`): those calls cull back faces, so each side shows its own light
+TWIN_KEY = 1 << 40
+
+
+def _twin_keys(tri_key: np.ndarray | None, tri_twin: np.ndarray) -> np.ndarray | None:
+    """Draw-call keys (t,) with :data:`TWIN_KEY` added where ``tri_twin`` (t,) bool; None when no
+    triangle has a twin (keys unchanged)."""
+    if not tri_twin.any():
+        return tri_key
+    base = np.full(len(tri_twin), -1, np.int64) if tri_key is None else np.asarray(tri_key, np.int64)
+    return np.where(tri_twin, base + TWIN_KEY, base)
 
 
 @dataclass
@@ -309,6 +322,8 @@ class Renderer:
         pos, tris = drawn.position, drawn.triangles
         md = mesh_detail(solution, drawn, self._scene)  # detail vertices hold incoming light
         duv, dflag, divisor, tri_key = md or (np.zeros((len(pos), 2)), np.zeros(len(pos)), 1.0, None)
+        twin = twin_patches(corners, solution.patch_is_quad)
+        tri_key = _twin_keys(tri_key, twin[drawn.patch[tris[:, 0]]] if len(tris) else np.zeros(0, bool))
         colors = []
         for k, sol in enumerate(solutions):
             rad = _vec(sol.vert_radiance, 3, "vert_radiance")
@@ -506,7 +521,17 @@ class Renderer:
         a, b = self._pair("iat")
         n = len(colors[a])  # the mesh part holds radiance: no detail
         arrays = {"position": mpos, "color": colors[a], "color_b": colors[b], "detail_uv": np.zeros((n, 2))}
-        self._baked_mesh.upload(self.ctx, self._reg, {**arrays, "detail": np.zeros(n)}, midx)
+        # patches with a twin (Baked.patch_twin): their calls cull back faces
+        twin = np.asarray(getattr(baked, "patch_twin", np.zeros(0, bool)), dtype=bool).reshape(-1)
+        mkey = None
+        if twin.any():
+            mpatch = np.asarray(baked.mesh_patch, dtype=np.int64).reshape(-1)
+            tpatch = np.asarray(baked.tex_patch, dtype=np.int64).reshape(-1)
+            if len(midx) and len(mpatch) == len(mpos):
+                mkey = _twin_keys(None, twin[mpatch[midx[:, 0]]])
+            if len(tidx) and len(tpatch) == k:
+                tri_key = _twin_keys(tri_key, twin[tpatch[tidx[:, 0]]])
+        self._baked_mesh.upload(self.ctx, self._reg, {**arrays, "detail": np.zeros(n)}, midx, mkey)
         self._colors_pair["iat"] = (a, b)
         if len(tidx):
             tuv = self._page_tex.scale_uv(tuv)
@@ -585,6 +610,7 @@ class Renderer:
             if g.n_triangles:
                 self._uniforms(g.program, {**common, "blend": w if pa != pb else 0.0, "detail": 1})
                 for key, first, count in g.calls():  # mesh mode: one call per detail material
+                    key = self._cull_twins(key)
                     tex = self._detail["preview"].get(key) if mode == "mesh" else None
                     (tex if tex is not None else self._white).use(1)
                     self._uniforms(g.program, {"use_detail": tex is not None})
@@ -606,6 +632,7 @@ class Renderer:
             pages = {"pages": 0, "detail": 1, "page_scale": self._page_scale}
             self._uniforms(g.program, {**common, **blend, **pages})
             for key, first, count in g.calls():
+                key = self._cull_twins(key)
                 tex = self._detail["iat"].get(key)
                 (tex if tex is not None else self._white).use(1)
                 self._uniforms(g.program, {"use_detail": tex is not None})
@@ -620,9 +647,20 @@ class Renderer:
                 self._uniforms(g.program, {"use_detail": tex is not None})
                 g.render_range(first, count)
                 tris, calls = tris + count // 3, calls + 1
+        self.ctx.disable(self._moderngl.CULL_FACE)
         s = stats.setdefault(mode, {"triangles": 0, "draw_calls": 0})
         s["triangles"] += tris
         s["draw_calls"] += calls
+
+    def _cull_twins(self, key: int) -> int:
+        """A draw call's material key (-1: none); culls back faces for a call of twin triangles
+        (:data:`TWIN_KEY`) and draws both faces otherwise: a patch with a twin shows only its front,
+        its twin shows the other side's light; a one-sided patch seen from behind shows its front's."""
+        if key >= TWIN_KEY // 2:
+            self.ctx.enable(self._moderngl.CULL_FACE)
+            return key - TWIN_KEY
+        self.ctx.disable(self._moderngl.CULL_FACE)
+        return key
 
     def _draw_sky_and_glass(self, camera, aspect: float, clip: bytes, exposure: float, tonemap: bool) -> None:
         """The sky where nothing was drawn (depth still 1), then glass over everything."""
