@@ -1,7 +1,9 @@
 """What the viewer draws over the 3D view with imgui (its background draw list, no GL): the mode's
 label, the split divider, the light markers and their names (on a dark plate, readable on bright
-surfaces), the HUD lines (:func:`viewer.panels.hud_lines`), REC / PLAY, and a notice when the camera
-has left the model (:func:`outside_model`) with the way back (R).
+surfaces), the HUD lines (:func:`viewer.panels.hud_lines`), REC / PLAY, and, in the middle of the
+view, why it shows nothing (:func:`view_notices`): no light in the model, no light reaching its
+surfaces, the camera outside the model (:func:`outside_model`) or the model outside the camera's
+view (:func:`nothing_in_view`), each with what to do.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ def view_overlay(state: AppState) -> None:
     """Labels and the split divider over the 3D view (imgui background draw list, no GL), clipped to
     the view: the panels beside it may keep last frame's pixels (:mod:`viewer.panel_cache`), and a
     label drawn over them every frame would pile up."""
+    state.view.notices = ()
     x, y, w, h = state.view.rect
     if w <= 0 or h <= 0:
         return
@@ -58,12 +61,12 @@ def _view_overlay(state: AppState, dl) -> None:
         )
     light_markers(state, dl)
     sun_compass(state, dl)
-    if outside_model(state):
-        text = "outside the model: press R (or View: Reset view) to go back"
+    state.view.notices = tuple(view_notices(state))
+    for k, text in enumerate(state.view.notices):  # on a dark plate, one under the other
         size = imgui.calc_text_size(text)
-        p = ImVec2(x + 0.5 * (w - size.x), y + 0.5 * h)
+        p = ImVec2(x + 0.5 * (w - size.x), y + 0.5 * h + 28 * k)
         dl.add_rect_filled(ImVec2(p.x - 8, p.y - 6), ImVec2(p.x + size.x + 8, p.y + size.y + 6), shadow, 4.0)
-        dl.add_text(p, imgui.get_color_u32(ImVec4(1.0, 0.6, 0.3, 1.0)), text)
+        dl.add_text(p, imgui.get_color_u32(NOTICE), text)
     hud = hud_lines(state)
     for k, line in enumerate(hud):
         yy = y + h - 10 - 16 * (len(hud) - k)
@@ -73,6 +76,60 @@ def _view_overlay(state: AppState, dl) -> None:
         dl.add_text(ImVec2(x + w - 60, y + 8), imgui.get_color_u32(RED), "REC")
     if state.paths.player is not None:
         dl.add_text(ImVec2(x + w - 60, y + 8), white, "PLAY")
+
+
+#: the colour of the notices in the middle of the view
+NOTICE = ImVec4(1.0, 0.6, 0.3, 1.0)
+NO_LIGHT = "no light: the model has no lamp, sky or emissive material (Lighting: Add point light)"
+NO_LIGHT_REACHES = "no light reaches the model's surfaces: the solution is black"
+OUTSIDE = "outside the model: press R (or View: Reset view) to go back"
+NOT_IN_VIEW = "nothing in view: the model is outside the camera's view (R: reset view)"
+
+
+def view_notices(state: AppState) -> list[str]:
+    """Why the 3D view of the open model shows nothing (black or empty), each line with what to do;
+    [] when it shows the model."""
+    scene = state.model.scene
+    if scene is None:
+        return []
+    out = []
+    if not scene.has_light_sources:
+        out.append(NO_LIGHT)
+    elif solution_is_black(state.model.solution):
+        out.append(NO_LIGHT_REACHES)
+    if outside_model(state):
+        out.append(OUTSIDE)
+    elif nothing_in_view(state):
+        out.append(NOT_IN_VIEW)
+    return out
+
+
+_BLACK: list = [None, False]  # [solution, whether its radiance is all zero]: the last one asked about
+
+
+def solution_is_black(sol) -> bool:
+    """Every vertex of ``sol`` (a Solution or None) has zero radiance (kept for the last solution)."""
+    if sol is None:
+        return False
+    if _BLACK[0] is not sol:
+        rad = getattr(sol, "vert_radiance", None)
+        _BLACK[0], _BLACK[1] = sol, rad is not None and len(rad) > 0 and not np.any(np.asarray(rad) > 0)
+    return bool(_BLACK[1])
+
+
+def nothing_in_view(state: AppState) -> bool:
+    """The model's box lies wholly outside the camera's view frustum (all 8 corners beyond one clip
+    plane): everything is culled, the view shows only the background."""
+    cam, scene = state.view.camera, state.model.scene
+    x, y, w, h = state.view.rect
+    if cam is None or scene is None or w <= 0 or h <= 0:
+        return False
+    lo, hi = scene_bounds(scene)
+    corners = np.array([[(lo, hi)[(k >> a) & 1][a] for a in range(3)] + [1.0] for k in range(8)])
+    clip = corners @ np.asarray(cam.clip_from_world(w / h), dtype=np.float64).T  # (8, 4)
+    cw = clip[:, 3]
+    beyond = [clip[:, a] > cw for a in range(3)] + [clip[:, a] < -cw for a in range(3)]
+    return bool(any(b.all() for b in beyond))
 
 
 def empty_label(state: AppState) -> str:

@@ -185,6 +185,8 @@ class ViewState:
       frame from the central dock node; framebuffer_scale : framebuffer pixels per window pixel
     kept : with nothing shown, the view's rectangle kept last frame's pixels, label included
       (:meth:`viewer.view3d.View3D.draw`): nothing is drawn over it
+    notices : why the view shows nothing (no light, camera outside, model out of view), as drawn
+      over it this frame (:func:`viewer.overlay.view_notices`)
     """
 
     mode: str = "iat"
@@ -200,6 +202,7 @@ class ViewState:
     rect: tuple[int, int, int, int] = (0, 0, 0, 0)
     framebuffer_scale: tuple[float, float] = (1.0, 1.0)
     kept: bool = False
+    notices: tuple[str, ...] = ()
 
 
 @dataclass
