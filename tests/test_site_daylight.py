@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import datetime
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -25,61 +24,18 @@ from iat.lighting.daylight_default import (
     zone_hours,
 )
 from iat.lighting.sun import day_times, solar_position
+from tests.support.site_ifc import (
+    LAT,
+    LON,
+    NORTH_DEG,
+    angle_deg,
+    expected_to_sun,
+    site_ifc,
+)
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "real-models"
 MADRID = REAL / "revit2021-madrid-house.ifc"
 OPEN_HOUSE = REAL / "ifcopenshell-open-house-ifc4.ifc"
-
-# Boulder, Colorado: 40 deg 0' 54" N, 105 deg 16' 13.8" W
-LAT_DMS, LON_DMS = [40, 0, 54, 0], [-105, -16, -13, -800000]
-LAT, LON = 40.015, -(105 + 16 / 60 + 13.8 / 3600)
-NORTH_DEG = 30.0
-
-
-def angle_deg(a, b) -> float:
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    c = a @ b / (np.linalg.norm(a) * np.linalg.norm(b))
-    return math.degrees(math.acos(min(max(c, -1.0), 1.0)))
-
-
-def expected_to_sun(lat, lon, when, north_deg) -> np.ndarray:
-    """Towards the sun in the Y-up scene, worked out in IFC's plan: true north (-sin a, cos a),
-    east its clockwise quarter turn, Z up; then (x, y, z) -> (x, z, -y)."""
-    az, el = solar_position(lat, lon, when)
-    a = math.radians(north_deg)
-    n = np.array([-math.sin(a), math.cos(a)])
-    e = np.array([n[1], -n[0]])
-    h = math.cos(math.radians(az)) * n + math.sin(math.radians(az)) * e
-    x, y, z = math.cos(math.radians(el)) * h[0], math.cos(math.radians(el)) * h[1], math.sin(math.radians(el))
-    return np.array([x, z, -y])
-
-
-def site_ifc(tmp_path, located: bool = True) -> Path:
-    """A small IFC4 written with ifcopenshell.api: four walls (one with a window opening) and a
-    slab; its IfcSite at Boulder and TrueNorth turned 30 degrees anticlockwise."""
-    import ifcopenshell.api
-
-    from tests.support.ifc_builder import IfcBuilder
-
-    b = IfcBuilder("site test")
-    s = b.style("wall", (0.7, 0.7, 0.7))
-    b.wall("south", 0, (0.0, 0.0), (4.0, 0.0), 0.0, 2.5, 0.2, s, openings=[(1.0, 3.0, 0.8, 2.0)])
-    b.wall("east", 0, (4.0, 0.0), (4.0, 3.0), 0.0, 2.5, 0.2, s)
-    b.wall("north", 0, (4.0, 3.0), (0.0, 3.0), 0.0, 2.5, 0.2, s)
-    b.wall("west", 0, (0.0, 3.0), (0.0, 0.0), 0.0, 2.5, 0.2, s)
-    b.slab("floor", 0, [(0, 0), (4, 0), (4, 3), (0, 3)], -0.2, 0.2, b.style("floor", (0.5, 0.4, 0.3)))
-    (site,) = b.f.by_type("IfcSite")
-    if located:
-        ifcopenshell.api.run(
-            "attribute.edit_attributes",
-            b.f,
-            product=site,
-            attributes={"RefLatitude": LAT_DMS, "RefLongitude": LON_DMS, "RefElevation": 1655.0},
-        )
-    ifcopenshell.api.run("georeference.edit_true_north", b.f, true_north=NORTH_DEG)
-    out = tmp_path / ("site.ifc" if located else "nowhere.ifc")
-    b.write(out, "site-test")
-    return out
 
 
 def plain_scene(path: str = "") -> Scene:

@@ -218,11 +218,11 @@ def cmd_solve(args) -> int:
         return _solve_states_on_engine(args, opts)
     scene = _load(args, args.input, max_edge=opts.max_edge)
     apply_to(args, scene)
-    if getattr(args, "states", False):
+    if getattr(args, "states", False) or getattr(args, "sun_study", None):  # (--sun-study: a day's hours)
         from iat.lighting.solution_set import solve_set
 
         with _progress_bar(args, f"solve states of {Path(args.input).name}") as bar:
-            sset = solve_set(scene, None, opts, progress=bar, mesh=args.states_mesh)
+            sset = solve_set(scene, getattr(args, "study", None), opts, progress=bar, mesh=args.states_mesh)
         out = Path(args.output)
         written = []
         for name, t, sol in zip(sset.names, sset.times, sset.solutions, strict=True):
@@ -622,7 +622,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("solve", help="radiosity solution with adaptive quad-tree meshing")
     s.add_argument("input", metavar="MODEL")
-    add_daylight_flags(s)
+    add_daylight_flags(s, study=True)
     s.add_argument("-o", "--output", required=True, metavar="SOL.npz")
     solve_flags(s)
     sides_flag(s)
