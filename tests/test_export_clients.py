@@ -263,17 +263,17 @@ def test_three_js_draws_the_layered_export_with_the_shipped_plugin(bakes, three_
 @pytest.fixture(scope="module")
 def babylon_images(three_images):
     """{(model, kind): (Babylon.js image (h, w, 3) uint8, info)} of the files three.js drew:
-    "default", "layered" (with the shipped glTF loader extension) and "bare" (the layered file
-    without it); all in one browser session."""
+    "default", "layered" and "hdr" (with the shipped glTF loader extension) and "bare" (the layered
+    file without it); all in one browser session."""
     files = three_images[1]
-    keys = [(k, n) for k in ("default", "layered", "bare") for n in MODELS]
+    keys = [(k, n) for k in ("default", "layered", "hdr", "bare") for n in MODELS]
     jobs = [
         {
-            "glb": files["default" if k == "default" else "layered", n],
+            "glb": files["layered" if k == "bare" else k, n],
             "width": SIZE[0],
             "height": SIZE[1],
             "camera": 0,
-            "plugin": BABYLON_PLUGIN if k == "layered" else None,
+            "plugin": BABYLON_PLUGIN if k in ("layered", "hdr") else None,
         }
         for k, n in keys
     ]
@@ -292,23 +292,25 @@ def test_babylon_js_draws_the_default_export_as_our_renderer(bakes, babylon_imag
     assert holes == 0
 
 
+@pytest.mark.parametrize("kind", ["layered", "hdr"])
 @pytest.mark.parametrize("name", MODELS)
-def test_babylon_js_draws_the_layered_export_with_the_shipped_extension(bakes, babylon_images, name):
-    """MOZ_lightmap through the shipped extension: albedo (TEXCOORD_0) x lightmap (TEXCOORD_1); without
-    it the detail materials are lit PBR materials in a scene with no light: black."""
-    img, info = babylon_images[name, "layered"]
+def test_babylon_js_draws_the_layered_export_with_the_shipped_extension(bakes, babylon_images, name, kind):
+    """MOZ_lightmap through the shipped extension: albedo (TEXCOORD_0) x lightmap (TEXCOORD_1), an
+    RGBM lightmap (``hdr``) decoded by its material plugin; without the extension the detail
+    materials are lit PBR materials in a scene with no light: black."""
+    img, info = babylon_images[name, kind]
     assert info["warnings"] == []
     _, bk, _ = bakes[name]
     db, holes = _compare(bakes, name, img)
     bare_db, _ = _compare(bakes, name, babylon_images[name, "bare"][0])
     print(
-        f"{name}: Babylon.js layered + extension {db:.2f} dB, {holes} see-through; "
-        f"without it {bare_db:.2f} dB"
+        f"{name}: Babylon.js {kind} + extension {db:.2f} dB, {holes} see-through; without it {bare_db:.2f} dB"
     )
     assert db >= 40.0
     assert holes == 0
     if bk.detail_textures:  # the pool's tiles
-        assert info["materials"] == ["PBRMaterial+unlit", "PBRMaterial+unlit+lightmap"]
+        lit = "PBRMaterial+unlit+lightmap" + ("+rgbm" if kind == "hdr" else "")
+        assert info["materials"] == ["PBRMaterial+unlit", lit]
         assert babylon_images[name, "bare"][1]["materials"] == ["PBRMaterial", "PBRMaterial+unlit"]
         assert bare_db < db - 10
     else:

@@ -8,7 +8,7 @@
 // (the plugin's default export called with BABYLON first, if given: IAT's MOZ_lightmap extension);
 // the Babylon camera made from the file's K-th glTF camera draws it (aspect W / H); the canvas is
 // written as an 8-bit PNG. Prints one JSON line as three_render.js does ("materials": Babylon
-// material classes, "+unlit", "+lightmap"); exit 0, or 2 with the error on stderr. The browser side
+// material classes, "+unlit", "+lightmap", "+rgbm"); exit 0, or 2 with the error on stderr. The browser side
 // is browser_jobs.js.
 "use strict";
 const { main } = require("./browser_jobs.js");
@@ -47,7 +47,8 @@ window.renderJob = async (job) => {
   const types = new Set();
   for (const m of scene.meshes) {
     if (m.material && m.getTotalVertices() > 0) {
-      types.add(m.material.getClassName() + (m.material.unlit ? "+unlit" : "") + (m.material.lightmapTexture ? "+lightmap" : ""));
+      const mat = m.material, rgbm = mat.pluginManager && mat.pluginManager.getPlugin("IATRgbmLightmap");
+      types.add(mat.getClassName() + (mat.unlit ? "+unlit" : "") + (mat.lightmapTexture ? "+lightmap" : "") + (rgbm ? "+rgbm" : ""));
     }
   }
   const gl = canvas.getContext("webgl2") || canvas.getContext("webgl");

@@ -4,9 +4,9 @@
 //   import registerIatLightmap from "./iat_lightmap.js";
 //   registerIatLightmap(BABYLON);                   // before loading the file
 // ES modules (@babylonjs/core + @babylonjs/loaders):
+//   import { MaterialPluginBase } from "@babylonjs/core";
 //   import { registerGLTFExtension } from "@babylonjs/loaders/glTF/2.0";
-//   import { EXTENSION, IATLightmapExtension } from "./iat_lightmap.js";
-//   registerGLTFExtension(EXTENSION, true, (loader) => new IATLightmapExtension(loader));
+//   registerIatLightmap({ MaterialPluginBase, GLTF2: { registerGLTFExtension } });
 //
 // Babylon.js 9 reads no lightmap extension of its own (its loader has no MSFT_lightmap any more), so
 // this extension reads IAT's `MOZ_lightmap = {index, texCoord, intensity}` (the form three.js's
@@ -14,9 +14,38 @@
 // base colour texture (TEXCOORD_0) and lightmapTexture = the page (TEXCOORD_<texCoord>, sRGB), used
 // as a shadow map (multiplied), level = intensity / pi; so colour = albedo x illumination at the
 // file's exposure, with no light in the scene. Materials without the extension are left to the
-// loader. RGBM lightmaps (`iat bake --layered --hdr`) are not decoded here (three.js plugin and
-// Blender script only). Tested with babylonjs 9.28 (docs/export.md).
+// loader. With `extras.iat_illumination.encoding = "rgbm"` (`iat bake --layered --hdr`) a material
+// plugin multiplies the (sRGB-decoded) lightmap texel by its alpha x `rgbm_range` in the PBR shader's
+// lightmap line. Tested with babylonjs 9.28 (docs/export.md).
 export const EXTENSION = "MOZ_lightmap";
+
+let MaterialPluginBase = null; // set by registerIatLightmap: Babylon's class, for RGBM lightmaps
+
+// the PBR fragment shader's lightmap line (pbrBlockLightmapInit, GLSL), as a code injection regex
+const LIGHTMAP_LINE = "!lightmapColor\\.rgb\\*=vLightmapInfos\\.y;";
+
+function rgbmPlugin(material, range) {
+  class IATRgbmLightmapPlugin extends MaterialPluginBase {
+    constructor(mat) {
+      super(mat, "IATRgbmLightmap", 200, { IAT_RGBM_LIGHTMAP: false });
+      this._enable(true);
+    }
+
+    prepareDefines(defines) {
+      defines.IAT_RGBM_LIGHTMAP = true;
+    }
+
+    getClassName() {
+      return "IATRgbmLightmapPlugin";
+    }
+
+    getCustomCode(shaderType) {
+      if (shaderType !== "fragment") return null;
+      return { [LIGHTMAP_LINE]: `lightmapColor.rgb*=vLightmapInfos.y*lightmapColor.a*${range.toFixed(4)};` };
+    }
+  }
+  return new IATRgbmLightmapPlugin(material);
+}
 
 export class IATLightmapExtension {
   constructor(loader) {
@@ -58,6 +87,11 @@ export class IATLightmapExtension {
         babylonMaterial.useLightmapAsShadowmap = true; // multiplied, not added
       }),
     );
+    const ill = (material.extras || {}).iat_illumination || {};
+    if (ill.encoding === "rgbm") {
+      if (!MaterialPluginBase) throw new Error(`${context}: RGBM lightmap: registerIatLightmap was given no MaterialPluginBase`);
+      rgbmPlugin(babylonMaterial, Number(ill.rgbm_range || 16));
+    }
     if (material.doubleSided) {
       babylonMaterial.backFaceCulling = false;
       babylonMaterial.twoSidedLighting = true;
@@ -68,5 +102,6 @@ export class IATLightmapExtension {
 }
 
 export default function registerIatLightmap(BABYLON) {
+  MaterialPluginBase = BABYLON.MaterialPluginBase || null;
   BABYLON.GLTF2.registerGLTFExtension(EXTENSION, true, (loader) => new IATLightmapExtension(loader));
 }
