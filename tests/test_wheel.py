@@ -84,6 +84,8 @@ def test_the_wheel_holds_the_top_level_shaders(wheel):
     here = sorted(p.name for p in (ROOT / "shaders").glob("*.glsl"))
     assert glsl == [f"iat/shaders/{n}" for n in here]
     assert "color.glsl" in here and len(here) >= 8  # the one shared include and the programs
+    for client in ("three/iat_lightmap.js", "babylon/iat_lightmap.js", "blender/iat_import.py"):
+        assert f"iat/export/clients/{client}" in names  # the shipped client code (docs/export.md)
     assert shader_dir() == ROOT / "shaders"  # this source tree (an editable install) reads shaders/
 
 
