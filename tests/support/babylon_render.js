@@ -51,16 +51,10 @@ window.renderJob = async (job) => {
       types.add(mat.getClassName() + (mat.unlit ? "+unlit" : "") + (mat.lightmapTexture ? "+lightmap" : "") + (rgbm ? "+rgbm" : ""));
     }
   }
-  const gl = canvas.getContext("webgl2") || canvas.getContext("webgl");
-  const px = new Uint8Array(job.width * job.height * 4);
-  gl.readPixels(0, 0, job.width, job.height, gl.RGBA, gl.UNSIGNED_BYTE, px);
-  let opaque = 0;
-  for (let i = 3; i < px.length; i += 4) opaque += px[i] === 255 ? 1 : 0;
-  const lost = gl.isContextLost();
-  const url = canvas.toDataURL("image/png");
+  const out = window.canvasResult(canvas, canvas.getContext("webgl2") || canvas.getContext("webgl"), types);
   engine.dispose();
   canvas.remove();
-  return { png: url, materials: [...types].sort(), blank: lost || opaque === 0 };
+  return out;
 };
 window.ready = true;
 </script></body></html>`;

@@ -2,7 +2,8 @@
 // the client library's folders, the job files) and headless Chromium through puppeteer-core.
 //
 // runJobs(spec, page, roots): serves `page` at /index.html and each roots[prefix] folder at /prefix/,
-// opens the page once per job, calls window.renderJob(job) (job.glb and job.plugin rewritten to
+// opens the page once per job (with window.canvasResult(canvas, gl, materials) defined for its
+// renderJob to return), calls window.renderJob(job) (job.glb and job.plugin rewritten to
 // served URLs) and writes the returned PNG data URL to spec.jobs[i].out. Prints one JSON line:
 // [{"out", "warnings": [console warnings and errors], "materials", "attempts", "blank"}, ...]; a
 // blank canvas (SwiftShader's context lost on a loaded machine) is drawn again, twice at most.
@@ -14,6 +15,18 @@ const path = require("path");
 const puppeteer = require("puppeteer-core");
 
 const TYPES = { ".js": "text/javascript", ".html": "text/html", ".glb": "model/gltf-binary" };
+
+// defined in every page before its own scripts: what renderJob returns, from the drawn canvas and
+// its WebGL context (read before the client library disposes of it); blank: no opaque pixel or the
+// context lost
+const CANVAS_RESULT = `window.canvasResult = (canvas, gl, types) => {
+  const px = new Uint8Array(canvas.width * canvas.height * 4);
+  gl.readPixels(0, 0, canvas.width, canvas.height, gl.RGBA, gl.UNSIGNED_BYTE, px);
+  let opaque = 0;
+  for (let i = 3; i < px.length; i += 4) opaque += px[i] === 255 ? 1 : 0;
+  const blank = gl.isContextLost() || opaque === 0;
+  return { png: canvas.toDataURL("image/png"), materials: [...types].sort(), blank };
+};`;
 
 function serve(page, roots, files) {
   return http.createServer((req, res) => {
@@ -58,6 +71,7 @@ async function runJobs(spec, page, roots) {
     for (const [i, job] of jobs.entries()) {
       for (let attempt = 0; attempt < 3; attempt++) {
         const tab = await browser.newPage();
+        await tab.evaluateOnNewDocument(CANVAS_RESULT);
         const warnings = [];
         tab.on("console", (m) => { if (m.type() === "warn" || m.type() === "error") warnings.push(m.text()); });
         tab.on("pageerror", (e) => warnings.push(String(e)));

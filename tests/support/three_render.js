@@ -44,16 +44,10 @@ window.renderJob = async (job) => {
   renderer.render(gltf.scene, camera);
   const types = new Set();
   gltf.scene.traverse((o) => { if (o.material) types.add(o.material.type + (o.material.lightMap ? "+lightMap" : "")); });
-  const gl = renderer.getContext();
-  const px = new Uint8Array(job.width * job.height * 4);
-  gl.readPixels(0, 0, job.width, job.height, gl.RGBA, gl.UNSIGNED_BYTE, px);
-  let opaque = 0;
-  for (let i = 3; i < px.length; i += 4) opaque += px[i] === 255 ? 1 : 0;
-  const lost = gl.isContextLost();
-  const url = canvas.toDataURL("image/png");
+  const out = window.canvasResult(canvas, renderer.getContext(), types);
   renderer.dispose();
   canvas.remove();
-  return { png: url, materials: [...types].sort(), blank: lost || opaque === 0 };
+  return out;
 };
 window.ready = true;
 </script></body></html>`;
