@@ -13,7 +13,6 @@ from iat.io.scene import Light, Material, Scene, Sky
 from iat.measure import photometry as ph
 from iat.measure.sensors import irradiance_at
 from iat.radiosity import SolveOptions, solve
-from tests.test_radiosity import _box_quads
 
 
 # -- scenes built in code ------------------------------------------------------------------------
@@ -27,6 +26,27 @@ def grid_quads(x0, x1, z0, z1, y, nx, nz, up=True):
                 [[xs[i], y, zs[j]], [xs[i], y, zs[j + 1]], [xs[i + 1], y, zs[j + 1]], [xs[i + 1], y, zs[j]]]
             )
             out.append(q if up else q[::-1])
+    return out
+
+
+def box_quads(lo, hi, k):
+    """The inward faces of an axis-aligned box, each split into k x k quads: [(axis, side, quad)]."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    centre = (lo + hi) / 2
+    out = []
+    for axis in range(3):
+        a, b = [x for x in range(3) if x != axis]
+        ga, gb = np.linspace(lo[a], hi[a], k + 1), np.linspace(lo[b], hi[b], k + 1)
+        for side in (lo[axis], hi[axis]):
+            for i in range(k):
+                for j in range(k):
+                    q = np.zeros((4, 3))
+                    q[:, axis] = side
+                    q[:, a] = ga[[i, i + 1, i + 1, i]]
+                    q[:, b] = gb[[j, j, j + 1, j + 1]]
+                    if np.cross(q[2] - q[0], q[3] - q[1]) @ (centre - q.mean(axis=0)) < 0:
+                        q = q[[0, 3, 2, 1]]
+                    out.append((axis, side, q))
     return out
 
 
@@ -46,7 +66,7 @@ def roof_opening_room(sky: Sky, height=3.0):
     floor (4 x 4 quads) has albedo 0.5, walls and roof are black: the floor gets the sky component
     only (no inter-reflection reaches it)."""
     polys, mats = [], []
-    for axis, side, _, _, q in _box_quads([0, 0, 0], [4, height, 4], 4, True):
+    for axis, side, q in box_quads([0, 0, 0], [4, height, 4], 4):
         if axis == 1 and side == height:
             continue
         polys.append(q)
@@ -177,7 +197,7 @@ def test_closed_room_interreflections_follow_the_average_formula():
     room of one albedo). Tolerance 2 %; measured -0.7 % (total)."""
     phi, rho = 1000.0, 0.5
     lt = Light(kind="point", position=[1.7, 1.4, 2.2], intensity=ph.intensity_from_lumens(phi))
-    quads = [q for *_, q in _box_quads([0, 0, 0], [4, 3, 5], 3, True)]
+    quads = [q for *_, q in box_quads([0, 0, 0], [4, 3, 5], 3)]
     scene = scene_of(quads, [0] * len(quads), [Material("grey", albedo=np.full(3, rho))], [lt])
     sol = solve(scene, SolveOptions(max_depth=4, convergence=0.01))
     area = 2 * (4 * 3 + 4 * 5 + 3 * 5)

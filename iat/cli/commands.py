@@ -18,8 +18,10 @@ from pathlib import Path
 
 import numpy as np
 
+from iat.cli.analysis import add_analyse_parser, add_false_color_flags, open_overcast, render_false_color
 from iat.cli.args import join_negative_values, parse_size, parse_vec
 from iat.cli.daylight import add_daylight_flags, apply_to, check_solution_flags, daylight_request
+from iat.cli.warning_lines import WarningLines, warning_printer
 from iat.errors import IATError, IATWarning, OptionError
 from iat.progress import ProgressBar
 from iat.tools.common import policy_dict
@@ -336,6 +338,8 @@ def cmd_render(args) -> int:
         if mode not in ("iat", "preview"):
             raise OptionError(f"{args.input} is an exported bake: render it with --mode iat (or preview)")
         scene, sol = _load(args, args.input), None
+    elif args.false_color == "daylight-factor":
+        scene, sol = open_overcast(args, _load, _solve_options, _progress_bar)
     else:
         scene, sol = _open(args, "render")
     if args.eye or args.target:
@@ -353,6 +357,8 @@ def cmd_render(args) -> int:
         cam = scene.cameras[args.camera]
     else:
         cam = scene.default_camera()
+    if args.false_color:  # lux, cd/m² or daylight factor with a legend (iat.cli.analysis)
+        return _emit(args, render_false_color(args, scene, sol, cam, size, out)) or 0
     if sol is None and sset is None and mode == "iat":  # an exported bake, drawn as baked
         from iat.render.glb_view import render_glb
 
@@ -695,6 +701,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--fov", type=float, default=50.0)
     s.add_argument("--size", default="640x480")
     s.add_argument("--exposure", type=float, help="PNG exposure (default: automatic)")
+    add_false_color_flags(s)
     bake_flags(s)
     solve_flags(s)
     s.add_argument("--json", action="store_true")
@@ -733,44 +740,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--modes", default="mesh,iat", help="modes --play measures, comma-separated")
     s.add_argument("--json", action="store_true", help="--play statistics as JSON")
     s.set_defaults(func=cmd_view)
+    add_analyse_parser(sub, solve_flags, sides_flag, _load, _solve_options, _progress_bar, _emit)
     return p
-
-
-def _print_warning(command: str, text: str) -> None:
-    from tqdm import tqdm
-
-    line = " ".join(str(text).split())
-    tqdm.write(f"iat {command}: warning: {line}", file=sys.stderr)  # above a progress bar, if any
-
-
-def _warning_printer(command: str):
-    """A :func:`warnings.showwarning` that prints an IATWarning as one line on stderr."""
-    default = warnings.showwarning
-
-    def show(message, category, filename, lineno, file=None, line=None):
-        if not issubclass(category, IATWarning):
-            return default(message, category, filename, lineno, file, line)
-        _print_warning(command, message)
-
-    return show
-
-
-class _WarningLines(logging.Handler):
-    """Prints the ``iat`` loggers' warnings as ``iat CMD: warning: ...`` lines on stderr."""
-
-    def __init__(self, command: str):
-        super().__init__(logging.WARNING)
-        self.command = command
-
-    def emit(self, record: logging.LogRecord) -> None:
-        _print_warning(self.command, record.getMessage())
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(join_negative_values(sys.argv[1:] if argv is None else list(argv)))
     logger = logging.getLogger("iat")
-    handler = _WarningLines(args.command)
+    handler = WarningLines(args.command)
     logger.addHandler(handler)
     propagate, logger.propagate = logger.propagate, False
     try:
@@ -783,7 +761,7 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("always", IATWarning)
-        warnings.showwarning = _warning_printer(args.command)
+        warnings.showwarning = warning_printer(args.command)
         try:
             return int(args.func(args) or 0)
         except IATError as e:
