@@ -47,6 +47,10 @@ class RenderError(IATError):
     """The renderer could not create a context or draw."""
 
 
+class SolveError(IATError):
+    """A solve broke a physical bound (its light grew past what the albedos allow) and stopped."""
+
+
 class Cancelled(IATError):
     """A long operation was cancelled through its progress callback."""
 

@@ -471,7 +471,8 @@ def cmd_batch(args) -> int:
     from iat.tools.batch import parse_jobs, print_errors, run_batch
 
     batch = parse_jobs(args.jobs)
-    batch.daylight = daylight_request(args)
+    req = daylight_request(args)
+    batch.daylight = req if req.enabled else None  # (None: the models' own light, as run_batch's default)
     with _progress_bar(args, f"batch {Path(args.jobs).name}") as bar:
         report = run_batch(batch, workers=args.workers, scheduler=args.scheduler, progress=bar)
     if getattr(args, "json", False):

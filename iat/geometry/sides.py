@@ -171,6 +171,22 @@ def _coincident(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return paired, duplicate
 
 
+def repeated_faces(faces: np.ndarray) -> np.ndarray:
+    """(f,) bool: faces (f, 3) int64 (welded) that repeat an earlier face with the same corners in
+    the same orientation. Two coincident surfaces facing the same way would each receive the whole
+    light there and reflect it twice (a closed room at albedo 0.97 with every face doubled diverges):
+    the loader keeps the first of each."""
+    F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if len(F) == 0:
+        return np.zeros(0, dtype=bool)
+    r = np.argmin(F, axis=1)
+    canon = np.take_along_axis(F, (r[:, None] + np.arange(3)) % 3, axis=1)  # rotation kept, orientation too
+    _, first = np.unique(canon, axis=0, return_index=True)
+    out = np.ones(len(F), dtype=bool)
+    out[first] = False
+    return out
+
+
 def winding_numbers(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     """(k,) float64 generalised winding numbers of ``points`` (k, 3) about the closed surface
     ``triangles`` (t, 3, 3) (Van Oosterom-Strackee solid angles over 4 pi): +1 inside an outward

@@ -47,7 +47,7 @@ from iat.geometry.mesh import (
     weld_vertices,
 )
 from iat.geometry.panels import make_panels
-from iat.geometry.sides import SIDES, add_back_faces, classify_sides, object_ids, twin_patches
+from iat.geometry.sides import SIDES, add_back_faces, classify_sides, object_ids, repeated_faces, twin_patches
 from iat.io.dae import dae_frame
 from iat.io.gltf import GltfDocument
 from iat.io.ifc import read_ifc
@@ -416,6 +416,11 @@ def load_scene(
     if bad.any():
         log.info("%s: dropped %d zero-area faces of %d", path, int(bad.sum()), len(F))
         F, M, UV, objects = F[~bad], M[~bad], UV[~bad], objects[~bad]
+    again = repeated_faces(F)
+    if again.any():  # each copy would receive the light there and reflect it again
+        msg = f"{path}: dropped {int(again.sum())} faces repeating another in the same place"
+        warnings.warn(IATWarning(msg), stacklevel=2)
+        F, M, UV, objects = F[~again], M[~again], UV[~again], objects[~again]
     side = classify_sides(
         V,
         F,

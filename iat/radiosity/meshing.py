@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
+from iat.errors import SolveError
 from iat.geometry import quadtree as qt
 from iat.radiosity.context import Context
 from iat.radiosity.options import ABS_FLOOR, BIG_LEVELS, BIG_TOLERANCE, GAIN_LIMIT
@@ -202,7 +203,12 @@ def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, re
                 span[0] + (span[1] - span[0]) * passes / (D + 1),
                 f"{label}: pass {passes + 1}, {forest.n_leaves} elements, {len(new)} new points",
             )
-            cache.add(new, evaluate(new))
+            vals = evaluate(new)
+            if not np.isfinite(vals).all():  # never refine on a blown-up value
+                raise SolveError(
+                    f"{label}: non-finite radiance at {int((~np.isfinite(vals)).any(axis=1).sum())} points"
+                )
+            cache.add(new, vals)
             good, passes = forest, passes + 1
             if not cand.any():
                 break

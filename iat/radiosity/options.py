@@ -60,6 +60,12 @@ SHOT_GROUP_RATIO = 0.5
 REFINE_SAMPLE_FACTOR = 2
 #: a patch's shot gain (probe-integrated / interpolated power) kept in [1/(1+this), 1+this] (concave light)
 GAIN_LIMIT = 0.25
+#: a shot whose receivers get more than this times the power it sent (its sampled form factors sum
+#: above 1) is scaled back to what it sent; the house's shots reach 1.14 (quadrature noise)
+FF_SUM_LIMIT = 1.25
+#: a solve whose reflected or unshot power exceeds this times what the albedos allow (rho / (1 - rho)
+#: of the power received, rho the largest albedo) stops with :class:`iat.errors.SolveError`
+ENERGY_SLACK = 1.25
 #: changed sources' power, fraction of the new emitted power, above which ``resolve`` solves afresh (noise)
 RESOLVE_MAX_CHANGE = 1.0
 #: a shooter whose field peaks above this times its mean gets more samples per side, up to

@@ -4,7 +4,7 @@ mesh of the previous solution (radiosity is linear in the sources)."""
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -60,18 +60,108 @@ def resolve(
     daylight = getattr(scene, "sky", None) is not None or any(lt.kind == "directional" for lt in scene.lights)
     if not src or daylight or src.get("daylight"):  # (the sun and the sky: solved afresh on the mesh)
         return solve(scene, opts, progress, mesh=previous)
-    # what changed: emission per patch, lights added or removed (equal ones cancel)
-    emission = scene.patch_emission
-    area = scene.patch_area
-    old_emission = np.zeros_like(emission)
-    for row in src.get("emitters", []):
-        old_emission[int(row[0])] = row[1:4]
-    diff = emission - old_emission
-    changed_patches = np.flatnonzero((diff != 0).any(axis=1))
-    new_lights = [lt for lt in scene.lights if lt.kind in ("point", "spot")]
-    removed = [light_from_record(d) for d in src.get("lights", [])]
+    change = SourceChange.between(src, scene)
+    if change.power > RESOLVE_MAX_CHANGE * change.new_power:
+        return solve(scene, opts, progress, mesh=previous)
+    t_start = time.perf_counter()
+    with Visibility.of_scene(scene) as vis:
+        run = SolveRun(scene, opts, progress, vis, t_start)
+        run.take_mesh(previous)
+        geo = run.mesh.geo
+        old_reflected = np.asarray(previous.vert_radiance, dtype=np.float64) - change.old_emission[geo.patch]
+        t0 = time.perf_counter()
+        try:
+            run.progress.report(0.0, f"resolving: direct light of {change.count} changed sources")
+            delta = change.reflected_direct(run.ctx, geo, run.check)
+        except SolveCancelled:
+            delta = np.zeros((len(run.keys), 3))
+        offset = run.light_correction(lights=change.lights, signs=change.signs)
+        run.set_direct(old_reflected + delta, offset, delta + offset, time.perf_counter() - t0)
+        if not run.progress.cancelled:
+            run.run_plan([Shoot(opts.convergence * min(run.power0, change.power), (0.2, 1.0))])
+        return run.finish(
+            mode="resolve",
+            fallback_reflectance=previous.stats.get("reflectance"),
+            extra={
+                "changed_sources": change.count,
+                "changed_power_fraction": float(change.power / change.new_power)
+                if change.new_power > 0
+                else 0.0,
+            },
+        )
+
+
+@dataclass
+class SourceChange:
+    """What changed between the sources a solution recorded and a scene's: per patch the emission
+    ``diff`` (P, 3) = new - ``old_emission`` on the ``changed`` patches, point / spot lights
+    ``added`` and ``removed`` (equal ones cancel; a light whose intensity changed is added as the
+    difference), the luminance ``power`` of the change (by magnitude) and the scene's
+    ``new_power``, both in W."""
+
+    emission: np.ndarray
+    old_emission: np.ndarray
+    diff: np.ndarray
+    changed: np.ndarray
+    added: list
+    removed: list
+    power: float
+    new_power: float
+
+    @classmethod
+    def between(cls, src: dict, scene) -> SourceChange:
+        emission, area = scene.patch_emission, scene.patch_area
+        old_emission = np.zeros_like(emission)
+        for row in src.get("emitters", []):
+            old_emission[int(row[0])] = row[1:4]
+        diff = emission - old_emission
+        new_lights = [lt for lt in scene.lights if lt.kind in ("point", "spot")]
+        added, removed = _light_difference(new_lights, [light_from_record(d) for d in src.get("lights", [])])
+        power = float(np.pi * (np.abs(diff @ LUMINANCE_WEIGHTS) * area).sum())
+        power += sum(light_power(lt) for lt in added + removed)
+        new_power = float(np.pi * (emission @ LUMINANCE_WEIGHTS * area).sum())
+        new_power += sum(light_power(lt) for lt in new_lights)
+        changed = np.flatnonzero((diff != 0).any(axis=1))
+        return cls(emission, old_emission, diff, changed, added, removed, power, float(new_power))
+
+    @property
+    def count(self) -> int:
+        return int(len(self.changed) + len(self.added) + len(self.removed))
+
+    @property
+    def lights(self) -> list:
+        return self.added + self.removed
+
+    @property
+    def signs(self) -> list[float]:
+        return [1.0] * len(self.added) + [-1.0] * len(self.removed)
+
+    def reflected_direct(self, ctx, geo, check) -> np.ndarray:
+        """(n, 3) the reflected direct light of the change at ``geo``'s vertices: the old light
+        of each changed source off and the new on, each sampled as a fresh solve samples it."""
+        incoming = np.zeros((len(geo.key), 3))
+        old_share = emitter_shares(self.old_emission, ctx.patches.area)
+        for e in self.changed:
+            was = ctx.light.emitter_side(old_share[e])
+            now = ctx.light.emitter_side(ctx.patches.emitter_share[e])
+            if was == now:
+                incoming += ctx.light.emitter_gather(int(e), geo, now)[:, None] * self.diff[e]
+            else:
+                for side, e_rad in ((now, self.emission[e]), (was, -self.old_emission[e])):
+                    if e_rad.any():
+                        incoming += ctx.light.emitter_gather(int(e), geo, side)[:, None] * e_rad
+            check()
+        for lt, sign in zip(self.lights, self.signs, strict=True):
+            incoming += sign * ctx.light.light_irradiance(lt, geo) / np.pi
+            check()
+        return ctx.patches.albedo[geo.patch] * incoming
+
+
+def _light_difference(new_lights: list, removed: list) -> tuple[list, list]:
+    """``(added, removed)``: the lights of ``new_lights`` not among the old ``removed`` (which loses
+    the ones matched); a light equal but for its intensity is added as the difference."""
     added = []
-    for lt in new_lights:  # equal lights cancel; a light whose intensity changed adds the difference
+    for lt in new_lights:
         sig = light_signature(lt)
         sigs = [light_signature(o) for o in removed]  # (lights hold arrays: match by index)
         i = next((k for k, o in enumerate(sigs) if o == sig), None)
@@ -84,55 +174,4 @@ def resolve(
             d.radiant_intensity = d.radiant_intensity - removed[i].radiant_intensity
             added.append(d)
         del removed[i]
-    delta_power = float(np.pi * (np.abs(diff @ LUMINANCE_WEIGHTS) * area).sum())
-    delta_power += sum(light_power(lt) for lt in added + removed)
-    new_power = float(np.pi * (emission @ LUMINANCE_WEIGHTS * area).sum())
-    new_power += sum(light_power(lt) for lt in scene.lights if lt.kind in ("point", "spot"))
-    if delta_power > RESOLVE_MAX_CHANGE * new_power:
-        return solve(scene, opts, progress, mesh=previous)
-    t_start = time.perf_counter()
-    with Visibility.of_scene(scene) as vis:
-        run = SolveRun(scene, opts, progress, vis, t_start)
-        ctx = run.ctx
-        run.take_mesh(previous)
-        keys, geo = run.keys, run.mesh.geo
-        old_reflected = np.asarray(previous.vert_radiance, dtype=np.float64) - old_emission[geo.patch]
-        t0 = time.perf_counter()
-        try:
-            n_changed = len(changed_patches) + len(added) + len(removed)
-            run.progress.report(0.0, f"resolving: direct light of {n_changed} changed sources")
-            incoming = np.zeros((len(keys), 3))
-            old_share = emitter_shares(old_emission, area)
-            for e in changed_patches:  # the old light off and the new on, each sampled as solved
-                was, now = (
-                    ctx.light.emitter_side(old_share[e]),
-                    ctx.light.emitter_side(ctx.patches.emitter_share[e]),
-                )
-                if was == now:
-                    incoming += ctx.light.emitter_gather(int(e), geo, now)[:, None] * diff[e]
-                else:
-                    for side, e_rad in ((now, emission[e]), (was, -old_emission[e])):
-                        if e_rad.any():
-                            incoming += ctx.light.emitter_gather(int(e), geo, side)[:, None] * e_rad
-                run.check()
-            for sign, group in ((1.0, added), (-1.0, removed)):
-                for lt in group:
-                    incoming += sign * ctx.light.light_irradiance(lt, geo) / np.pi
-                    run.check()
-            delta = ctx.patches.albedo[geo.patch] * incoming
-        except SolveCancelled:
-            delta = np.zeros((len(keys), 3))
-        offset = run.light_correction(
-            lights=added + removed, signs=[1.0] * len(added) + [-1.0] * len(removed)
-        )
-        run.set_direct(old_reflected + delta, offset, delta + offset, time.perf_counter() - t0)
-        if not run.progress.cancelled:
-            run.run_plan([Shoot(opts.convergence * min(run.power0, delta_power), (0.2, 1.0))])
-        return run.finish(
-            mode="resolve",
-            fallback_reflectance=previous.stats.get("reflectance"),
-            extra={
-                "changed_sources": int(len(changed_patches) + len(added) + len(removed)),
-                "changed_power_fraction": float(delta_power / new_power) if new_power > 0 else 0.0,
-            },
-        )
+    return added, removed

@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 
+from iat.errors import SolveError
 from iat.geometry import quadtree as qt
 from iat.radiosity.context import Context
 from iat.radiosity.kernels import add_at_rows, rows_product
@@ -24,6 +25,8 @@ from iat.radiosity.options import (
     ABS_FLOOR,
     COARSE_EPS,
     COARSE_SIZE,
+    ENERGY_SLACK,
+    FF_SUM_LIMIT,
     MAX_REFLECTANCE,
     PEAK_RATIO,
     PEAK_SAMPLE_LIMIT,
@@ -193,10 +196,13 @@ class SolveRun:
         patch's light integrated with its probes over that of its linear interpolant, which its
         shots multiply (an element that stays coarse under concave light interpolates below it).
         1 on patches lit by point or spot lights (whose ``offset`` (V, 3) already shoots the light
-        the elements hold) and when the solve was cancelled."""
+        the elements hold) and when the solve was cancelled; at most 1 / the patch's largest albedo."""
         if self.progress.cancelled:
             return np.ones(self.P)
         gain = probe_shot_gain(self.forest, cache, self.ctx.patches)
+        # what a patch shoots never exceeds what it received: rho x gain <= 1 (near-white patches
+        # facing each other would otherwise grow their light at every bounce)
+        gain = np.minimum(gain, 1.0 / np.maximum(self.ctx.patches.albedo.max(axis=1), 1e-300))
         if len(offset) and np.any(offset):
             lit = np.zeros(self.P, dtype=bool)
             lit[qt.decode_key(self.keys, self.ctx.patches.n)[0][np.any(offset != 0, axis=1)]] = True
@@ -230,6 +236,7 @@ class SolveRun:
                 total = float(power.sum())
                 if total <= target:
                     break
+                self.check_energy(total, "unshot")
                 done = min(1.0, max(0.0, math.log(u_start / max(total, 1e-300)) / span_log))
                 self.progress.set(
                     span[0] + (span[1] - span[0]) * done,
@@ -255,6 +262,7 @@ class SolveRun:
         received (``vertex_power`` (V,): the power of a unit of reflected radiance at each)."""
         mesh, rad, P = self.mesh, self.rad, self.ctx.patches
         rows, dv, acc, field_mean = shot
+        dv = self.bounded_shot(s, rows, dv, field_mean, vertex_power)
         for k, ci, got in acc:
             add_at_rows(self.coarse[k].acc, ci, got)
         self.shot_index[s] += 1
@@ -270,6 +278,39 @@ class SolveRun:
         m_abs[touched] = rows_product(mesh.M.indptr, mesh.M.indices, mesh.M.data, rad.unshot, touched, True)
         received = vertex_power[rows] @ dv  # (rows are distinct)
         self.shot_log.append((np.pi * P.area[s] * field_mean, received))
+
+    def bounded_shot(self, s: int, rows, dv: np.ndarray, field_mean: np.ndarray, vertex_power) -> np.ndarray:
+        """``dv`` (k, 3), a shot's reflected radiance at its vertices ``rows`` (k,), scaled back, per
+        channel, to the power s sent when its receivers would get more than ``FF_SUM_LIMIT`` times
+        that (its sampled form factors sum above 1: a blow-up, not quadrature noise)."""
+        rho = self.mesh.rho[rows]
+        got = vertex_power[rows] @ np.where(rho > 0, np.abs(dv) / np.where(rho > 0, rho, 1.0), 0.0)
+        sent = np.pi * self.ctx.patches.area[s] * np.abs(field_mean)
+        over = got > FF_SUM_LIMIT * sent
+        if not over.any():
+            return dv
+        scale = np.where(over, sent / np.where(over, got, 1.0), 1.0)
+        self.stats["renormalised_shots"] = self.stats.get("renormalised_shots", 0) + 1
+        return dv * scale
+
+    def reflected_bound(self) -> float:
+        """Luminance power (W) the surfaces can reflect over all bounces at most: ``rho / (1 -
+        rho)`` of the power they received from the sources, rho the largest albedo (any channel);
+        inf when rho >= 1 (an albedo-1 room never converges: ``max_shots`` stops it)."""
+        rho = float(self.ctx.patches.albedo.max()) if self.P else 0.0
+        return math.inf if rho >= 1.0 else max(self.power_ref, self.power0) * rho / (1.0 - rho)
+
+    def check_energy(self, power: float, what: str) -> None:
+        """Raise :class:`SolveError` when ``power`` (luminance W, the ``what`` light) is not finite
+        or exceeds ``ENERGY_SLACK`` times :meth:`reflected_bound`: a solve that blew up stops with
+        one line instead of writing a wrong solution."""
+        bound = ENERGY_SLACK * self.reflected_bound()
+        if not math.isfinite(power) or power > bound:
+            raise SolveError(
+                f"the solve diverged after {self.shots} shots: {what} power {power:.3g} W exceeds the "
+                f"{bound:.3g} W the albedos allow (coincident faces or a near-white material?); "
+                "see docs/stability.md"
+            )
 
     def samples_by_power(self, m_hi: int, power: float, field: np.ndarray) -> int:
         """Samples per side of a gather of a shooter's ``field`` ((N+1, N+1, 3) lattice radiance)
@@ -450,7 +491,11 @@ class SolveRun:
             reflected = reflected + amb
         radiance = ctx.patches.emission[vpatch] + reflected
         if not np.isfinite(radiance).all():
-            raise FloatingPointError("radiosity produced non-finite radiance (a solver bug)")
+            self.check_energy(math.inf, "reflected")
+        self.check_energy(
+            float(np.pi * (ctx.patches.area * luminance_of(self.mesh.M @ np.abs(reflected))).sum()),
+            "reflected",
+        )
         radiance = np.maximum(radiance, 0.0)
         unshot_fraction = float(unshot_power.sum() / self.power_ref) if self.power_ref > 0 else 0.0
         self.progress.finish(f"done: {self.shots} shots, {len(keys)} vertices")

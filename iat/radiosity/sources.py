@@ -46,7 +46,7 @@ def light_record(lt) -> dict:
 
 
 def light_from_record(d: dict):
-    """A light-like object (what :meth:`Context.light_irradiance` reads) from :func:`light_record`."""
+    """A light-like object (what :meth:`DirectLight.light_irradiance` reads) from :func:`light_record`."""
     return SimpleNamespace(
         kind=d["kind"],
         position=np.asarray(d["position"], dtype=np.float64),
