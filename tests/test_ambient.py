@@ -69,8 +69,10 @@ def test_ambient_term_is_the_furnace_after_one_shot(albedo):
 
 
 def test_ambient_hits_read_the_lattice_where_the_rays_land():
-    """The compiled kernel against numpy: front hits only, each read with ``sample_lattice`` from its
-    patch's grid, the vertex's mean over its rays, and the fraction of its rays on each patch."""
+    """The compiled kernel against numpy: front hits, each read with ``sample_lattice`` from its
+    patch's grid; back hits on a patch with a twin read the twin (at (v, u) for a swapped twin, its
+    mean otherwise), other back hits nothing; the vertex's mean over its rays, and the fraction of
+    its rays on each patch."""
     from iat.radiosity.kernels import ambient_hits
     from iat.radiosity.sampling import sample_lattice
 
@@ -82,18 +84,30 @@ def test_ambient_hits_read_the_lattice_where_the_rays_land():
     tri_patch = rng.integers(0, n_p, n_t)
     tri_uv = rng.random((n_t, 3, 2))
     normal = rng.normal(size=(n_p, 3))
+    twin = np.array([1, 0, 3, 2, -1])  # 0 and 1 made by add_back_faces ((u, v) swapped), 2 and 3 not
+    swap = np.array([True, True, False, False, False])
     grids = rng.random((n_p, (g + 1) ** 2, 3))
+    means = grids.mean(axis=1)
     first = np.zeros((n, 3))
     r, c, f = np.empty(n * k, np.int64), np.empty(n * k, np.int64), np.empty(n * k)
-    m = ambient_hits(tri, bary, dirs, tri_patch, tri_uv, normal, grids.reshape(-1, 3), g, k, first, r, c, f)
-    p = tri_patch[np.maximum(tri, 0)]
-    front = (tri >= 0) & (np.einsum("nc,nc->n", dirs, normal[p]) < 0)
+    args = (tri, bary, dirs, tri_patch, tri_uv, normal, twin, swap, means, grids.reshape(-1, 3), g, k)
+    m = ambient_hits(*args, first, r, c, f)
+    hit = tri_patch[np.maximum(tri, 0)]
+    front = (tri >= 0) & (np.einsum("nc,nc->n", dirs, normal[hit]) < 0)
+    back = (tri >= 0) & ~front & (twin[hit] >= 0)
+    p = np.where(back, twin[hit], hit)
     b = np.column_stack([1 - bary.sum(axis=1), bary])
     uv = np.clip(np.einsum("nk,nkc->nc", b, tri_uv[np.maximum(tri, 0)]), 0, 1)
     want = np.zeros((n * k, 3))
-    for q in np.flatnonzero(front):
-        want[q] = sample_lattice(grids[p[q]], g, uv[q : q + 1, 0], uv[q : q + 1, 1])[0]
+    for q in np.flatnonzero(front | back):
+        u, v = (uv[q, 1], uv[q, 0]) if back[q] and swap[hit[q]] else (uv[q, 0], uv[q, 1])
+        if back[q] and not swap[hit[q]]:
+            want[q] = means[p[q]]
+        else:
+            want[q] = sample_lattice(grids[p[q]], g, np.array([u]), np.array([v]))[0]
+    assert back.any() and (back & swap[hit]).any() and (back & ~swap[hit]).any()
     np.testing.assert_allclose(first, want.reshape(n, k, 3).mean(axis=1), rtol=1e-12, atol=1e-15)
     got = {(int(a), int(b)): float(x) for a, b, x in zip(r[:m], c[:m], f[:m], strict=True)}
-    pairs, counts = np.unique(np.column_stack([np.arange(n * k) // k, p])[front], axis=0, return_counts=True)
+    met = front | back
+    pairs, counts = np.unique(np.column_stack([np.arange(n * k) // k, p])[met], axis=0, return_counts=True)
     assert got == {(int(a), int(b)): x / k for (a, b), x in zip(pairs, counts, strict=True)}

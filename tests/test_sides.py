@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from iat.camera import Camera
+from iat.geometry import quadtree as qt
 from iat.geometry.sides import (
     add_back_faces,
     classify_sides,
@@ -369,3 +370,25 @@ def test_madrid_house_counts():
     assert rep.back_faces == 10742 and rep.twin_patches == 8422
     assert rep.paired_faces == 148 and rep.coincident_faces == 0
     assert twin_patches(scene.corner_positions, scene.patch_is_quad).sum() >= 2 * rep.twin_patches
+
+
+def test_walls_with_their_own_backs_keep_the_ambient_term(tmp_path):
+    """A closed room whose six walls carry a back face each (coincident, facing out): the ambient
+    term's rays that meet a back read its twin facing them, so the room's light is the same as
+    without the backs (it fell to 0.015 of the ambient share when those rays counted as misses)."""
+    room = _box((-1, 0, -1), (1, 2, 1), inward=True)
+    out = {}
+    for name, groups in (
+        ("plain", [("room", "white", room)]),
+        ("backs", [("room", "white", room), ("back", "white", [q[::-1] for q in room])]),
+    ):
+        scene = load_scene(
+            _write_obj(tmp_path / f"{name}.obj", groups, {"white": "Kd 0.8 0.8 0.8"}), sides="front"
+        )
+        scene.lights = [Light(kind="point", position=np.array([0.0, 1.0, 0.0]), intensity=1.0)]
+        sol = solve(scene, SolveOptions(max_depth=2, convergence=0.2))
+        patch = qt.decode_key(sol.vert_key, sol.n)[0]
+        inner = (scene.patch_normal[patch] * (np.array([0.0, 1.0, 0.0]) - sol.vert_position)).sum(1) > 0
+        out[name] = (float(sol.vert_radiance[inner, 0].mean()), sol.stats["ambient_luminance_fraction"])
+    assert out["backs"][0] == pytest.approx(out["plain"][0], rel=0.01)
+    assert out["backs"][1] == pytest.approx(out["plain"][1], rel=0.05) and out["plain"][1] > 0.3

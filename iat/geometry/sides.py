@@ -367,10 +367,18 @@ def twin_patches(corner_positions: np.ndarray, is_quad: np.ndarray) -> np.ndarra
 
     corner_positions : (P, 4, 3) float (a triangle's slot 3 repeats slot 2); is_quad : (P,) bool.
     Positions are compared exactly (twins share their vertices)."""
+    return twin_index(corner_positions, is_quad)[0] >= 0
+
+
+def twin_index(corner_positions: np.ndarray, is_quad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(twin, swap)``: (P,) int64 the patch's coincident twin facing the other way (-1: none; of
+    several, one), and (P,) bool whether the twin's lattice point (u, v) is this patch's (v, u)
+    (the twins :func:`add_back_faces` makes: same first corner, the rest reversed). Arguments as
+    :func:`twin_patches`."""
     pos = np.asarray(corner_positions, dtype=np.float64).reshape(-1, 4, 3)
     P = len(pos)
     if P == 0:
-        return np.zeros(0, dtype=bool)
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool)
     q = np.asarray(is_quad, dtype=bool).reshape(-1)
     pts = pos.copy()
     pts[~q, 3] = np.inf  # triangles: three corners, the fourth slot sorts last on both twins
@@ -387,6 +395,15 @@ def twin_patches(corner_positions: np.ndarray, is_quad: np.ndarray) -> np.ndarra
     g[rows] = np.cumsum(new) - 1
     lead = rows[new][g]  # each group's first patch: its normal is the reference
     pos_side = (n * n[lead]).sum(axis=1) > 0
-    n_pos = np.bincount(g, weights=pos_side)
-    n_neg = np.bincount(g, weights=~pos_side)
-    return np.where(pos_side, n_neg[g] > 0, n_pos[g] > 0)
+    # per group, one patch of each side (the last written): each side's twin is the other's
+    one_pos = np.full(g.max() + 1, -1, dtype=np.int64)
+    one_neg = np.full(g.max() + 1, -1, dtype=np.int64)
+    one_pos[g[pos_side]] = np.flatnonzero(pos_side)
+    one_neg[g[~pos_side]] = np.flatnonzero(~pos_side)
+    twin = np.where(pos_side, one_neg[g], one_pos[g])
+    has = twin >= 0
+    t = np.where(has, twin, 0)
+    last = np.where(q, 3, 2)  # the corner after c0 going the other way round
+    swap = has & (pos[t, 0] == pos[:, 0]).all(axis=1)
+    swap &= (pos[t, 1] == pos[np.arange(P), last]).all(axis=1)
+    return twin, swap

@@ -676,12 +676,15 @@ def cosine_rays(dx, dy, t1, t2, normal, origin32, w, o, d):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def ambient_hits(tri, bary, dirs, tri_patch, tri_uv, normal, flat, g, k, first, rows, cols, counts):
+def ambient_hits(tri, bary, dirs, tri_patch, tri_uv, normal, twin, twin_swap, means, flat, g, k, first,
+                 rows, cols, counts):  # fmt: skip
     """The ambient term's rays of a block of vertices, ``k`` each, in vertex order (n * k,): where
     a ray meets a front face (opaque triangle ``tri`` >= 0, barycentric ``bary`` (n*k, 2), direction
     ``dirs`` (n*k, 3) against the normal (P, 3) of its patch ``tri_patch[tri]``), the unshot radiance
     there, read piecewise-linearly (as ``sampling.sample_lattice``) from ``flat`` ((P (g+1)^2, 3):
-    each patch's g x g lattice) at the hit's lattice (u, v) (``tri_uv`` (T, 3, 2)). Adds each
+    each patch's g x g lattice) at the hit's lattice (u, v) (``tri_uv`` (T, 3, 2)); a ray that meets
+    the back of a patch with a coincident ``twin`` (P,) (-1: none) facing it reads the twin there
+    (at (v, u) where ``twin_swap`` (P,), else the twin's mean ``means`` (P, 3)). Adds each
     vertex's mean over its rays to ``first`` (n, 3); writes per vertex the patches its rays met
     (``rows`` its index in the block, ``cols`` the patch) and the fraction of its rays on each
     (``counts``), and returns how many such pairs."""
@@ -698,23 +701,33 @@ def ambient_hits(tri, bary, dirs, tri_patch, tri_uv, normal, flat, g, k, first, 
             if t < 0:
                 continue
             p = tri_patch[t]
+            swap = False
             if dirs[q, 0] * normal[p, 0] + dirs[q, 1] * normal[p, 1] + dirs[q, 2] * normal[p, 2] >= 0.0:
-                continue  # a back face
-            b1, b2 = bary[q, 0], bary[q, 1]
-            b0 = 1.0 - b1 - b2
-            u = min(max(b0 * tri_uv[t, 0, 0] + b1 * tri_uv[t, 1, 0] + b2 * tri_uv[t, 2, 0], 0.0), 1.0)
-            w = min(max(b0 * tri_uv[t, 0, 1] + b1 * tri_uv[t, 1, 1] + b2 * tri_uv[t, 2, 1], 0.0), 1.0)
-            x, y = u * g, w * g
-            a, b = min(int(x), g - 1), min(int(y), g - 1)
-            fx, fy = x - a, y - b
-            i00 = p * (g + 1) * (g + 1) + a * (g + 1) + b
-            if fx + fy <= 1.0:
-                wb, ib, w10, w01 = 1.0 - fx - fy, i00, fx, fy
-            else:
-                wb, ib, w10, w01 = fx + fy - 1.0, i00 + g + 2, 1.0 - fy, 1.0 - fx
-            for c in range(3):
-                val = flat[ib, c] * wb + flat[i00 + g + 1, c] * w10 + flat[i00 + 1, c] * w01
-                first[v, c] += val / k
+                if twin[p] < 0:
+                    continue  # a back face
+                swap = twin_swap[p]
+                p = twin[p]  # the back of a sheet whose twin faces the ray: the twin's light
+                if not swap:
+                    for c in range(3):
+                        first[v, c] += means[p, c] / k
+            if swap or tri_patch[t] == p:
+                b1, b2 = bary[q, 0], bary[q, 1]
+                b0 = 1.0 - b1 - b2
+                u = min(max(b0 * tri_uv[t, 0, 0] + b1 * tri_uv[t, 1, 0] + b2 * tri_uv[t, 2, 0], 0.0), 1.0)
+                w = min(max(b0 * tri_uv[t, 0, 1] + b1 * tri_uv[t, 1, 1] + b2 * tri_uv[t, 2, 1], 0.0), 1.0)
+                if swap:
+                    u, w = w, u
+                x, y = u * g, w * g
+                a, b = min(int(x), g - 1), min(int(y), g - 1)
+                fx, fy = x - a, y - b
+                i00 = p * (g + 1) * (g + 1) + a * (g + 1) + b
+                if fx + fy <= 1.0:
+                    wb, ib, w10, w01 = 1.0 - fx - fy, i00, fx, fy
+                else:
+                    wb, ib, w10, w01 = fx + fy - 1.0, i00 + g + 2, 1.0 - fy, 1.0 - fx
+                for c in range(3):
+                    val = flat[ib, c] * wb + flat[i00 + g + 1, c] * w10 + flat[i00 + 1, c] * w01
+                    first[v, c] += val / k
             if owner[p] != v:
                 owner[p], slot[p] = v, nf
                 found[nf] = p

@@ -11,6 +11,7 @@ import numpy as np
 
 from iat.geometry import quadtree as qt
 from iat.geometry.clip import clamp_into, coverage_grid
+from iat.geometry.sides import twin_index
 from iat.radiosity.options import (
     FF_CACHE_ENTRIES,
     FF_EPS,
@@ -139,6 +140,8 @@ class Patches:
     min_size: float  # smallest element edge (``min_element_size`` or a fraction of the scene)
     max_size: float  # element edge above which the split test is stricter
     n: int  # lattice cells a side at ``max_depth``
+    twin: np.ndarray  # (P,) int64 the coincident patch facing the other way (a sheet's back), -1: none
+    twin_swap: np.ndarray  # (P,) bool: the twin's lattice (u, v) is this patch's (v, u)
     _coverage: dict = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
@@ -164,6 +167,7 @@ class Patches:
         helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
         t1 = np.cross(normal, helper)
         t1 /= np.maximum(np.linalg.norm(t1, axis=1, keepdims=True), 1e-300)
+        twin, twin_swap = twin_index(corners, is_quad)
         return cls(
             corners=corners,
             is_quad=is_quad,
@@ -190,6 +194,8 @@ class Patches:
             min_size=MIN_ELEMENT_FRACTION * math.sqrt(float(area.sum())) if mes is None else float(mes),
             max_size=MAX_ELEMENT_FRACTION * math.sqrt(float(area.sum())),
             n=1 << opts.max_depth,
+            twin=twin,
+            twin_swap=twin_swap,
         )
 
     @property

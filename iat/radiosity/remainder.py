@@ -63,13 +63,32 @@ def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, check
     geo : the vertices' :class:`~iat.radiosity.patches.ReceiverGeometry`; tri_patch (T,), tri_uv
     (T, 3, 2): the patch and lattice (u, v) of each of ``vis``'s opaque triangles."""
     g = grids.shape[1] - 1
+    pt = ctx.patches
     flat = np.ascontiguousarray(grids.reshape(-1, 3))
+    means = np.ascontiguousarray(grids.reshape(len(grids), -1, 3).mean(axis=1))  # (P, 3), for twins
     mean = np.zeros((len(geo.key), 3))
     per_vertex, cols, counts = [], [], []  # (V, P) CSR by rows: the kernel writes them in vertex order
     for sl, o, d, w, k in hemisphere_rays(ctx, geo):
         tri, bary = vis.first_hits(o, d, np.full(len(o), 4.0 * ctx.patches.scale, dtype=np.float32))
         r, c, f = np.empty(len(o), np.int64), np.empty(len(o), np.int64), np.empty(len(o))
-        m = ambient_hits(tri, bary, w, tri_patch, tri_uv, ctx.patches.normal, flat, g, k, mean[sl], r, c, f)
+        m = ambient_hits(
+            tri,
+            bary,
+            w,
+            tri_patch,
+            tri_uv,
+            pt.normal,
+            pt.twin,
+            pt.twin_swap,
+            means,
+            flat,
+            g,
+            k,
+            mean[sl],
+            r,
+            c,
+            f,
+        )
         if tally:
             per_vertex.append(np.bincount(r[:m], minlength=sl.stop - sl.start))
             cols.append(c[:m].astype(np.int32))
