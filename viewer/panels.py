@@ -26,6 +26,7 @@ from imgui_bundle import ImVec2, ImVec4, hello_imgui, imgui, implot
 
 from iat.bake.flatten import METHODS
 from iat.io.load import SUPPORTED_EXTENSIONS
+from viewer import false_color
 from viewer.bake_worker import snap_scale
 from viewer.daylight import sun_facts, sun_label
 from viewer.eta import JobEta
@@ -164,6 +165,8 @@ def view_panel(state: AppState) -> None:
             imgui.same_line()
         if imgui.radio_button(MODE_LABELS[m], state.view.mode == m):
             state.view.mode = m
+    if state.view.mode == "false":
+        false_color.settings_panel(state)
     if state.view.mode == "split":
         changed, v = imgui.slider_float("Divider", float(state.view.split), 0.0, 1.0, "%.2f")
         if changed:

@@ -35,13 +35,14 @@ from iat.bake.policy import BakePolicy
 from iat.camera import Camera
 from iat.radiosity import SolveOptions
 from viewer.bake_worker import BakeWorker
+from viewer.false_color import FalseColorSettings
 from viewer.jobs import OpenJob, SetJob
 from viewer.navigation import CameraPath, Navigator, PathPlayer, PathRecorder
 
 log = logging.getLogger(__name__)
 
-MODES = ("mesh", "iat", "split", "diff")
-MODE_LABELS = {"mesh": "Mesh", "iat": "IAT", "split": "Split", "diff": "Difference"}
+MODES = ("mesh", "iat", "split", "diff", "false")
+MODE_LABELS = {"mesh": "Mesh", "iat": "IAT", "split": "Split", "diff": "Difference", "false": "False colour"}
 FRAME_HISTORY = 240  # frames kept for the frame-time plot
 
 
@@ -203,6 +204,7 @@ class ViewState:
     framebuffer_scale: tuple[float, float] = (1.0, 1.0)
     kept: bool = False
     notices: tuple[str, ...] = ()
+    false_color: FalseColorSettings = field(default_factory=FalseColorSettings)  # the "false" mode's
 
 
 @dataclass

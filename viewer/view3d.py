@@ -33,6 +33,7 @@ import numpy as np
 
 import glfw  # isort: skip
 
+from viewer.false_color import FalseColorView
 from viewer.jobs import error_text
 from viewer.state import AppState
 
@@ -83,6 +84,7 @@ class View3D:
         self.draw_error = ""
         self._dirty = True
         self.export = None  # a GlbView of an exported bake, drawn instead of the renderer
+        self.false_color: FalseColorView | None = None  # the false-colour mode's drawer
 
     def show_export(self, document) -> None:
         """Draw ``document`` (a :class:`~iat.render.glb_view.GlbDocument`) from now on; None: the
@@ -143,6 +145,7 @@ class View3D:
             tuple(vp),
             generation,
             tuple(blend),
+            s.view.false_color.key() if mode == "false" else None,
         )
 
     # -- per frame -----------------------------------------------------------------------------
@@ -206,6 +209,9 @@ class View3D:
         try:
             if self.export is not None:
                 self._draw_export(state, cam, target, viewport)
+            elif mode == "false":  # lux or cd/m² in false colour, its legend (viewer.false_color)
+                self.false_color = self.false_color or FalseColorView(self.ctx)
+                self.false_color.draw(state, cam, target, viewport)
             else:
                 self.renderer.draw(
                     cam,

@@ -216,34 +216,39 @@ def false_color_image(
     return img, scale
 
 
-def draw_legend(img: np.ndarray, scale: Scale) -> np.ndarray:
-    """``img`` (h, w, 3) uint8 with the scale's legend on its right: a colour bar (low at the
-    bottom) on a dark panel, tick labels, the quantity and unit above and ``log``/``linear`` below."""
+def legend_image(height: int, scale: Scale) -> np.ndarray:
+    """(height, pw, 3) uint8 the scale's legend panel: a colour bar (low at the bottom) on a dark
+    ground, tick labels, the unit above and ``log``/``linear`` below; its width fits the labels."""
     import cv2
 
-    out = np.ascontiguousarray(img.copy())
-    h, w = out.shape[:2]
-    font, fs = cv2.FONT_HERSHEY_SIMPLEX, max(0.3, min(0.5, h / 900))
-    th = max(1, int(round(fs * 2)))
-    label_w = max(cv2.getTextSize(fmt(v), font, fs, th)[0][0] for v in scale.ticks() or [scale.hi])
+    fs = max(0.3, min(0.5, height / 900))
+    font, th = cv2.FONT_HERSHEY_SIMPLEX, max(1, int(round(fs * 2)))
+    labels = [fmt(v) for v in scale.ticks()] or [fmt(scale.hi)]
+    label_w = max(cv2.getTextSize(t, font, fs, th)[0][0] for t in [*labels, scale.unit, "linear"])
     text_h = cv2.getTextSize("lx", font, fs, th)[0][1]
-    bar_w = max(8, w // 40)
-    panel_w = bar_w + label_w + 18
-    x0 = max(0, w - panel_w - 6)
-    top, bottom = 2 * text_h + 12, h - 2 * text_h - 12
-    cv2.rectangle(out, (x0, 2), (w - 2, h - 3), (20, 20, 20), -1)
+    bar_w = max(8, height // 30)
+    out = np.full((height, bar_w + label_w + 18, 3), 20, dtype=np.uint8)
+    top, bottom = 2 * text_h + 12, height - 2 * text_h - 12
     ys = np.arange(top, bottom)
     t = 1.0 - (ys - top) / max(bottom - top - 1, 1)
     lo, hi = (math.log10(scale.lo), math.log10(scale.hi)) if scale.log else (scale.lo, scale.hi)
     vals = 10.0 ** (lo + t * (hi - lo)) if scale.log else lo + t * (hi - lo)
-    bar = np.round(colorize(vals, scale) * 255).astype(np.uint8)
-    out[top:bottom, x0 + 4 : x0 + 4 + bar_w] = bar[:, None, :]
+    out[top:bottom, 4 : 4 + bar_w] = np.round(colorize(vals, scale) * 255).astype(np.uint8)[:, None, :]
+    white = (230, 230, 230)
     for v in scale.ticks():
-        tv = scale.position(v)
-        y = int(round(bottom - 1 - float(tv) * (bottom - top - 1)))
-        cv2.line(out, (x0 + 4 + bar_w, y), (x0 + 8 + bar_w, y), (230, 230, 230), 1)
-        cv2.putText(out, fmt(v), (x0 + 10 + bar_w, y + 4), font, fs, (230, 230, 230), th, cv2.LINE_AA)
-    cv2.putText(out, scale.unit, (x0 + 4, top - text_h // 2 - 4), font, fs, (230, 230, 230), th, cv2.LINE_AA)
+        y = int(round(bottom - 1 - float(scale.position(v)) * (bottom - top - 1)))
+        cv2.line(out, (4 + bar_w, y), (8 + bar_w, y), white, 1)
+        cv2.putText(out, fmt(v), (10 + bar_w, y + text_h // 2), font, fs, white, th, cv2.LINE_AA)
+    cv2.putText(out, scale.unit, (4, top - text_h // 2 - 4), font, fs, white, th, cv2.LINE_AA)
     kind = "log" if scale.log else "linear"
-    cv2.putText(out, kind, (x0 + 4, bottom + text_h + 8), font, fs, (230, 230, 230), th, cv2.LINE_AA)
+    cv2.putText(out, kind, (4, bottom + text_h + 8), font, fs, white, th, cv2.LINE_AA)
+    return out
+
+
+def draw_legend(img: np.ndarray, scale: Scale) -> np.ndarray:
+    """``img`` (h, w, 3) uint8 with :func:`legend_image` at its right edge (4 pixels in)."""
+    out = np.ascontiguousarray(img.copy())
+    h, w = out.shape[:2]
+    panel = legend_image(h - 4, scale)[:, : max(w - 4, 1)]
+    out[2 : h - 2, w - 2 - panel.shape[1] : w - 2] = panel
     return out
