@@ -46,7 +46,7 @@ import glfw  # isort: skip
 
 from iat.errors import IATError
 from iat.radiosity import SolveOptions
-from viewer import background_io, controls, overlay, panels
+from viewer import background_io, controls, overlay, panels, sun_panel
 from viewer.bake_worker import BakeSource, BakeWorker
 from viewer.jobs import Opened, OpenJob, SetJob, error_text
 from viewer.navigation import CameraPath, load_paths, paths_file, save_paths, walker
@@ -175,6 +175,7 @@ class ViewerApp:
             self._window("Model", "LeftBottom", panels.file_panel),
             self._window("Stats", "RightSpace", panels.stats_panel),
             self._window("Lighting", "RightBottom", panels.lighting_panel),
+            self._window("Sun & sky", "RightBottom", sun_panel.sun_sky_panel),
         ]
         return rp
 
@@ -395,6 +396,7 @@ class ViewerApp:
         controls.shortcuts(s)
         panels.error_window(s)
         overlay.view_overlay(s)
+        sun_panel.frame(self)  # the Sun & sky panel's change to the re-solve, the sky, the sun's disc
         busy = s.jobs.opening or s.jobs.rebaking or s.lighting.relighting or s.lighting.solving_day_cycle
         moving = s.paths.player or s.paths.recorder or s.view.looking or s.lighting.dragging_light
         if self.idle and (busy or moving or (self.view3d is not None and self.view3d.dirty)):

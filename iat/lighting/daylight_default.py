@@ -50,7 +50,7 @@ HAURWITZ = (1098.0, 0.057)
 #: an overcast sky's horizontal irradiance as a fraction of the clear sky's global one
 OVERCAST_FRACTION = 0.3
 #: the sky models the panel and ``--sky`` offer beside the file-format ones
-SKY_MODELS = ("clear", "overcast", "none")
+SKY_MODELS = ("clear", "overcast", "uniform", "none")
 #: how a user changes the default (the end of the one line)
 HOW_TO_CHANGE = "change with --sun [LAT,LON,]YYYY-MM-DDTHH:MM[,TZ], --sky KIND or --no-daylight"
 
@@ -115,7 +115,8 @@ class Daylight:
       TrueNorth; :func:`iat.io.site.north_vector`)
     sun_on : the sun is there (its light is 0 below the horizon anyway)
     sky_model : "clear" (Preetham of ``turbidity`` at the clear sky's diffuse irradiance), "overcast"
-      (CIE overcast at :data:`OVERCAST_FRACTION` of the clear sky's global irradiance), "none"
+      (CIE overcast at :data:`OVERCAST_FRACTION` of the clear sky's global irradiance), "uniform" (one
+      radiance everywhere, at the clear sky's diffuse irradiance), "none"
     sky_scale : the sky's brightness factor (1: the model's own figure)
     custom_sky : a sky given as such (``--sky uniform:...``, ``preetham:T``, ``hdr:FILE``): replaces
       ``sky_model``; a "preetham" one is turned towards the sun
@@ -199,6 +200,9 @@ class Daylight:
                 kind="preetham", turbidity=float(self.turbidity), sun_direction=to_sun, name="clear sky"
             )
             target = clear_sky_diffuse(el)
+        elif self.sky_model == "uniform":
+            sky = Sky(kind="uniform", name="uniform sky")
+            target = clear_sky_diffuse(el)
         else:
             sky = Sky(kind="cie_overcast", name="overcast sky")
             target = OVERCAST_FRACTION * clear_sky_global(el)
@@ -238,6 +242,8 @@ class Daylight:
         if self.sky_model == "clear":
             e = self.sky_scale * clear_sky_diffuse(el)
             return f"clear sky (Preetham, turbidity {self.turbidity:g}, {e:.0f} W/m² diffuse)"
+        if self.sky_model == "uniform":
+            return f"uniform sky ({self.sky_scale * clear_sky_diffuse(el):.0f} W/m² diffuse)"
         e = self.sky_scale * OVERCAST_FRACTION * clear_sky_global(el)
         return f"overcast sky (CIE, {e:.0f} W/m² diffuse)"
 
