@@ -90,7 +90,7 @@ def sun_sky_panel(state: AppState) -> None:
     lo, hi = (0.0, 24.0) if not study else (ss.study["hours"][0], ss.study["hours"][-1])
     shown_hour = float(d.hour) if hour is None else hour
     changed, v = imgui.slider_float(
-        "Time", shown_hour, lo, hi, f"{_clock(shown_hour)} ({d.clock_text()[-6:]})"
+        "Time", shown_hour, lo, hi, f"{_clock(shown_hour)} ({d.clock_text().split(' ', 2)[2]})"
     )
     if changed:
         sun_sky.change(state, hour=float(min(max(v, lo), hi)))
