@@ -10,12 +10,12 @@ from iat.errors import IATWarning, SolveError
 from iat.io.load import load_scene
 from iat.io.scene import Material
 from iat.radiosity import SolveOptions, solve
-from tests.test_radiosity import _box_quads, _scene
+from tests.test_radiosity import box_quads, scene_of
 
 
 def _furnace_obj(tmp_path, albedo: float, copies: int):
     """A closed unit box, 6 x 2 x 2 inward quads, each written ``copies`` times, all emitting 1."""
-    quads = [q for *_, q in _box_quads([0, 0, 0], [1, 1, 1], 2, True)]
+    quads = [q for *_, q in box_quads([0, 0, 0], [1, 1, 1], 2, True)]
     v, f = [], []
     for q in quads:
         base = len(v)
@@ -47,9 +47,9 @@ def test_a_solve_that_diverges_stops_with_one_line():
     """Coincident duplicates built in memory (past the loader) in a closed albedo-0.5 box: the light
     doubles at each bounce; the solve stops with a SolveError naming the bound instead of writing
     a solution 60 times too bright."""
-    quads = [q for *_, q in _box_quads([0, 0, 0], [1, 1, 1], 2, True)]
+    quads = [q for *_, q in box_quads([0, 0, 0], [1, 1, 1], 2, True)]
     quads = quads + [q.copy() for q in quads]
-    scene = _scene(quads, [0] * len(quads), [Material("grey", albedo=np.full(3, 0.5), emission=np.ones(3))])
+    scene = scene_of(quads, [0] * len(quads), [Material("grey", albedo=np.full(3, 0.5), emission=np.ones(3))])
     with pytest.raises(
         SolveError, match=r"the solve diverged after \d+ shots: \w+ power .* W exceeds the .* W"
     ):

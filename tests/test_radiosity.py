@@ -17,7 +17,7 @@ from iat.radiosity.solver import evaluate_direct
 
 
 # -- scenes built in memory ------------------------------------------------------------
-def _box_quads(lo, hi, k, inward):
+def box_quads(lo, hi, k, inward):
     """Faces of an axis-aligned box split into k x k quads: [(axis, side, i, j, (4, 3) corners)]."""
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     centre = (lo + hi) / 2
@@ -39,7 +39,7 @@ def _box_quads(lo, hi, k, inward):
     return out
 
 
-def _scene(polys, material_ids, materials, lights=()):
+def scene_of(polys, material_ids, materials, lights=()):
     verts, corners = [], []
     for q in polys:
         idx = list(range(len(verts), len(verts) + len(q)))
@@ -50,18 +50,18 @@ def _scene(polys, material_ids, materials, lights=()):
 
 def furnace_box(albedo, emission=1.0, k=2):
     """A closed unit box, 6 k x k inward quads, all emitting and reflecting."""
-    quads = [q for *_, q in _box_quads([0, 0, 0], [1, 1, 1], k, True)]
+    quads = [q for *_, q in box_quads([0, 0, 0], [1, 1, 1], k, True)]
     mat = Material("grey", albedo=np.full(3, albedo), emission=np.full(3, emission))
-    return _scene(quads, [0] * len(quads), [mat])
+    return scene_of(quads, [0] * len(quads), [mat])
 
 
 def lit_box(albedo=0.5):
     """A closed unit box (3 x 3 quads a face) lit by its centre ceiling quad, with a block on the floor."""
     polys, mats = [], []
-    for axis, side, i, j, q in _box_quads([0, 0, 0], [1, 1, 1], 3, True):
+    for axis, side, i, j, q in box_quads([0, 0, 0], [1, 1, 1], 3, True):
         polys.append(q)
         mats.append(1 if (axis == 1 and side == 1.0 and i == 1 and j == 1) else 0)
-    for axis, side, _, _, q in _box_quads([0.3, 0, 0.3], [0.6, 0.4, 0.6], 1, False):
+    for axis, side, _, _, q in box_quads([0.3, 0, 0.3], [0.6, 0.4, 0.6], 1, False):
         if not (axis == 1 and side == 0.0):  # the block stands on the floor: no bottom
             polys.append(q)
             mats.append(0)
@@ -69,7 +69,7 @@ def lit_box(albedo=0.5):
         Material("grey", albedo=np.full(3, albedo)),
         Material("light", albedo=np.full(3, albedo), emission=np.full(3, 10.0)),
     ]
-    return _scene(polys, mats, materials)
+    return scene_of(polys, mats, materials)
 
 
 def floor_scene(occluder: bool, light_height: float):
@@ -83,7 +83,7 @@ def floor_scene(occluder: bool, light_height: float):
         h = light_height / 2
         polys.append(np.array([[-0.25, h, -0.25], [-0.25, h, 0.25], [0.25, h, 0.25], [0.25, h, -0.25]]))
     light = Light(kind="point", position=[0.1, light_height, 0.05], intensity=light_height**2)
-    return _scene(polys, [0] * len(polys), [Material("white", albedo=np.full(3, 0.6))], [light])
+    return scene_of(polys, [0] * len(polys), [Material("white", albedo=np.full(3, 0.6))], [light])
 
 
 def triangle_box(albedo):
@@ -96,7 +96,7 @@ def triangle_box(albedo):
             t = t[[0, 2, 1]]
         polys.append(t)
     mat = Material("grey", albedo=np.full(3, albedo), emission=np.ones(3))
-    return _scene(polys, [0] * 4, [mat])
+    return scene_of(polys, [0] * 4, [mat])
 
 
 def _reflected_power(sol: Solution, scene: Scene) -> np.ndarray:
@@ -174,7 +174,7 @@ def cornell():
         Material("green", albedo=cornell_box.GREEN),
         Material("light", albedo=cornell_box.LIGHT_ALBEDO, emission=cornell_box.LIGHT_RADIANCE),
     ]
-    scene = _scene(polys, mats, materials)
+    scene = scene_of(polys, mats, materials)
     return scene, solve(scene, SolveOptions(max_depth=4))
 
 

@@ -492,10 +492,9 @@ class SolveRun:
         radiance = ctx.patches.emission[vpatch] + reflected
         if not np.isfinite(radiance).all():
             self.check_energy(math.inf, "reflected")
-        self.check_energy(
-            float(np.pi * (ctx.patches.area * luminance_of(self.mesh.M @ np.abs(reflected))).sum()),
-            "reflected",
-        )
+        # (with the point lights' element correction: a vertex next to a light holds its 1/d^2 peak)
+        held = self.mesh.M @ np.abs(reflected + self.rad.offset)
+        self.check_energy(float(np.pi * (ctx.patches.area * luminance_of(held)).sum()), "reflected")
         radiance = np.maximum(radiance, 0.0)
         unshot_fraction = float(unshot_power.sum() / self.power_ref) if self.power_ref > 0 else 0.0
         self.progress.finish(f"done: {self.shots} shots, {len(keys)} vertices")
