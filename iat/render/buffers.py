@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from iat.errors import RenderError
 from iat.render.gl import Registry
 
 _MIN_BUFFER = 64  # bytes; GL buffers are never created empty
@@ -120,3 +121,31 @@ class Geometry:
         self.vao = self.index_buffer = None
         self.n_triangles = 0
         self.ranges = []
+
+
+#: added to the draw-call key of triangles whose patch has a twin (a back face of its own,
+#: :mod:`iat.geometry.sides`): those calls cull back faces, so each side shows its own light
+TWIN_KEY = 1 << 40
+
+
+def twin_keys(tri_key: np.ndarray | None, tri_twin: np.ndarray) -> np.ndarray | None:
+    """Draw-call keys (t,) with :data:`TWIN_KEY` added where ``tri_twin`` (t,) bool; None when no
+    triangle has a twin (keys unchanged)."""
+    if not tri_twin.any():
+        return tri_key
+    base = np.full(len(tri_twin), -1, np.int64) if tri_key is None else np.asarray(tri_key, np.int64)
+    return np.where(tri_twin, base + TWIN_KEY, base)
+
+
+def as_rows(a, n: int, name: str, dtype=np.float32) -> np.ndarray:
+    """``a`` as (k, n) rows of ``dtype``; :class:`RenderError` naming ``name`` when it does not split."""
+    a = np.asarray(a, dtype=dtype)
+    if a.size % n:
+        raise RenderError(f"{name} has {a.size} values, not a multiple of {n}")
+    return a.reshape(-1, n)
+
+
+def check_indices(indices: np.ndarray, n_vertices: int, name: str) -> None:
+    """:class:`RenderError` naming ``name`` when ``indices`` reach outside ``n_vertices`` vertices."""
+    if indices.size and (indices.min() < 0 or indices.max() >= n_vertices):
+        raise RenderError(f"{name} refer to vertex {int(indices.max())} but there are {n_vertices} vertices")

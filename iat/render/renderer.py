@@ -63,7 +63,7 @@ from iat.errors import RenderError
 from iat.geometry.sides import twin_patches
 from iat.radiosity.solution import drawn_mesh
 from iat.render import gl
-from iat.render.buffers import Geometry, upload_buffer
+from iat.render.buffers import TWIN_KEY, Geometry, as_rows, check_indices, twin_keys, upload_buffer
 from iat.render.gl import Registry
 from iat.render.lod import LodDrawer
 from iat.render.mesh_detail import mesh_detail
@@ -74,18 +74,6 @@ MODES = ("preview", "mesh", "iat", "split", "diff")
 PREVIEW_AMBIENT = 0.5
 #: columns of the sky's equirectangular image drawn behind the model (0.7 degrees a texel)
 SKY_WIDTH = 512
-#: added to the draw-call key of triangles whose patch has a twin (a back face of its own,
-#: :mod:`iat.geometry.sides`): those calls cull back faces, so each side shows its own light
-TWIN_KEY = 1 << 40
-
-
-def _twin_keys(tri_key: np.ndarray | None, tri_twin: np.ndarray) -> np.ndarray | None:
-    """Draw-call keys (t,) with :data:`TWIN_KEY` added where ``tri_twin`` (t,) bool; None when no
-    triangle has a twin (keys unchanged)."""
-    if not tri_twin.any():
-        return tri_key
-    base = np.full(len(tri_twin), -1, np.int64) if tri_key is None else np.asarray(tri_key, np.int64)
-    return np.where(tri_twin, base + TWIN_KEY, base)
 
 
 @dataclass
@@ -96,18 +84,6 @@ class _Target:
     color: Any
     depth: Any
     fbo: Any
-
-
-def _vec(a, n: int, name: str, dtype=np.float32) -> np.ndarray:
-    a = np.asarray(a, dtype=dtype)
-    if a.size % n:
-        raise RenderError(f"{name} has {a.size} values, not a multiple of {n}")
-    return a.reshape(-1, n)
-
-
-def _check_indices(indices: np.ndarray, n_vertices: int, name: str) -> None:
-    if indices.size and (indices.min() < 0 or indices.max() >= n_vertices):
-        raise RenderError(f"{name} refer to vertex {int(indices.max())} but there are {n_vertices} vertices")
 
 
 class Renderer:
@@ -317,16 +293,16 @@ class Renderer:
                 f"solution vertex keys refer to patch {int((key // (m * m)).max())} of {len(corners)}"
             )
         tris = np.asarray(solution.tri_vertices, dtype=np.int64).reshape(-1, 3)
-        _check_indices(tris, len(key), "solution tri_vertices")
+        check_indices(tris, len(key), "solution tri_vertices")
         drawn = drawn_mesh(solution)  # panel cells' triangles cut to their surface
         pos, tris = drawn.position, drawn.triangles
         md = mesh_detail(solution, drawn, self._scene)  # detail vertices hold incoming light
         duv, dflag, divisor, tri_key = md or (np.zeros((len(pos), 2)), np.zeros(len(pos)), 1.0, None)
         twin = twin_patches(corners, solution.patch_is_quad)
-        tri_key = _twin_keys(tri_key, twin[drawn.patch[tris[:, 0]]] if len(tris) else np.zeros(0, bool))
+        tri_key = twin_keys(tri_key, twin[drawn.patch[tris[:, 0]]] if len(tris) else np.zeros(0, bool))
         colors = []
         for k, sol in enumerate(solutions):
-            rad = _vec(sol.vert_radiance, 3, "vert_radiance")
+            rad = as_rows(sol.vert_radiance, 3, "vert_radiance")
             if len(rad) != len(key):
                 raise RenderError(f"solution has {len(key)} vertex keys but {len(rad)} radiance values")
             if k and (
@@ -459,22 +435,22 @@ class Renderer:
         pixel_format = str(getattr(policy, "pixel_format", "rgba16f") or "rgba16f")
         mipmaps = bool(getattr(policy, "mipmaps", False))
 
-        mpos = _vec(baked.mesh_positions, 3, "mesh_positions")
-        colors = [np.ascontiguousarray(_vec(c, 3, "mesh_radiance")) for c in mesh_colors]
+        mpos = as_rows(baked.mesh_positions, 3, "mesh_positions")
+        colors = [np.ascontiguousarray(as_rows(c, 3, "mesh_radiance")) for c in mesh_colors]
         midx = np.asarray(baked.mesh_indices, dtype=np.int64).reshape(-1, 3)
         for mrad in colors:
             if len(mpos) != len(mrad):
                 raise RenderError(
                     f"baked mesh part has {len(mpos)} positions but {len(mrad)} radiance values"
                 )
-        _check_indices(midx, len(mpos), "baked mesh_indices")
+        check_indices(midx, len(mpos), "baked mesh_indices")
 
-        tpos = _vec(baked.tex_positions, 3, "tex_positions")
+        tpos = as_rows(baked.tex_positions, 3, "tex_positions")
         k = len(tpos)
-        tuv = _vec(baked.tex_uv, 2, "tex_uv")
-        tlayer = _vec(baked.tex_layer, 1, "tex_layer")
+        tuv = as_rows(baked.tex_uv, 2, "tex_uv")
+        tlayer = as_rows(baked.tex_layer, 1, "tex_layer")
         tduv = getattr(baked, "tex_detail_uv", None)
-        tduv = np.zeros((k, 2), np.float32) if tduv is None else _vec(tduv, 2, "tex_detail_uv")
+        tduv = np.zeros((k, 2), np.float32) if tduv is None else as_rows(tduv, 2, "tex_detail_uv")
         tmat = getattr(baked, "tex_material", None)
         tmat = np.full(k, -1, np.int64) if tmat is None else np.asarray(tmat, dtype=np.int64).reshape(-1)
         tidx = np.asarray(baked.tex_indices, dtype=np.int64).reshape(-1, 3)
@@ -482,7 +458,7 @@ class Renderer:
         for name, a in rows.items():
             if len(a) != k:
                 raise RenderError(f"baked {name} has {len(a)} rows but tex_positions has {k}")
-        _check_indices(tidx, k, "baked tex_indices")
+        check_indices(tidx, k, "baked tex_indices")
 
         details = dict(getattr(baked, "detail_textures", None) or {})
         tdetail = getattr(baked, "tex_detail", None)
@@ -528,9 +504,9 @@ class Renderer:
             mpatch = np.asarray(baked.mesh_patch, dtype=np.int64).reshape(-1)
             tpatch = np.asarray(baked.tex_patch, dtype=np.int64).reshape(-1)
             if len(midx) and len(mpatch) == len(mpos):
-                mkey = _twin_keys(None, twin[mpatch[midx[:, 0]]])
+                mkey = twin_keys(None, twin[mpatch[midx[:, 0]]])
             if len(tidx) and len(tpatch) == k:
-                tri_key = _twin_keys(tri_key, twin[tpatch[tidx[:, 0]]])
+                tri_key = twin_keys(tri_key, twin[tpatch[tidx[:, 0]]])
         self._baked_mesh.upload(self.ctx, self._reg, {**arrays, "detail": np.zeros(n)}, midx, mkey)
         self._colors_pair["iat"] = (a, b)
         if len(tidx):
