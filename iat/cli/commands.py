@@ -77,6 +77,7 @@ def _load(args, path, max_edge=None):
             panels=not getattr(args, "no_panels", False),
             discontinuity=getattr(args, "discontinuity", False),
             sides=getattr(args, "sides", None) or "auto",
+            cut=not getattr(args, "no_cut", False),
         )
 
 
@@ -167,6 +168,9 @@ def cmd_info(args) -> int:
                 "coincident_faces": sd.coincident_faces,
             }
         )
+    if scene.pierce is not None:  # faces other objects pierce (iat.geometry.pierce)
+        pc = scene.pierce
+        info.update(piercing_pairs=pc.pairs, intersecting_objects=pc.objects, faces_cut=pc.faces_cut)
     _emit(args, info)
     return 0
 
@@ -590,6 +594,7 @@ def build_parser() -> argparse.ArgumentParser:
             "(other formats: glTF doubleSided materials only); both: every format so; "
             "front: faces as the file has them (all count them)",
         )
+        sp.add_argument("--no-cut", action="store_true", dest="no_cut", help="keep pierced faces whole")
 
     def set_flags(sp):
         sp.add_argument(

@@ -6,7 +6,8 @@
   under mirroring.
 - Vertices are welded (:data:`iat.geometry.mesh.WELD_REL_TOL`), zero-area triangles
   dropped, and coplanar same-material triangle pairs merged into convex quads
-  (:func:`iat.geometry.mesh.merge_quads`); ``max_edge`` pre-splits big patches
+  (:func:`iat.geometry.mesh.merge_quads`); before that, ``cut`` cuts the faces other objects pierce
+  along the crossings (:func:`iat.geometry.pierce.cut_pierced`); ``max_edge`` pre-splits big patches
   (:func:`iat.geometry.mesh.split_patches`); ``discontinuity`` cuts roots along the hard shadows
   of the file's lights, last (:func:`iat.geometry.discontinuity.split_discontinuities`).
 - Materials: ``albedo = baseColorFactor x mean(baseColorTexture)`` (texture
@@ -47,6 +48,7 @@ from iat.geometry.mesh import (
     weld_vertices,
 )
 from iat.geometry.panels import make_panels
+from iat.geometry.pierce import cut_pierced
 from iat.geometry.sides import SIDES, add_back_faces, classify_sides, object_ids, repeated_faces, twin_patches
 from iat.io.dae import dae_frame
 from iat.io.gltf import GltfDocument
@@ -340,6 +342,7 @@ def load_scene(
     panels: bool = True,
     discontinuity: bool = False,
     sides: str = "auto",
+    cut: bool = True,
 ) -> Scene:
     """Load a model file (glTF/GLB, OBJ+MTL, PLY, STL, OFF) into a :class:`Scene`.
 
@@ -361,6 +364,10 @@ def load_scene(
       sheets get a back face (its own patch); elsewhere only faces of glTF ``doubleSided``
       materials get one. ``"both"``: every format as IFC. ``"front"``: the faces as the file has
       them. :data:`iat.geometry.sides.SIDES`; what was found is ``Scene.sides``.
+    cut : cut the faces that other objects pierce along the crossings, so that no patch or panel
+      cell spans both sides of another surface (:func:`iat.geometry.pierce.cut_pierced`; a wall
+      through a ceiling is lit above it and dark below it); False keeps them whole. Either way
+      what was found is ``Scene.pierce``.
     progress : ``progress(fraction, message) -> bool``, called at the start of each
       stage (parse, weld, quad merge, pre-split) and with 1.0 at the end, fractions
       non-decreasing; returning False raises :class:`iat.errors.Cancelled`.
@@ -438,6 +445,10 @@ def load_scene(
     F, UV = side.faces, side.face_uv
     n_mat = len(materials)  # faces that get a back face carry material + n_mat until the patches are made
     M = np.where(side.back, M + n_mat, M)
+    # faces other objects pierce are cut along the crossings; (material, side of the cuts) pairs
+    # stand in for the materials until the patches are made (iat.geometry.pierce)
+    pierced = cut_pierced(V, F, M, UV, objects, cut=cut)
+    V, F, UV, M, code_material = pierced.vertices, pierced.faces, pierced.face_uv, pierced.code, pierced.codes
     report(_STAGES["weld"], "merging quads")
     corners, pmat, puv = merge_quads(V, F, M, UV)
     if max_edge is not None:
@@ -447,9 +458,14 @@ def load_scene(
     if panels:
         report(_STAGES["split"], "making panels")
         has_detail = np.array([m.detail is not None for m in materials], dtype=bool)
-        roots = make_panels(V, corners, pmat, puv, np.tile(has_detail, 2), cell_max=max_edge)
+        has_detail = np.tile(has_detail, 2)
+        if code_material is not None:
+            has_detail = has_detail[code_material]
+        roots = make_panels(V, corners, pmat, puv, has_detail, cell_max=max_edge)
         V, corners, pmat, puv = roots.vertices, roots.corners, roots.material, roots.uv
         clip_uv, clip_patch = roots.clip_uv, roots.clip_patch
+    if code_material is not None:
+        pmat = code_material[pmat]
     twin = pmat >= n_mat
     pmat = np.where(twin, pmat - n_mat, pmat)
     if twin.any():  # a back the file has already (split along another diagonal) is kept, not doubled
@@ -470,6 +486,7 @@ def load_scene(
         clip_uv=clip_uv,
         clip_patch=clip_patch,
         sides=side.report,
+        pierce=pierced.report,
     )
     if gl is not None:
         report(_STAGES["split"], "reading lights and cameras")

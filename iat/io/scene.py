@@ -26,6 +26,7 @@ import numpy as np
 from iat.camera import Camera
 from iat.errors import OptionError
 from iat.geometry.mesh import corner_positions, patch_areas, patch_normals
+from iat.geometry.pierce import PierceReport
 from iat.geometry.quadtree import bilinear
 from iat.geometry.sides import SideReport
 
@@ -178,6 +179,8 @@ class Scene:
     sky : a :class:`Sky` around the model, or None
     sides : the loader's :class:`~iat.geometry.sides.SideReport` (inside-out solids turned, open
       sheets given a back face), or None for a scene built in memory
+    pierce : the loader's :class:`~iat.geometry.pierce.PierceReport` (faces other objects pierce,
+      cut along the crossings), or None for a scene built in memory
     """
 
     vertices: np.ndarray
@@ -193,6 +196,7 @@ class Scene:
     clip_patch: np.ndarray | None = None
     sky: Sky | None = None
     sides: SideReport | None = None
+    pierce: PierceReport | None = None
 
     def __post_init__(self):
         self.vertices = np.asarray(self.vertices, dtype=np.float64).reshape(-1, 3)

@@ -1,0 +1,441 @@
+"""Faces cut where other geometry pierces them (issue 36: no leaks through intersecting geometry).
+
+Real BIM exports pass walls up through a ceiling into the sun. A root patch that straddles the
+ceiling has vertices above it (sunlit) and below it (the room): its elements interpolate across the
+ceiling line and, as a shooter, its field carries the sunlight into the room. So the loader
+(:func:`iat.io.load.load_scene`, ``cut=True``, the default) cuts the triangles along the lines where
+other objects pierce them, after welding and the sides classification and before quads and panels
+are made:
+
+1. :func:`pierced_pairs`: pairs of triangles of *different* objects (IFC elements, glTF primitives,
+   OBJ groups) that cross properly: each has corners strictly on both sides of the other's plane
+   (beyond :data:`PIERCE_TOL` x the scene diagonal) and the two crossing intervals on the planes'
+   common line overlap by more than that. Touching is not piercing: a box standing on a floor, a
+   slab that ends on a wall's face, coplanar overlaps are left as they are (a sample model with no
+   crossing loads exactly as before). A sweep over the triangles' boxes along the axis with the
+   fewest overlaps, compiled with numba.
+2. :func:`cut_faces`: each pierced triangle is cut by the plane of every face that pierces it (the
+   whole triangle, restricted to the faces that really cross it), convex piece by convex piece;
+   the pieces are fanned into triangles, their vertices welded, their uvs interpolated. The piece
+   edges that lie on a cut are **barriers**.
+3. :func:`region_labels`: patches may merge only within a side of every barrier. Coplanar,
+   same-material faces joined by non-barrier edges form regions; a region that holds both sides of
+   a barrier (it joins around the cut's end) gives each of its faces a region of its own. The
+   loader passes (material, region) pairs as the materials :func:`iat.geometry.mesh.merge_quads`
+   and :func:`iat.geometry.panels.make_panels` see (so no quad, no panel and no panel cell spans
+   a cut) and maps them back after.
+
+:func:`cut_pierced` runs the three; its :class:`PierceReport` is ``Scene.pierce`` (``iat info``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from numba import njit
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from iat.geometry.mesh import degenerate_faces, weld_vertices
+
+#: faces pierce each other when each has corners beyond this fraction of the scene diagonal on both
+#: sides of the other's plane and their crossing overlaps by more than that (0.1 mm in a 10 m house)
+PIERCE_TOL = 1e-5
+#: faces are coplanar neighbours of one region when their normals are within this (radians; as panels)
+REGION_ANGLE_TOL = 1e-3
+
+
+@dataclass
+class PierceReport:
+    """What :func:`cut_pierced` found and did (``iat info``).
+
+    cut : whether the loader cut (``load_scene(cut=...)``); the counts are found either way
+    pairs : pairs of triangles of different objects that pierce each other
+    objects : objects (IFC elements, glTF primitives, OBJ groups) with a pierced or piercing face
+    faces_cut : triangles cut (0 when ``cut`` is False)
+    pieces : triangles they became
+    joined_regions : regions that joined around a cut's end (their faces merge no further)
+    """
+
+    cut: bool = True
+    pairs: int = 0
+    objects: int = 0
+    faces_cut: int = 0
+    pieces: int = 0
+    joined_regions: int = 0
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@njit(cache=True, nogil=True)
+def _interval(t, dist, tri, line, tol):
+    """(lo, hi) of triangle ``t``'s crossing of a plane along unit ``line``; dist (3,): its
+    corners' signed distances to that plane (within ``tol``: on it)."""
+    lo, hi = np.inf, -np.inf
+    for i in range(3):
+        j = (i + 1) % 3
+        di, dj = dist[i], dist[j]
+        si = 0 if abs(di) <= tol else (1 if di > 0 else -1)
+        sj = 0 if abs(dj) <= tol else (1 if dj > 0 else -1)
+        if si == 0:
+            s = tri[t, i, 0] * line[0] + tri[t, i, 1] * line[1] + tri[t, i, 2] * line[2]
+            lo, hi = min(lo, s), max(hi, s)
+        if si * sj < 0:
+            f = di / (di - dj)
+            s = 0.0
+            for c in range(3):
+                s += (tri[t, i, c] + (tri[t, j, c] - tri[t, i, c]) * f) * line[c]
+            lo, hi = min(lo, s), max(hi, s)
+    return lo, hi
+
+
+@njit(cache=True, nogil=True)
+def _straddle(a, b, tri, normal, offset, tol, dist):
+    """Fill ``dist`` (3,) with triangle a's corners' distances to b's plane; True when a has
+    corners beyond ``tol`` on both sides."""
+    lo, hi = np.inf, -np.inf
+    for i in range(3):
+        d = tri[a, i, 0] * normal[b, 0] + tri[a, i, 1] * normal[b, 1] + tri[a, i, 2] * normal[b, 2]
+        d -= offset[b]
+        dist[i] = d
+        lo, hi = min(lo, d), max(hi, d)
+    return lo < -tol and hi > tol
+
+
+@njit(cache=True, nogil=True)
+def _crossing(a, b, tri, normal, offset, tol, da, db, line):
+    """True when triangles a and b pierce each other (see :func:`pierced_pairs`)."""
+    if not _straddle(a, b, tri, normal, offset, tol, da):
+        return False
+    if not _straddle(b, a, tri, normal, offset, tol, db):
+        return False
+    line[0] = normal[a, 1] * normal[b, 2] - normal[a, 2] * normal[b, 1]
+    line[1] = normal[a, 2] * normal[b, 0] - normal[a, 0] * normal[b, 2]
+    line[2] = normal[a, 0] * normal[b, 1] - normal[a, 1] * normal[b, 0]
+    n = np.sqrt(line[0] ** 2 + line[1] ** 2 + line[2] ** 2)
+    if n < 1e-12:
+        return False
+    line /= n
+    lo_a, hi_a = _interval(a, da, tri, line, tol)
+    lo_b, hi_b = _interval(b, db, tri, line, tol)
+    return min(hi_a, hi_b) - max(lo_a, lo_b) > tol
+
+
+@njit(cache=True, nogil=True)
+def _sweep(tri, normal, offset, lo, hi, obj, order, axis, tol):
+    """(a, b) int64 pierced pairs: a sweep along ``axis`` over the boxes ``lo``, ``hi`` (T, 3)
+    in ``order`` (sorted by ``lo[:, axis]``)."""
+    cap = 1024
+    out_a = np.empty(cap, np.int64)
+    out_b = np.empty(cap, np.int64)
+    k = 0
+    da = np.empty(3)
+    db = np.empty(3)
+    line = np.empty(3)
+    n = len(order)
+    for ii in range(n):
+        i = order[ii]
+        for jj in range(ii + 1, n):
+            j = order[jj]
+            if lo[j, axis] > hi[i, axis]:
+                break
+            if obj[i] == obj[j]:
+                continue
+            if (
+                lo[j, 0] > hi[i, 0]
+                or lo[i, 0] > hi[j, 0]
+                or lo[j, 1] > hi[i, 1]
+                or lo[i, 1] > hi[j, 1]
+                or lo[j, 2] > hi[i, 2]
+                or lo[i, 2] > hi[j, 2]
+            ):
+                continue
+            if not _crossing(i, j, tri, normal, offset, tol, da, db, line):
+                continue
+            if k == cap:
+                cap *= 2
+                na, nb = np.empty(cap, np.int64), np.empty(cap, np.int64)
+                na[:k], nb[:k] = out_a[:k], out_b[:k]
+                out_a, out_b = na, nb
+            out_a[k], out_b[k] = min(i, j), max(i, j)
+            k += 1
+    return out_a[:k], out_b[:k]
+
+
+def pierced_pairs(tri: np.ndarray, objects: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of triangles of different objects that pierce each other.
+
+    tri : (T, 3, 3) float64 world corners; objects : (T,) int64; tol : scene units (corners within
+    it of a plane are on it, crossings no longer than it do not count).
+    Returns (a (k,), b (k,)) int64, a < b, sorted.
+    """
+    tri = np.ascontiguousarray(tri, dtype=np.float64)
+    if len(tri) < 2:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    offset = (n * tri[:, 0]).sum(axis=1)
+    lo, hi = tri.min(axis=1) - tol, tri.max(axis=1) + tol
+    counts = []
+    for axis in range(3):  # the axis along which the fewest boxes overlap
+        s = np.sort(lo[:, axis])
+        counts.append(int((np.searchsorted(s, hi[:, axis], side="right")).sum()))
+    axis = int(np.argmin(counts))
+    order = np.argsort(lo[:, axis], kind="stable")
+    obj = np.ascontiguousarray(objects, dtype=np.int64)
+    a, b = _sweep(tri, n, offset, lo, hi, obj, order, axis, float(tol))
+    o = np.lexsort((b, a))
+    return a[o], b[o]
+
+
+@njit(cache=True, nogil=True)
+def _cut_one(t, tri, start, pn, pd, tol, maxv):
+    """Convex pieces of triangle ``t`` cut by its planes ``pn[start[t]:start[t + 1]]``, ``pd``.
+
+    Returns (pieces (q, maxv, 3), count (q,), barrier (q, maxv) bool: edge k, corner k to k + 1,
+    lies on a cut)."""
+    cap = 8
+    P = np.zeros((cap, maxv, 3))
+    C = np.zeros(cap, np.int64)
+    B = np.zeros((cap, maxv), np.bool_)
+    P[0, :3] = tri[t]
+    C[0] = 3
+    q = 1
+    s = np.empty(maxv, np.int64)
+    d = np.empty(maxv)
+    pts = np.empty((2, maxv, 3))
+    on = np.empty((2, maxv), np.bool_)
+    fl = np.empty((2, maxv), np.bool_)
+    m = np.zeros(2, np.int64)
+    for k in range(start[t], start[t + 1]):
+        for p in range(q):
+            n = C[p]
+            pos = neg = False
+            for i in range(n):
+                d[i] = P[p, i, 0] * pn[k, 0] + P[p, i, 1] * pn[k, 1] + P[p, i, 2] * pn[k, 2] - pd[k]
+                s[i] = 0 if abs(d[i]) <= tol else (1 if d[i] > 0 else -1)
+                pos |= s[i] > 0
+                neg |= s[i] < 0
+            if not (pos and neg):
+                continue
+            m[:] = 0
+            for i in range(n):  # Sutherland-Hodgman on a convex polygon, both sides at once
+                j = (i + 1) % n
+                for side in range(2):
+                    sg = 1 if side == 0 else -1
+                    if s[i] * sg >= 0:
+                        pts[side, m[side]] = P[p, i]
+                        on[side, m[side]] = s[i] == 0
+                        fl[side, m[side]] = B[p, i]
+                        m[side] += 1
+                    if s[i] * s[j] < 0:
+                        f = d[i] / (d[i] - d[j])
+                        pts[side, m[side]] = P[p, i] + (P[p, j] - P[p, i]) * f
+                        on[side, m[side]] = True
+                        fl[side, m[side]] = B[p, i]
+                        m[side] += 1
+            if q == cap:
+                cap *= 2
+                P2, C2, B2 = (
+                    np.zeros((cap, maxv, 3)),
+                    np.zeros(cap, np.int64),
+                    np.zeros((cap, maxv), np.bool_),
+                )
+                P2[:q], C2[:q], B2[:q] = P[:q], C[:q], B[:q]
+                P, C, B = P2, C2, B2
+            for side in range(2):
+                slot = p if side == 0 else q
+                mm = m[side]
+                C[slot] = mm
+                for e in range(mm):
+                    P[slot, e] = pts[side, e]
+                    B[slot, e] = (on[side, e] and on[side, (e + 1) % mm]) or fl[side, e]
+            q += 1
+    return P[:q], C[:q], B[:q]
+
+
+@njit(cache=True, nogil=True)
+def _cut_all(faces, tri, start, pn, pd, tol, maxv):
+    """:func:`_cut_one` of every triangle ``faces`` (m,), as fans: (parent (r,), corners (r, 3, 3),
+    barrier (r, 3) bool per edge k, corner k to k + 1)."""
+    cap = 4 * len(faces) + 16
+    par = np.empty(cap, np.int64)
+    cor = np.empty((cap, 3, 3))
+    bar = np.zeros((cap, 3), np.bool_)
+    r = 0
+    for f in faces:
+        P, C, B = _cut_one(f, tri, start, pn, pd, tol, maxv)
+        for p in range(len(C)):
+            n = C[p]
+            for k in range(1, n - 1):  # fan from corner 0: edges (0, k), (k, k + 1), (k + 1, 0)
+                if r == cap:
+                    cap *= 2
+                    par2, cor2, bar2 = (
+                        np.empty(cap, np.int64),
+                        np.empty((cap, 3, 3)),
+                        np.zeros((cap, 3), np.bool_),
+                    )
+                    par2[:r], cor2[:r], bar2[:r] = par[:r], cor[:r], bar[:r]
+                    par, cor, bar = par2, cor2, bar2
+                par[r] = f
+                cor[r, 0], cor[r, 1], cor[r, 2] = P[p, 0], P[p, k], P[p, k + 1]
+                bar[r, 0] = B[p, 0] if k == 1 else False
+                bar[r, 1] = B[p, k]
+                bar[r, 2] = B[p, n - 1] if k + 1 == n - 1 else False
+                r += 1
+    return par[:r], cor[:r], bar[:r]
+
+
+def _face_planes(a: np.ndarray, b: np.ndarray, normal: np.ndarray, offset: np.ndarray, tol: float):
+    """Each pierced face's distinct cutting planes: (face (k,) sorted, normal (k, 3), offset (k,)),
+    the planes of the faces that pierce it (coplanar ones once)."""
+    face = np.concatenate([a, b])
+    other = np.concatenate([b, a])
+    n, d = normal[other], offset[other]
+    flip = np.where(
+        np.abs(n[:, 0]) > 1e-9, n[:, 0] < 0, np.where(np.abs(n[:, 1]) > 1e-9, n[:, 1] < 0, n[:, 2] < 0)
+    )
+    n = np.where(flip[:, None], -n, n)
+    d = np.where(flip, -d, d)
+    key = np.concatenate([face[:, None], np.round(n * 1e7), np.round(d / tol)[:, None]], axis=1)
+    key = key.astype(np.int64)
+    _, first = np.unique(key, axis=0, return_index=True)
+    o = first[np.argsort(face[first], kind="stable")]
+    return face[o], n[o], d[o]
+
+
+def cut_faces(V: np.ndarray, F: np.ndarray, a: np.ndarray, b: np.ndarray, tol: float):
+    """Cut the faces of pierced pairs (a, b) (:func:`pierced_pairs`) by each other's planes.
+
+    V (n, 3) float64, F (f, 3) int64. Returns (vertices (n', 3), faces (f', 3), parent (f',) int64:
+    the input face each output face comes from (uncut faces first, in place; pieces in place of
+    their parent), barrier (k, 2) int64 sorted vertex pairs of the edges on a cut, n_cut).
+    """
+    tri = V[F]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    offset = (normal * tri[:, 0]).sum(axis=1)
+    face, pn, pd = _face_planes(a, b, normal, offset, tol)
+    cut, per = np.unique(face, return_counts=True)
+    start = np.zeros(len(F) + 1, np.int64)
+    start[cut + 1] = per
+    start = np.cumsum(start)
+    maxv = 3 + int(per.max())
+    par, cor, bar = _cut_all(cut, np.ascontiguousarray(tri), start, np.ascontiguousarray(pn), pd, tol, maxv)
+    keep = np.ones(len(F), bool)
+    keep[cut] = False
+    nv = len(V)
+    allV = np.concatenate([V, cor.reshape(-1, 3)])
+    newF = (nv + np.arange(3 * len(cor))).reshape(-1, 3)
+    allF = np.concatenate([F[keep], newF])
+    parent = np.concatenate([np.flatnonzero(keep), par])
+    o = np.argsort(parent, kind="stable")
+    allF, parent = allF[o], parent[o]
+    allV, allF = weld_vertices(allV, allF)
+    bad = degenerate_faces(allV, allF)
+    piece = np.concatenate([np.zeros(int(keep.sum()), bool), np.ones(len(cor), bool)])[o]
+    e = np.stack([allF, np.roll(allF, -1, axis=1)], axis=2)[piece]  # (r, 3, 2) edges of the pieces
+    flags = np.concatenate([np.zeros((int(keep.sum()), 3), bool), bar])[o][piece]
+    barrier = np.sort(e[flags & ~bad[piece][:, None]], axis=1)
+    barrier = np.unique(barrier, axis=0) if len(barrier) else np.zeros((0, 2), np.int64)
+    return allV, allF[~bad], parent[~bad], barrier, len(cut)
+
+
+def region_labels(V: np.ndarray, F: np.ndarray, material: np.ndarray, barrier: np.ndarray):
+    """(f,) int64 region of each face and the number of regions that joined around a cut.
+
+    Regions: faces joined by edges shared with a face of the same material whose normal is within
+    :data:`REGION_ANGLE_TOL`, except ``barrier`` (k, 2) edges. Every face of a region holding both
+    sides of a barrier edge gets a region of its own (label ``-1 - face``); the others keep their
+    region's number. V (n, 3), F (f, 3) int64, material (f,) int64.
+    """
+    nf = len(F)
+    normal = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    e = np.sort(np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    owner = np.repeat(np.arange(nf), 3)
+    nv = len(V)
+    key = e[:, 0] * nv + e[:, 1]
+    o = np.argsort(key, kind="stable")
+    ks, fo = key[o], owner[o]
+    same = ks[1:] == ks[:-1]  # consecutive half-edges on one edge (pairs of a non-manifold edge chain)
+    fa, fb, kk = fo[:-1][same], fo[1:][same], ks[1:][same]
+    on_barrier = np.isin(kk, barrier[:, 0] * nv + barrier[:, 1]) if len(barrier) else np.zeros(len(kk), bool)
+    ok = (material[fa] == material[fb]) & ((normal[fa] * normal[fb]).sum(axis=1) >= np.cos(REGION_ANGLE_TOL))
+    link = ok & ~on_barrier
+    g = coo_matrix((np.ones(int(link.sum())), (fa[link], fb[link])), shape=(nf, nf))
+    _, region = connected_components(g, directed=False)
+    region = region.astype(np.int64)
+    across = ok & on_barrier & (region[fa] == region[fb])
+    joined = np.unique(region[fa[across]])
+    lone = np.isin(region, joined)
+    region[lone] = -1 - np.flatnonzero(lone)
+    return region, len(joined)
+
+
+@dataclass
+class Pierced:
+    """:func:`cut_pierced`'s result.
+
+    vertices (n', 3) float64; faces (f', 3) int64; face_uv (f', 3, 2) float64 (interpolated);
+    code (f',) int64: the materials the patch makers see, (material, region) pairs numbered;
+    codes (codes,) int64: each code's material, or None when nothing was cut (then
+    ``code`` is the material); parent (f',) int64 input face; report :class:`PierceReport`.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    face_uv: np.ndarray
+    code: np.ndarray
+    codes: np.ndarray | None
+    parent: np.ndarray
+    report: PierceReport
+
+
+def cut_pierced(
+    V: np.ndarray,
+    F: np.ndarray,
+    material: np.ndarray,
+    face_uv: np.ndarray,
+    objects: np.ndarray,
+    cut: bool = True,
+    tol_rel: float = PIERCE_TOL,
+) -> Pierced:
+    """Find the faces other objects pierce (:func:`pierced_pairs`) and, when ``cut``, cut them
+    (:func:`cut_faces`) and label the sides of each cut (:func:`region_labels`).
+
+    V (n, 3) float64 welded; F (f, 3) int64; material (f,) int64; face_uv (f, 3, 2) float64;
+    objects (f,) int64; tol_rel : :data:`PIERCE_TOL` (fraction of the used vertices' diagonal).
+    With no pierced pair, or ``cut`` False, the arrays come back as they are.
+    """
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
+    material = np.asarray(material, dtype=np.int64)
+    used = V[np.unique(F)] if len(F) else np.zeros((1, 3))
+    tol = tol_rel * max(float(np.linalg.norm(used.max(axis=0) - used.min(axis=0))), 1e-300)
+    a, b = pierced_pairs(V[F], objects, tol)
+    report = PierceReport(cut=cut, pairs=len(a), objects=len(np.unique(objects[np.concatenate([a, b])])))
+    same = Pierced(V, F, face_uv, material, None, np.arange(len(F)), report)
+    if not cut or len(a) == 0:
+        return same
+    V2, F2, parent, barrier, n_cut = cut_faces(V, F, a, b, tol)
+    # uvs: each corner's barycentric coordinates in its parent triangle
+    p0, p1, p2 = (V[F[parent, k]] for k in range(3))
+    e1, e2 = p1 - p0, p2 - p0
+    q = V2[F2] - p0[:, None]
+    d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    det = np.maximum(d11 * d22 - d12 * d12, 1e-300)[:, None]
+    q1, q2 = (q * e1[:, None]).sum(2), (q * e2[:, None]).sum(2)
+    beta, gamma = (d22[:, None] * q1 - d12[:, None] * q2) / det, (d11[:, None] * q2 - d12[:, None] * q1) / det
+    uvp = np.asarray(face_uv, dtype=np.float64)[parent]  # (f', 3, 2)
+    uv = (1 - beta - gamma)[..., None] * uvp[:, None, 0] + beta[..., None] * uvp[:, None, 1]
+    uv += gamma[..., None] * uvp[:, None, 2]
+    region, joined = region_labels(V2, F2, material[parent], barrier)
+    pairs, code = np.unique(np.stack([material[parent], region], axis=1), axis=0, return_inverse=True)
+    report.faces_cut = int(n_cut)
+    report.pieces = int(np.isin(parent, np.unique(np.concatenate([a, b]))).sum())
+    report.joined_regions = int(joined)
+    code = code.reshape(-1).astype(np.int64)
+    return Pierced(V2, F2, uv, code, pairs[:, 0].astype(np.int64), parent, report)
