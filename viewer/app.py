@@ -175,7 +175,7 @@ class ViewerApp:
             self._window("Model", "LeftBottom", panels.file_panel),
             self._window("Stats", "RightSpace", panels.stats_panel),
             self._window("Lighting", "RightBottom", panels.lighting_panel),
-            self._window("Sun & sky", "RightBottom", sun_panel.sun_sky_panel),
+            self._window("Sun & sky", "RightSpace", sun_panel.sun_sky_panel),
         ]
         return rp
 

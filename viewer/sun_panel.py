@@ -1,6 +1,6 @@
 """The Sun & sky panel (issue 38) and the sun's disc over the 3D view.
 
-**Sun & sky** (docked under Stats, beside Lighting; the state and what a change does are in
+**Sun & sky** (a tab beside Stats, top right; the state and what a change does are in
 :mod:`viewer.sun_sky`): the place (latitude, longitude; true north as a slider and a compass drawn
 with the camera's heading up: N and the sun), the date, a time slider (clock hours in the
 longitude's zone), sun on/off, the sky model (clear: Preetham with its turbidity; overcast: CIE;
