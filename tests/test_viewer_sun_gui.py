@@ -58,6 +58,7 @@ def test_sun_and_sky_panel(tmp_path, monkeypatch, gui_child):
         return
     pytest.importorskip("ifcopenshell")
     from imgui_bundle import imgui
+    from imgui_bundle.immapp import testing
     from PIL import Image
 
     from iat.camera import Camera
@@ -67,6 +68,7 @@ def test_sun_and_sky_panel(tmp_path, monkeypatch, gui_child):
     from tests.support.site_ifc import site_ifc
     from viewer import sun_panel, sun_sky
     from viewer.app import ViewerApp
+    from viewer.daylight import model_north, sun_facts
 
     monkeypatch.setenv("IAT_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setenv("IAT_SCREENSHOT_DIR", str(tmp_path / "shots"))
@@ -150,7 +152,10 @@ def test_sun_and_sky_panel(tmp_path, monkeypatch, gui_child):
         got["m17"], got["patch17"] = marker("17:00"), lit_patch(s.model.solution)
         got["sol17"] = s.model.solution
         got["disc"] = sun_panel.disc_position(s)
+        (sun,) = [lt for lt in s.lighting.editor.lights if lt.kind == "directional"]
+        got["facts17"] = sun_facts(sun, model_north(s))  # the Lighting panel's words, from true north
         got["seventeen"] = shot(ctx, "17")
+        testing.capture(ctx, str(tmp_path / "window-17.png"))  # (docs/screenshots/viewer-sun-sky.png)
 
         ctx.item_input_value("//Sun & sky/Time", 13.0)
         wait_until(ctx, lambda: s.lighting.relighting, 60, "the 13:00 solve to start")
@@ -202,6 +207,7 @@ def test_sun_and_sky_panel(tmp_path, monkeypatch, gui_child):
     assert (m17["az"], m17["el"]) == pytest.approx((az17, el17), abs=0.1)
     assert np.degrees(np.arccos(np.clip(m17["to_sun"] @ to17, -1, 1))) < 0.1
     assert m17["az"] - m9["az"] > 150  # from the east to the west, by the south
+    assert got["facts17"].startswith(f"azimuth {az17:.1f} deg, elevation {el17:.1f} deg, ")
     assert np.linalg.norm(got["patch17"] - predicted_patch(to17)) < PATCH_TOL, (
         got["patch17"],
         predicted_patch(to17),

@@ -32,11 +32,21 @@ def towards_sun(state: dict) -> np.ndarray | None:
     return d / n if n > 0 else None
 
 
-def angles(to_sun: np.ndarray) -> tuple[float, float]:
-    """(azimuth, elevation) in degrees of a unit vector towards the sun."""
+def angles(to_sun: np.ndarray, north=None) -> tuple[float, float]:
+    """(azimuth, elevation) in degrees of a unit vector towards the sun; the azimuth clockwise from
+    ``north`` (a horizontal unit vector; default the scene's -Z, :func:`model_north` for true north)."""
+    n = NORTH if north is None else np.asarray(north, dtype=np.float64)
+    east = np.cross(n, UP)
     el = math.degrees(math.asin(float(np.clip(np.dot(to_sun, UP), -1.0, 1.0))))
-    az = math.degrees(math.atan2(float(np.dot(to_sun, EAST)), float(np.dot(to_sun, NORTH)))) % 360.0
+    az = math.degrees(math.atan2(float(np.dot(to_sun, east)), float(np.dot(to_sun, n)))) % 360.0
     return az, el
+
+
+def model_north(app_state: AppState) -> np.ndarray:
+    """The open model's true north in the scene: the Sun & sky panel's (its IfcSite's TrueNorth, or
+    as set there; :mod:`viewer.sun_sky`), else the scene's -Z."""
+    d = getattr(getattr(app_state.lighting, "sun_sky", None), "daylight", None)
+    return d.north() if d is not None else NORTH
 
 
 def key_states(app_state: AppState) -> tuple[dict, dict, float] | None:
@@ -98,7 +108,7 @@ def sun_label(app_state: AppState) -> str:
         d = sun_at(app_state)
         if d is None:
             return ""
-        stated = angles(d)
+        stated = angles(d, model_north(app_state))
     az, el = stated
     return f"sun: azimuth {az:.0f} deg, elevation {el:.0f} deg"
 
@@ -125,12 +135,12 @@ def shown_sun(app_state: AppState) -> np.ndarray | None:
     return d if d is not None else scene_sun(app_state)
 
 
-def sun_facts(lt) -> str:
+def sun_facts(lt, north=None) -> str:
     """What a directional light is, in words: 'azimuth 132.3 deg, elevation 38.1 deg, 826 W/m²'
-    (azimuth from the scene's -Z; the light's intensity times its colour's largest channel, the
-    irradiance on a surface facing it)."""
+    (azimuth from ``north``, default the scene's -Z, :func:`model_north` for true north; the light's
+    intensity times its colour's largest channel, the irradiance on a surface facing it)."""
     d = -np.asarray(lt.direction, dtype=np.float64)
     d = d / max(float(np.linalg.norm(d)), 1e-12)
-    az, el = angles(d)
+    az, el = angles(d, north)
     lux = float(lt.intensity) * float(np.max(lt.color))
     return f"azimuth {az:.1f} deg, elevation {el:.1f} deg, {lux:.0f} W/m²"

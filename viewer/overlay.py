@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 from imgui_bundle import ImVec2, ImVec4, imgui
 
-from viewer.daylight import angles, shown_sun
+from viewer.daylight import angles, model_north, shown_sun
 from viewer.panels import RED, hud_lines
 from viewer.state import MODE_LABELS, AppState
 
@@ -256,5 +256,5 @@ def sun_compass(state: AppState, dl, radius: float = 26.0) -> None:
     tip = ImVec2(c.x + radius * sx, c.y - radius * sy)
     dl.add_line(c, tip, sun, 2.5)
     dl.add_circle_filled(tip, 4.0, sun)
-    az, el = angles(d)
+    az, el = angles(d, model_north(state))  # from true north
     dl.add_text(ImVec2(c.x - radius, c.y + radius + 4), ring, f"sun {az:.0f}/{el:.0f} deg")

@@ -28,7 +28,7 @@ from iat.bake.flatten import METHODS
 from iat.io.load import SUPPORTED_EXTENSIONS
 from viewer import false_color
 from viewer.bake_worker import snap_scale
-from viewer.daylight import sun_facts, sun_label
+from viewer.daylight import model_north, sun_facts, sun_label
 from viewer.eta import JobEta
 from viewer.lights import new_light_intensity, new_light_position
 from viewer.navigation import paths_file
@@ -445,7 +445,7 @@ def lighting_panel(state: AppState) -> None:
 
     k = state.lighting.selected_light
     if 0 <= k < len(ed.lights) and ed.lights[k].kind == "directional":  # the sun: a direction, no place
-        imgui.text_wrapped(f"sun: {sun_facts(ed.lights[k])}")
+        imgui.text_wrapped(f"sun: {sun_facts(ed.lights[k], model_north(state))}")  # from true north
         _help("A direction, not a lamp: set its place, date and time in the Sun & sky panel (or --sun).")
     elif 0 <= k < len(ed.lights):
         lt = ed.lights[k]
