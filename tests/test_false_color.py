@@ -38,7 +38,9 @@ def test_scale_positions_ticks_and_colours():
     assert lin.ticks() == [0.0, 2.0, 4.0, 6.0, 8.0, 10.0]
     np.testing.assert_allclose(colorize([0.0, 10.0], lin), PALETTE[[0, -1]])
     assert np.allclose(colorize([np.nan], lin)[0], 0.5)  # unknown: grey
-    assert auto_scale([0.5, 3.0, 7.2], "daylight-factor") == Scale("daylight-factor", 0.0, 8.0, False)
+    assert auto_scale([0.5, 3.0, 7.2], "daylight-factor") == Scale("daylight-factor", 0.0, 10.0, False)
+    assert auto_scale(np.linspace(0, 30, 100), "daylight-factor").hi == 30.0  # median 15 %
+    assert auto_scale(np.geomspace(1, 1e6, 100), "illuminance").lo == 100.0  # four decades at most
     a = auto_scale(np.geomspace(30, 3000, 50), "illuminance")
     assert (a.lo, a.hi, a.log) == (10.0, 10000.0, True)
     with pytest.raises(ValueError, match="lo > 0"):
@@ -102,14 +104,17 @@ def test_cli_renders_false_colour_with_a_legend(tmp_path, capsys):
 def test_analyse_a_two_room_ifc_lists_both_rooms_with_plausible_values(tmp_path, capsys):
     """The generated two-room IFC (IfcSpaces 'Living' with a 2 x 1.2 m window, 'Study' with a 1 x
     1.2 m one): both rooms, their grids inside their footprints, daylight factors within 35 % of
-    the BRE average daylight factor formula ``T Aw theta / (A (1 - R^2))`` and in the order of
-    their windows."""
+    the BRE average daylight factor formula ``T Aw theta / (A (1 - R^2))`` (an estimate; the precise
+    check is the twin below) and in the order of their windows; under an overcast sky the
+    illuminance is the daylight factor times one outdoor illuminance in both rooms."""
     pytest.importorskip("ifcopenshell")
     from tests.support.two_room_ifc import WINDOWS, write_two_room_ifc
 
     ifc = write_two_room_ifc(tmp_path / "two.ifc")
     out = tmp_path / "report.json"
-    assert cli.main(["analyse", str(ifc), "-o", str(out), "--grid", "0.5", "--quality", "draft"]) == 0
+    fast = ["--quality", "draft", "--max-depth", "2"]
+    overcast = ["--sun", "off", "--sky", "overcast"]  # the illuminance under an overcast sky too
+    assert cli.main(["analyse", str(ifc), "-o", str(out), "--grid", "0.5", *fast, *overcast]) == 0
     text = capsys.readouterr().out
     assert "Living" in text and "Study" in text
     doc = json.loads(out.read_text())
@@ -124,7 +129,7 @@ def test_analyse_a_two_room_ifc_lists_both_rooms_with_plausible_values(tmp_path,
         df, lux = r["daylight_factor_percent"], r["illuminance_lux"]
         assert 0 < df["min"] <= df["mean"] <= df["max"]
         assert df["uniformity"] == pytest.approx(df["min"] / df["mean"])
-        assert 50 < lux["mean"] < 100000  # a sunlit room by day
+        assert 50 < lux["mean"] < 100000
         # BRE: T = 1 (unglazed), theta = 90 deg (no obstruction), A all inner surfaces, R their mean albedo
         x0, x1 = WINDOWS[name]
         aw = (x1 - x0) * 1.2
@@ -133,13 +138,48 @@ def test_analyse_a_two_room_ifc_lists_both_rooms_with_plausible_values(tmp_path,
         walls = 2 * width * 3 + 2 * 4 * 3 - aw
         r_mean = (width * 4 * (0.407 + 0.85) + walls * 0.7986) / area  # floor, ceiling, walls (luminance)
         bre = aw * 90 / (area * (1 - r_mean**2))
-        assert 0.65 * bre < df["mean"] < 1.35 * bre, (name, df["mean"], bre)
+        assert 0.7 * bre < df["mean"] < 1.35 * bre, (name, df["mean"], bre)
     ratio = (
         rooms["Living"]["daylight_factor_percent"]["mean"] / rooms["Study"]["daylight_factor_percent"]["mean"]
     )
     assert 1.5 < ratio < 3
     csv_out = tmp_path / "report.csv"
-    args = ["analyse", str(ifc), "-o", str(csv_out), "--only", "daylight-factor", "--quality", "draft"]
+    args = ["analyse", str(ifc), "-o", str(csv_out), "--only", "daylight-factor", *fast]
     assert cli.main(args) == 0
     rows = list(csv.DictReader(csv_out.read_text().splitlines()))
     assert len(rows) == 120 and rows[0]["lux"] == "" and float(rows[0]["daylight_factor_percent"]) > 0
+
+
+@pytest.mark.parametrize(
+    "cut",
+    [
+        pytest.param(
+            "crossings",
+            marks=pytest.mark.xfail(
+                strict=True,
+                reason="issue 36's cut of pierced faces (load_scene cut='crossings', the default) raises "
+                "this room's daylight factor by 15 %: 7.01 % against 6.11 % uncut and 6.28 % for the twin",
+            ),
+        ),
+        "none",
+    ],
+)
+def test_an_ifc_rooms_daylight_factor_matches_its_twin_built_in_code(tmp_path, cut):
+    """The IFC path (loader, IfcSpace, grid) against the same room built in code: the work-plane
+    mean daylight factor within 5 % (measured 6.11 % against 6.28 %, uncut)."""
+    pytest.importorskip("ifcopenshell")
+    from iat.io.load import load_scene
+    from iat.io.spaces import read_ifc_spaces
+    from iat.measure.daylight import ANALYSIS_MAX_EDGE, measure_rooms, overcast_scene
+    from tests.support.two_room_ifc import living_room_twin, write_two_room_ifc
+
+    opts = SolveOptions.preset("draft", max_depth=2, max_edge=ANALYSIS_MAX_EDGE)
+    ifc = write_two_room_ifc(tmp_path / "two.ifc")
+    room = [r for r in read_ifc_spaces(ifc) if r.name == "Living"]
+    oc = overcast_scene(load_scene(ifc, max_edge=ANALYSIS_MAX_EDGE, cut=cut))
+    got = measure_rooms(room, 0.5, overcast=(oc, solve(oc, opts)))[0]
+    twin, box = living_room_twin()
+    tc = overcast_scene(twin)
+    want = measure_rooms([box], 0.5, overcast=(tc, solve(tc, SolveOptions.preset("draft", max_depth=3))))[0]
+    np.testing.assert_allclose(got.points, want.points)
+    assert got.df.mean() == pytest.approx(want.df.mean(), rel=0.05)

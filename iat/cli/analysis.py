@@ -63,6 +63,16 @@ def _scale(args, values, quantity: str):
         raise OptionError(f"--color-range: {e}") from None
 
 
+def _analysis_options(args, solve_options):
+    """The solve options of a measurement: ``--max-edge`` ANALYSIS_MAX_EDGE unless given."""
+    from dataclasses import replace
+
+    from iat.measure.daylight import ANALYSIS_MAX_EDGE
+
+    opts = solve_options(args)
+    return opts if opts.max_edge is not None else replace(opts, max_edge=ANALYSIS_MAX_EDGE)
+
+
 def open_overcast(args, load, solve_options, bar):
     """(overcast scene, its solution) of ``args.input``, a model: the daylight factor's solve."""
     from iat.measure.daylight import overcast_scene
@@ -71,7 +81,7 @@ def open_overcast(args, load, solve_options, bar):
 
     if is_solution_path(args.input):
         raise OptionError("the daylight factor solves the model under the CIE overcast sky: give the model")
-    opts = solve_options(args)
+    opts = _analysis_options(args, solve_options)
     scene = overcast_scene(load(args, args.input, max_edge=opts.max_edge))
     with bar(args, f"solve {Path(args.input).name} (CIE overcast)") as b:
         return scene, solve(scene, opts, progress=b)
@@ -157,7 +167,7 @@ def cmd_analyse(args, load, solve_options, bar, emit) -> int:
         raise OptionError(
             "iat analyse solves the model (its own light and the CIE overcast sky): give the model"
         )
-    opts = solve_options(args)
+    opts = _analysis_options(args, solve_options)
     scene = load(args, args.input, max_edge=opts.max_edge)
     rooms, source = _rooms(args, scene)
     name = Path(args.input).name
@@ -180,6 +190,7 @@ def cmd_analyse(args, load, solve_options, bar, emit) -> int:
         "work_plane_m": args.height,
         "illuminance_under": (line or "the model's own light") if lit else None,
         "daylight_factor_sky": "CIE standard overcast (no sun, no lamps)" if overcast else None,
+        "max_edge_m": opts.max_edge,
         "luminous_efficacy_lm_per_w": 179.0,
     }
     doc = report(results, meta)

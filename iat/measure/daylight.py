@@ -32,6 +32,12 @@ from iat.radiosity.sky import cie_overcast_irradiance
 
 #: the work plane's height over a room's floor, m
 WORK_PLANE = 0.75
+#: the loader's pre-split (``max_edge``, m) of an analysis when none is given: a floor or ceiling
+#: slab that runs under the walls has all its corners inside them, and unsplit it stays one black
+#: element (the adaptive meshing sees no light at any of its vertices to refine on); on the two-room
+#: test building the living room's mean daylight factor is 4.55 % without, 6.11 % with 1 m, 6.23 %
+#: with 0.5 m (at twice the solve time)
+ANALYSIS_MAX_EDGE = 1.0
 
 
 def overcast_scene(scene: Scene) -> Scene:

@@ -114,9 +114,11 @@ def fmt(v: float) -> str:
 
 
 def auto_scale(values, quantity: str, log: bool | None = None) -> Scale:
-    """A scale for ``values``: the daylight factor linear from 0 to a round number at or above
-    the 99th percentile (at least 5 %); illuminance and luminance in log10, from a power of ten
-    at or below the 1st percentile to one at or above the 99th, at least two decades."""
+    """A scale for ``values``: the daylight factor linear from 0 to 10 % (the usual range; to a
+    round number at or above twice the median when that is higher: vertices crowd where the light
+    changes, so a window's bright reveal weighs more than the room in any upper percentile);
+    illuminance and luminance in log10, from the power of ten at or above the 99th percentile down
+    two to four decades (to the power of ten at or below the 1st percentile)."""
     v = np.asarray(values, dtype=np.float64).ravel()
     v = v[np.isfinite(v)]
     if log is None:
@@ -125,13 +127,14 @@ def auto_scale(values, quantity: str, log: bool | None = None) -> Scale:
         pos = v[v > 0]
         p1, p99 = np.percentile(pos, [1, 99]) if len(pos) else (1.0, 100.0)
         hi = 10.0 ** math.ceil(math.log10(max(float(p99), 1e-6)))
-        lo = min(10.0 ** math.floor(math.log10(max(float(p1), 1e-6))), hi / 100)
-        return Scale(quantity, lo, hi, True)
-    p99 = float(np.percentile(v, 99)) if len(v) else 1.0
-    floor = 5.0 if quantity == "daylight-factor" else 1e-6
-    hi = max(p99, floor)
-    hi = math.ceil(hi / nice_step(hi / 5)) * nice_step(hi / 5)
-    return Scale(quantity, 0.0, float(hi), False)
+        lo = 10.0 ** math.floor(math.log10(max(float(p1), 1e-6)))
+        return Scale(quantity, min(max(lo, hi / 1e4), hi / 100), hi, True)
+    if quantity == "daylight-factor":
+        top = 2.0 * float(np.median(v)) if len(v) else 0.0
+        hi = 10.0 if top <= 10.0 else math.ceil(top / nice_step(top / 5)) * nice_step(top / 5)
+        return Scale(quantity, 0.0, float(hi), False)
+    top = max(float(np.percentile(v, 99)) if len(v) else 1.0, 1e-6)
+    return Scale(quantity, 0.0, math.ceil(top / nice_step(top / 5)) * nice_step(top / 5), False)
 
 
 def colorize(values, scale: Scale) -> np.ndarray:

@@ -43,3 +43,59 @@ def write_two_room_ifc(path: Path) -> Path:
         b.run("aggregate.assign_object", b.f, products=[space], relating_object=b.storey(0))
     b.write(path, "two-rooms")
     return path
+
+
+def living_room_twin():
+    """The "Living" room of :func:`write_two_room_ifc` built in code as the loader should see it
+    (scene coordinates, Y up: x in [0, 3.9], z in [-4, 0], floor at y = 0): floor, ceiling and walls
+    facing in, the window x in [1, 3], y in [0.9, 2.1] in the wall z = 0 with its 0.2 m reveals, the
+    materials' albedos (floor, ceiling, wall). Returns the scene and the room's box."""
+    import numpy as np
+
+    from iat.io.scene import Material, Scene
+    from iat.io.spaces import Room
+
+    w, h, d = 3.9, HEIGHT, 4.0
+    centre = np.array([w / 2, h / 2, -d / 2])
+    X, Y, Z = np.eye(3)
+    polys, mats = [], []
+
+    def add(quads, m):
+        for q in quads:
+            n = np.cross(q[1] - q[0], q[2] - q[0])
+            polys.append(q if n @ (centre - q.mean(0)) > 0 else q[::-1])
+            mats.append(m)
+
+    def grid(p0, du, dv, nu, nv):
+        return [
+            np.array(
+                [p0 + du * i / nu + dv * j / nv + o for o in (0 * du, du / nu, du / nu + dv / nv, dv / nv)]
+            )
+            for i in range(nu)
+            for j in range(nv)
+        ]
+
+    o = np.zeros(3)
+    add(grid(o - d * Z, w * X, d * Z, 4, 4), 0)  # floor
+    add(grid(o - d * Z + h * Y, w * X, d * Z, 4, 4), 1)  # ceiling
+    add(grid(o - d * Z, w * X, h * Y, 4, 3), 2)  # north wall
+    add(grid(o - d * Z, d * Z, h * Y, 4, 3), 2)  # west wall
+    add(grid(o - d * Z + w * X, d * Z, h * Y, 4, 3), 2)  # the partition
+    (x0, x1), (y0, y1) = WINDOWS["Living"], (SILL, HEAD)
+    for a, b, c, e in [(0, x0, 0, h), (x1, w, 0, h), (x0, x1, 0, y0), (x0, x1, y1, h)]:  # the wall z = 0
+        add([np.array([[a, c, 0], [b, c, 0], [b, e, 0], [a, e, 0]], float)], 2)
+    for q in (  # the reveals, 0.2 m out
+        [[x0, y0, 0], [x1, y0, 0], [x1, y0, 0.2], [x0, y0, 0.2]],
+        [[x0, y1, 0], [x1, y1, 0], [x1, y1, 0.2], [x0, y1, 0.2]],
+        [[x0, y0, 0], [x0, y1, 0], [x0, y1, 0.2], [x0, y0, 0.2]],
+        [[x1, y0, 0], [x1, y1, 0], [x1, y1, 0.2], [x1, y0, 0.2]],
+    ):
+        add([np.array(q, float)], 2)
+    materials = [
+        Material("floor", albedo=[0.45, 0.4, 0.35]),
+        Material("ceiling", albedo=np.full(3, 0.85)),
+        Material("wall", albedo=[0.8, 0.8, 0.78]),
+    ]
+    verts = np.concatenate(polys)
+    corners = np.arange(len(verts)).reshape(-1, 4)
+    return Scene(verts, corners, np.array(mats), materials), Room.box("Living", [0, 0, -d], [w, h, 0])
