@@ -35,13 +35,14 @@ def _box(lo, hi):
     return v, q
 
 
-def write_room(path: Path) -> Path:
-    """The room as an OBJ, one object (material) per element: the slab reaches into the walls, and
-    the walls pass up through it (as in a Revit export)."""
+def write_room(path: Path, slab_into_walls: bool = True) -> Path:
+    """The room as an OBJ, one object (material) per element: the walls pass up through the slab (as
+    in a Revit export); the slab reaches into the walls, or ends on their faces (a contact)."""
     t = THICK
+    s = t if slab_into_walls else 0.0
     objects = {
         "floor": _box((-t, -0.2, -t), (LX + t, 0.0, WZ + t)),
-        "slab": _box((-t, H, -t), (LX + t, H + SLAB, WZ + t)),
+        "slab": _box((-s, H, -s), (LX + s, H + SLAB, WZ + s)),
         "wall_s": _box((-t, 0.0, -t), (LX + t, H + UP, 0.0)),
         "wall_n": _box((-t, 0.0, WZ), (LX + t, H + UP, WZ + t)),
         "wall_w": _box((-t, 0.0, 0.0), (0.0, H + UP, WZ)),
@@ -118,10 +119,11 @@ def test_pierced_pairs_find_crossings_not_contacts():
     coplanar = [[-0.5, 0, 0], [0.5, 0, 0], [0, 0, 0.5]]
     grazing = [[3, -0.5, 0], [3, 0.5, 0.2], [3, 0.5, -0.2]]  # crosses the floor's plane, not the floor
     tri = np.array([floor, crossing, standing, on_edge, coplanar, grazing], dtype=float)
-    a, b = pierced_pairs(tri, np.arange(6), 1e-6)
+    a, b, c, d = pierced_pairs(tri, np.arange(6), 1e-6)
+    assert len(c) == 0  # contacts are not looked for unless asked
     assert b[a == 0].tolist() == [1]  # of the five, only the crossing one pierces the floor
     assert (2, 3) in zip(a.tolist(), b.tolist(), strict=True)  # (they cross each other)
-    a, b = pierced_pairs(tri[:2], np.zeros(2, np.int64), 1e-6)  # one object: its own business
+    a, b, _, _ = pierced_pairs(tri[:2], np.zeros(2, np.int64), 1e-6)  # one object: its own business
     assert len(a) == 0
 
 
@@ -131,9 +133,9 @@ def test_cut_faces_split_a_quad_along_the_crossing_and_mark_the_cut():
         [[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0], [-1, 0.7, -1], [3, 0.7, -1], [1, 0.7, 2]], float
     )
     F = np.array([[0, 1, 2], [0, 2, 3], [4, 6, 5]])
-    a, b = pierced_pairs(V[F], np.array([0, 0, 1]), 1e-9)
+    a, b, _, _ = pierced_pairs(V[F], np.array([0, 0, 1]), 1e-9)
     assert sorted(a.tolist()) == [0, 1] and b.tolist() == [2, 2]
-    V2, F2, parent, barrier, n_cut = cut_faces(V, F, a, b, 1e-9)
+    V2, F2, parent, barrier, n_cut = cut_faces(V, F, np.r_[a, b], np.r_[b, a], 1e-9)
     tri = V2[F2]
     quad = parent < 2
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
@@ -203,7 +205,7 @@ def _drawn_samples(sol, k: int = 6):
     return pts, np.repeat(n, len(w), axis=0), r
 
 
-def _room_figures(path: Path, cut: bool) -> dict:
+def _room_figures(path: Path, cut) -> dict:
     scene = load_scene(path, cut=cut)
     scene.lights = [Light(kind="directional", direction=SUN, intensity=1000.0)]
     sol = solve(scene, SolveOptions(max_depth=4))
@@ -247,6 +249,31 @@ def test_a_wall_through_a_sunlit_slab_leaks_whole_and_not_cut(room):
     assert whole["band"] > 100.0 * whole["ceiling"]  # brighter than the ceiling it stands under
     assert cut["below"] <= ref.max() + 1e-9 * cut["above"]  # no direct sun, nothing carried below
     assert cut["band_max"] <= cut["ceiling"] + 1e-12 * cut["above"]
+
+
+def test_a_slab_ending_on_the_walls_faces_is_cut_with_contacts(tmp_path):
+    """The slab bounded by the walls' room sides touches them and crosses nothing: ``crossings``
+    leaves the walls whole (the leak stays), ``all`` cuts them along the slab resting on them."""
+    path = write_room(tmp_path / "bounded.obj", slab_into_walls=False)
+    plain, contacts = load_scene(path), load_scene(path, cut="all")
+    assert plain.pierce.pairs == 0 and plain.pierce.faces_cut == 0
+    assert contacts.pierce.contacts > 0 and contacts.pierce.faces_cut > 0
+    assert contacts.pierce.joined_regions == 0
+    for scene, straddle in ((plain, True), (contacts, False)):
+        spans = np.zeros(scene.n_patches, bool)
+        for level in (H, H + SLAB):
+            spans[_straddling(scene, 1, level)] = True
+        assert (spans & _room_side_patches(scene)).any() == straddle
+    whole, cut = _room_figures(path, "crossings"), _room_figures(path, "all")
+    assert whole["band"] > 1e-3 * whole["above"]
+    assert cut["below"] <= 1e-9 * cut["above"]
+
+
+def test_bad_cut_option_is_an_option_error(room):
+    from iat.errors import OptionError
+
+    with pytest.raises(OptionError, match="cut must be one of crossings, all, none"):
+        load_scene(room, cut="some")
 
 
 # -- a real file ----------------------------------------------------------------------------------

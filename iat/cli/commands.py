@@ -77,7 +77,7 @@ def _load(args, path, max_edge=None):
             panels=not getattr(args, "no_panels", False),
             discontinuity=getattr(args, "discontinuity", False),
             sides=getattr(args, "sides", None) or "auto",
-            cut=not getattr(args, "no_cut", False),
+            cut=getattr(args, "cut", None) or "crossings",
         )
 
 
@@ -170,7 +170,8 @@ def cmd_info(args) -> int:
         )
     if scene.pierce is not None:  # faces other objects pierce (iat.geometry.pierce)
         pc = scene.pierce
-        info.update(piercing_pairs=pc.pairs, intersecting_objects=pc.objects, faces_cut=pc.faces_cut)
+        info.update(piercing_pairs=pc.pairs, contacts=pc.contacts, intersecting_objects=pc.objects)
+        info["faces_cut"] = pc.faces_cut
     _emit(args, info)
     return 0
 
@@ -594,7 +595,12 @@ def build_parser() -> argparse.ArgumentParser:
             "(other formats: glTF doubleSided materials only); both: every format so; "
             "front: faces as the file has them (all count them)",
         )
-        sp.add_argument("--no-cut", action="store_true", dest="no_cut", help="keep pierced faces whole")
+        sp.add_argument(
+            "--cut",
+            choices=["crossings", "all", "none"],  # iat.geometry.pierce.CUTS (not imported: start-up)
+            default="crossings",
+            help="cut faces along other objects crossing them (all: and resting on them; none: not)",
+        )
 
     def set_flags(sp):
         sp.add_argument(

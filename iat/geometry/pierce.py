@@ -39,6 +39,11 @@ from scipy.sparse.csgraph import connected_components
 
 from iat.geometry.mesh import degenerate_faces, weld_vertices
 
+#: the loader's choices (``load_scene(cut=...)``, ``--cut``): ``crossings`` (default; ``True``): faces cut
+#: where faces of other objects cross them; ``all``: also where a face of another object rests on
+#: them (a slab ending on a wall's face, a wall standing on a slab, a box on a floor: contacts);
+#: ``none`` (``False``): nothing cut (the crossings are still counted)
+CUTS = ("crossings", "all", "none")
 #: faces pierce each other when each has corners beyond this fraction of the scene diagonal on both
 #: sides of the other's plane and their crossing overlaps by more than that (0.1 mm in a 10 m house)
 PIERCE_TOL = 1e-5
@@ -52,7 +57,8 @@ class PierceReport:
 
     cut : whether the loader cut (``load_scene(cut=...)``); the counts are found either way
     pairs : pairs of triangles of different objects that pierce each other
-    objects : objects (IFC elements, glTF primitives, OBJ groups) with a pierced or piercing face
+    contacts : triangles that rest on a triangle of another object (counted with ``contacts``)
+    objects : objects (IFC elements, glTF primitives, OBJ groups) with a face to cut
     faces_cut : triangles cut (0 when ``cut`` is False)
     pieces : triangles they became
     joined_regions : regions that joined around a cut's end (their faces merge no further)
@@ -60,6 +66,7 @@ class PierceReport:
 
     cut: bool = True
     pairs: int = 0
+    contacts: int = 0
     objects: int = 0
     faces_cut: int = 0
     pieces: int = 0
@@ -124,13 +131,44 @@ def _crossing(a, b, tri, normal, offset, tol, da, db, line):
 
 
 @njit(cache=True, nogil=True)
-def _sweep(tri, normal, offset, lo, hi, obj, order, axis, tol):
-    """(a, b) int64 pierced pairs: a sweep along ``axis`` over the boxes ``lo``, ``hi`` (T, 3)
-    in ``order`` (sorted by ``lo[:, axis]``)."""
+def _rests_on(a, b, tri, normal, offset, tol, da, db, line):
+    """True when triangle b rests on triangle a: an edge of b lies in a's plane across a's inside,
+    b stays on one side of that plane, and a has corners beyond ``tol`` on both sides of b's plane
+    (a slab ending on a wall's face, a box on a floor; see :func:`pierced_pairs`)."""
+    if not _straddle(a, b, tri, normal, offset, tol, da):
+        return False
+    if _straddle(b, a, tri, normal, offset, tol, db):
+        return False
+    on = 0
+    for i in range(3):
+        on += abs(db[i]) <= tol
+    if on != 2:
+        return False
+    line[0] = normal[a, 1] * normal[b, 2] - normal[a, 2] * normal[b, 1]
+    line[1] = normal[a, 2] * normal[b, 0] - normal[a, 0] * normal[b, 2]
+    line[2] = normal[a, 0] * normal[b, 1] - normal[a, 1] * normal[b, 0]
+    n = np.sqrt(line[0] ** 2 + line[1] ** 2 + line[2] ** 2)
+    if n < 1e-12:
+        return False
+    line /= n
+    lo_a, hi_a = _interval(a, da, tri, line, tol)
+    lo_b, hi_b = _interval(b, db, tri, line, tol)
+    return min(hi_a, hi_b) - max(lo_a, lo_b) > tol
+
+
+@njit(cache=True, nogil=True)
+def _sweep(tri, normal, offset, lo, hi, obj, order, axis, tol, contacts):
+    """(a, b) int64 pierced pairs and (c, d) contacts (triangle c cut by d's plane, with
+    ``contacts``): a sweep along ``axis`` over the boxes ``lo``, ``hi`` (T, 3) in ``order``
+    (sorted by ``lo[:, axis]``)."""
     cap = 1024
     out_a = np.empty(cap, np.int64)
     out_b = np.empty(cap, np.int64)
     k = 0
+    ccap = 1024
+    out_c = np.empty(ccap, np.int64)
+    out_d = np.empty(ccap, np.int64)
+    kc = 0
     da = np.empty(3)
     db = np.empty(3)
     line = np.empty(3)
@@ -153,6 +191,17 @@ def _sweep(tri, normal, offset, lo, hi, obj, order, axis, tol):
             ):
                 continue
             if not _crossing(i, j, tri, normal, offset, tol, da, db, line):
+                if not contacts:
+                    continue
+                for c, d in ((i, j), (j, i)):
+                    if _rests_on(c, d, tri, normal, offset, tol, da, db, line):
+                        if kc == ccap:
+                            ccap *= 2
+                            nc, nd = np.empty(ccap, np.int64), np.empty(ccap, np.int64)
+                            nc[:kc], nd[:kc] = out_c[:kc], out_d[:kc]
+                            out_c, out_d = nc, nd
+                        out_c[kc], out_d[kc] = c, d
+                        kc += 1
                 continue
             if k == cap:
                 cap *= 2
@@ -161,19 +210,23 @@ def _sweep(tri, normal, offset, lo, hi, obj, order, axis, tol):
                 out_a, out_b = na, nb
             out_a[k], out_b[k] = min(i, j), max(i, j)
             k += 1
-    return out_a[:k], out_b[:k]
+    return out_a[:k], out_b[:k], out_c[:kc], out_d[:kc]
 
 
-def pierced_pairs(tri: np.ndarray, objects: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray]:
-    """Pairs of triangles of different objects that pierce each other.
+def pierced_pairs(tri: np.ndarray, objects: np.ndarray, tol: float, contacts: bool = False):
+    """Pairs of triangles of different objects that pierce each other (and, with ``contacts``, that
+    rest on each other).
 
     tri : (T, 3, 3) float64 world corners; objects : (T,) int64; tol : scene units (corners within
     it of a plane are on it, crossings no longer than it do not count).
-    Returns (a (k,), b (k,)) int64, a < b, sorted.
+    Returns (a (k,), b (k,)) int64, a < b, sorted: the crossing pairs; and (c (m,), d (m,)) int64:
+    triangle d rests on triangle c (an edge of d lies in c's plane across c, d on one side of it,
+    c on both sides of d's plane: c is cut by d's plane, d is not cut), empty without ``contacts``.
     """
     tri = np.ascontiguousarray(tri, dtype=np.float64)
+    none = np.zeros(0, np.int64)
     if len(tri) < 2:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        return none, none, none, none
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     offset = (n * tri[:, 0]).sum(axis=1)
@@ -185,9 +238,9 @@ def pierced_pairs(tri: np.ndarray, objects: np.ndarray, tol: float) -> tuple[np.
     axis = int(np.argmin(counts))
     order = np.argsort(lo[:, axis], kind="stable")
     obj = np.ascontiguousarray(objects, dtype=np.int64)
-    a, b = _sweep(tri, n, offset, lo, hi, obj, order, axis, float(tol))
-    o = np.lexsort((b, a))
-    return a[o], b[o]
+    a, b, c, d = _sweep(tri, n, offset, lo, hi, obj, order, axis, float(tol), bool(contacts))
+    o, oc = np.lexsort((b, a)), np.lexsort((d, c))
+    return a[o], b[o], c[oc], d[oc]
 
 
 @njit(cache=True, nogil=True)
@@ -288,12 +341,10 @@ def _cut_all(faces, tri, start, pn, pd, tol, maxv):
     return par[:r], cor[:r], bar[:r]
 
 
-def _face_planes(a: np.ndarray, b: np.ndarray, normal: np.ndarray, offset: np.ndarray, tol: float):
-    """Each pierced face's distinct cutting planes: (face (k,) sorted, normal (k, 3), offset (k,)),
-    the planes of the faces that pierce it (coplanar ones once)."""
-    face = np.concatenate([a, b])
-    other = np.concatenate([b, a])
-    n, d = normal[other], offset[other]
+def _face_planes(face: np.ndarray, by: np.ndarray, normal: np.ndarray, offset: np.ndarray, tol: float):
+    """Each cut face's distinct cutting planes: (face (k,) sorted, normal (k, 3), offset (k,)), the
+    planes of the faces ``by`` that cut it (coplanar ones once)."""
+    n, d = normal[by], offset[by]
     flip = np.where(
         np.abs(n[:, 0]) > 1e-9, n[:, 0] < 0, np.where(np.abs(n[:, 1]) > 1e-9, n[:, 1] < 0, n[:, 2] < 0)
     )
@@ -306,8 +357,9 @@ def _face_planes(a: np.ndarray, b: np.ndarray, normal: np.ndarray, offset: np.nd
     return face[o], n[o], d[o]
 
 
-def cut_faces(V: np.ndarray, F: np.ndarray, a: np.ndarray, b: np.ndarray, tol: float):
-    """Cut the faces of pierced pairs (a, b) (:func:`pierced_pairs`) by each other's planes.
+def cut_faces(V: np.ndarray, F: np.ndarray, face: np.ndarray, by: np.ndarray, tol: float):
+    """Cut faces ``face`` (k,) by the planes of faces ``by`` (k,) (from :func:`pierced_pairs`: a pair
+    (a, b) that crosses gives (a, b) and (b, a), a contact (c, d) gives (c, d)).
 
     V (n, 3) float64, F (f, 3) int64. Returns (vertices (n', 3), faces (f', 3), parent (f',) int64:
     the input face each output face comes from (uncut faces first, in place; pieces in place of
@@ -317,7 +369,7 @@ def cut_faces(V: np.ndarray, F: np.ndarray, a: np.ndarray, b: np.ndarray, tol: f
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
     offset = (normal * tri[:, 0]).sum(axis=1)
-    face, pn, pd = _face_planes(a, b, normal, offset, tol)
+    face, pn, pd = _face_planes(face, by, normal, offset, tol)
     cut, per = np.unique(face, return_counts=True)
     start = np.zeros(len(F) + 1, np.int64)
     start[cut + 1] = per
@@ -401,26 +453,29 @@ def cut_pierced(
     face_uv: np.ndarray,
     objects: np.ndarray,
     cut: bool = True,
+    contacts: bool = False,
     tol_rel: float = PIERCE_TOL,
 ) -> Pierced:
     """Find the faces other objects pierce (:func:`pierced_pairs`) and, when ``cut``, cut them
     (:func:`cut_faces`) and label the sides of each cut (:func:`region_labels`).
 
     V (n, 3) float64 welded; F (f, 3) int64; material (f,) int64; face_uv (f, 3, 2) float64;
-    objects (f,) int64; tol_rel : :data:`PIERCE_TOL` (fraction of the used vertices' diagonal).
-    With no pierced pair, or ``cut`` False, the arrays come back as they are.
+    objects (f,) int64; contacts : also cut a face along the faces that rest on it (a slab ending
+    on a wall's face, a box on a floor); tol_rel : :data:`PIERCE_TOL` (fraction of the used
+    vertices' diagonal). With nothing to cut, or ``cut`` False, the arrays come back as they are.
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
     material = np.asarray(material, dtype=np.int64)
     used = V[np.unique(F)] if len(F) else np.zeros((1, 3))
     tol = tol_rel * max(float(np.linalg.norm(used.max(axis=0) - used.min(axis=0))), 1e-300)
-    a, b = pierced_pairs(V[F], objects, tol)
-    report = PierceReport(cut=cut, pairs=len(a), objects=len(np.unique(objects[np.concatenate([a, b])])))
+    a, b, c, d = pierced_pairs(V[F], objects, tol, contacts)
+    face, by = np.concatenate([a, b, c]), np.concatenate([b, a, d])
+    report = PierceReport(cut=cut, pairs=len(a), contacts=len(c), objects=len(np.unique(objects[face])))
     same = Pierced(V, F, face_uv, material, None, np.arange(len(F)), report)
-    if not cut or len(a) == 0:
+    if not cut or len(face) == 0:
         return same
-    V2, F2, parent, barrier, n_cut = cut_faces(V, F, a, b, tol)
+    V2, F2, parent, barrier, n_cut = cut_faces(V, F, face, by, tol)
     # uvs: each corner's barycentric coordinates in its parent triangle
     p0, p1, p2 = (V[F[parent, k]] for k in range(3))
     e1, e2 = p1 - p0, p2 - p0
@@ -435,7 +490,7 @@ def cut_pierced(
     region, joined = region_labels(V2, F2, material[parent], barrier)
     pairs, code = np.unique(np.stack([material[parent], region], axis=1), axis=0, return_inverse=True)
     report.faces_cut = int(n_cut)
-    report.pieces = int(np.isin(parent, np.unique(np.concatenate([a, b]))).sum())
+    report.pieces = int(np.isin(parent, np.unique(face)).sum())
     report.joined_regions = int(joined)
     code = code.reshape(-1).astype(np.int64)
     return Pierced(V2, F2, uv, code, pairs[:, 0].astype(np.int64), parent, report)

@@ -48,7 +48,7 @@ from iat.geometry.mesh import (
     weld_vertices,
 )
 from iat.geometry.panels import make_panels
-from iat.geometry.pierce import cut_pierced
+from iat.geometry.pierce import CUTS, cut_pierced
 from iat.geometry.sides import SIDES, add_back_faces, classify_sides, object_ids, repeated_faces, twin_patches
 from iat.io.dae import dae_frame
 from iat.io.gltf import GltfDocument
@@ -342,7 +342,7 @@ def load_scene(
     panels: bool = True,
     discontinuity: bool = False,
     sides: str = "auto",
-    cut: bool = True,
+    cut: bool | str = True,
 ) -> Scene:
     """Load a model file (glTF/GLB, OBJ+MTL, PLY, STL, OFF) into a :class:`Scene`.
 
@@ -364,10 +364,12 @@ def load_scene(
       sheets get a back face (its own patch); elsewhere only faces of glTF ``doubleSided``
       materials get one. ``"both"``: every format as IFC. ``"front"``: the faces as the file has
       them. :data:`iat.geometry.sides.SIDES`; what was found is ``Scene.sides``.
-    cut : cut the faces that other objects pierce along the crossings, so that no patch or panel
-      cell spans both sides of another surface (:func:`iat.geometry.pierce.cut_pierced`; a wall
-      through a ceiling is lit above it and dark below it); False keeps them whole. Either way
-      what was found is ``Scene.pierce``.
+    cut : ``"crossings"`` (default, True): cut the faces that other objects pierce along the
+      crossings, so that no patch or panel cell spans both sides of another surface
+      (:func:`iat.geometry.pierce.cut_pierced`; a wall through a ceiling is lit above it and dark
+      below it); ``"all"``: also along the faces of other objects that rest on them (a slab ending on
+      a wall's face, a wall on a slab); ``"none"`` (False) keeps them whole. Either way what was
+      found is ``Scene.pierce``.
     progress : ``progress(fraction, message) -> bool``, called at the start of each
       stage (parse, weld, quad merge, pre-split) and with 1.0 at the end, fractions
       non-decreasing; returning False raises :class:`iat.errors.Cancelled`.
@@ -383,6 +385,9 @@ def load_scene(
         raise OptionError(f"max_edge must be a positive number, got {max_edge!r}")
     if sides not in SIDES:
         raise OptionError(f"sides must be one of {', '.join(SIDES)}, got {sides!r}")
+    cut = ("none", "crossings")[cut] if isinstance(cut, bool) else cut
+    if cut not in CUTS:
+        raise OptionError(f"cut must be one of {', '.join(CUTS)}, got {cut!r}")
     if not path.exists():
         raise LoadError("file not found", path)
     if not path.is_file():
@@ -447,7 +452,7 @@ def load_scene(
     M = np.where(side.back, M + n_mat, M)
     # faces other objects pierce are cut along the crossings; (material, side of the cuts) pairs
     # stand in for the materials until the patches are made (iat.geometry.pierce)
-    pierced = cut_pierced(V, F, M, UV, objects, cut=cut)
+    pierced = cut_pierced(V, F, M, UV, objects, cut=cut != "none", contacts=cut == "all")
     V, F, UV, M, code_material = pierced.vertices, pierced.faces, pierced.face_uv, pierced.code, pierced.codes
     report(_STAGES["weld"], "merging quads")
     corners, pmat, puv = merge_quads(V, F, M, UV)
