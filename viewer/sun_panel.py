@@ -95,6 +95,12 @@ def sun_sky_panel(state: AppState) -> None:
     if changed:
         sun_sky.change(state, hour=float(min(max(v, lo), hi)))
     help_mark("Clock time in the zone of the longitude; with the sun study shown it plays the study.")
+    m = sun_sky.sun_marker(state)
+    if m is not None:
+        imgui.push_style_color(imgui.Col_.text, SUN_GOLD if m.up else DIM)
+        imgui.text_wrapped(m.text())
+        imgui.pop_style_color()
+        help_mark("Azimuth clockwise from true north (NOAA's solar position); the disc in the view marks it.")
     imgui.begin_disabled(study)
     changed, on = imgui.checkbox("Sun", bool(d.sun_on))
     if changed:
@@ -119,10 +125,6 @@ def sun_sky_panel(state: AppState) -> None:
     if changed:
         sun_sky.change(state, sky_scale=max(float(v), 0.0))
     imgui.end_disabled()
-    m = sun_sky.sun_marker(state)
-    if m is not None:
-        imgui.text_colored(SUN_GOLD if m.up else DIM, m.text())
-        help_mark("Azimuth clockwise from true north (NOAA's solar position); the disc in the view marks it.")
     imgui.text_colored(DIM, d.sky_text())
     if ss.error:
         imgui.text_colored(RED, ss.error)
