@@ -217,6 +217,8 @@ def _room_figures(path: Path, cut) -> dict:
     ceiling = inside & (n[:, 1] < -0.9) & (np.abs(x[:, 1] - H) < 1e-6)
     band = room_side & (x[:, 1] < H) & (x[:, 1] > H - 0.25)
     return {
+        "scene": scene,
+        "solution": sol,
         "band": r[band].mean(),
         "band_max": r[band].max(),
         "below": r[room_side & (x[:, 1] < H)].max(),
@@ -241,7 +243,8 @@ def test_a_wall_through_a_sunlit_slab_leaks_whole_and_not_cut(room):
     scene = load_scene(room, cut=False)
     scene.lights = [Light(kind="directional", direction=SUN, intensity=1000.0)]
     eye, target = (LX / 2, 1.2, WZ / 2), (LX / 2, H - 0.1, 0.0)
-    ref = render_reference(scene, Camera(eye=eye, target=target, yfov=50.0), (48, 32), spp=16, two_sided=True)
+    camera = Camera(eye=eye, target=target, yfov=50.0)
+    ref = render_reference(scene, camera, (48, 32), spp=16, two_sided=True)
     assert ref.max() <= 1e-9 * cut["above"]
     outside = Camera(eye=(LX / 2, H + UP + 3.0, -4.0), target=(LX / 2, H, WZ / 2), yfov=50.0)
     assert render_reference(scene, outside, (48, 32), spp=4, two_sided=True).mean() > 10.0  # the sun is on
@@ -249,6 +252,21 @@ def test_a_wall_through_a_sunlit_slab_leaks_whole_and_not_cut(room):
     assert whole["band"] > 100.0 * whole["ceiling"]  # brighter than the ceiling it stands under
     assert cut["below"] <= ref.max() + 1e-9 * cut["above"]  # no direct sun, nothing carried below
     assert cut["band_max"] <= cut["ceiling"] + 1e-12 * cut["above"]
+    # as drawn: mesh mode, and IAT mode all textured (threshold 0) and all mesh part (9)
+    from iat.bake.baker import Baker
+    from iat.bake.policy import BakePolicy
+    from iat.render.renderer import Renderer
+
+    with Renderer() as r:
+        for f, leaks in ((whole, True), (cut, False)):
+            r.set_solution(f["solution"])
+            images = [r.render(camera, (48, 32), mode="mesh")]
+            for threshold in (0, 9):
+                r.set_baked(Baker(f["solution"], f["scene"]).bake(BakePolicy(threshold=threshold)))
+                images.append(r.render(camera, (48, 32), mode="iat"))
+            assert r.ctx.error == "GL_NO_ERROR"
+            for img in images:  # the wall under the ceiling: lit whole (0.125 measured), black cut
+                assert (np.abs(img - ref).max() > 1e-3 * f["above"]) == leaks
 
 
 def test_a_slab_ending_on_the_walls_faces_is_cut_with_contacts(tmp_path):
