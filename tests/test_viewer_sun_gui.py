@@ -151,7 +151,15 @@ def test_sun_and_sky_panel(tmp_path, monkeypatch, gui_child):
         got["after"] = frames[n0:]
         got["m17"], got["patch17"] = marker("17:00"), lit_patch(s.model.solution)
         got["sol17"] = s.model.solution
-        got["disc"] = sun_panel.disc_position(s)
+        got["disc_away"] = sun_panel.disc_position(s)  # the camera looks down into the hall
+        m = sun_sky.sun_marker(s)  # look at the sun: its disc in the middle of the view
+        eye = np.asarray(s.view.camera.eye)
+        s.view.camera = Camera(eye=eye, target=eye + m.to_sun, up=[0.0, 1.0, 0.0], yfov=75.0, zfar=80.0)
+        x, y, w, h = s.view.rect
+        got["disc"] = (sun_panel.disc_position(s), (x + w / 2, y + h / 2))
+        s.view.nav.set_camera(cam)
+        s.view.camera = s.view.nav.camera
+        ctx.yield_(2)
         (sun,) = [lt for lt in s.lighting.editor.lights if lt.kind == "directional"]
         got["facts17"] = sun_facts(sun, model_north(s))  # the Lighting panel's words, from true north
         got["seventeen"] = shot(ctx, "17")
@@ -207,6 +215,8 @@ def test_sun_and_sky_panel(tmp_path, monkeypatch, gui_child):
     assert (m17["az"], m17["el"]) == pytest.approx((az17, el17), abs=0.1)
     assert np.degrees(np.arccos(np.clip(m17["to_sun"] @ to17, -1, 1))) < 0.1
     assert m17["az"] - m9["az"] > 150  # from the east to the west, by the south
+    disc, middle = got["disc"]
+    assert got["disc_away"] is None and disc is not None and np.allclose(disc, middle, atol=1.0)
     assert got["facts17"].startswith(f"azimuth {az17:.1f} deg, elevation {el17:.1f} deg, ")
     assert np.linalg.norm(got["patch17"] - predicted_patch(to17)) < PATCH_TOL, (
         got["patch17"],
