@@ -78,6 +78,14 @@ def test_changes_go_to_the_re_solve(tmp_path):
         assert np.array_equal(r2.solution.vert_key, r.solution.vert_key)
         s.model.scene = r2.scene
         assert sun_sky.shown_daylight(s).sky_scale == 2.0
+        # the sun off and no sky: moving the hour changes no light, so nothing is solved
+        sun_sky.change(s, sun_on=False, sky_model="none")
+        assert sun_sky.apply_pending(s)
+        wait_result(s.lighting.relighter)
+        version = s.lighting.editor.version
+        sun_sky.change(s, hour=9.0)
+        assert not sun_sky.apply_pending(s) and s.lighting.editor.version == version
+        assert sun_sky.sun_marker(s).text().startswith("sun down or off (azimuth ")
     finally:
         s.lighting.relighter.close()
 

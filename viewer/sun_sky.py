@@ -25,6 +25,7 @@ north), its W/m², its direction in the scene.
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from dataclasses import dataclass, field
@@ -71,8 +72,13 @@ class SunSky:
     hours: str = "8-18"
     study: dict | None = None
     sky_shown: Any = None
+    opened: Daylight | None = None
     error: str = ""
     events: list = field(default_factory=list)
+
+    def daylight_given(self) -> Daylight | None:
+        """The light the model opened with, as a setting (None: its own lamps, nothing added)."""
+        return self.opened if self.given else None
 
     def note(self, what: str) -> None:
         self.events.append((time.perf_counter(), what))
@@ -91,6 +97,7 @@ def sun_sky(state: AppState) -> SunSky:
         if scene is not None:
             try:
                 ss.daylight, ss.given = daylight_of(scene, state.model.daylight_request)
+                ss.opened = ss.daylight
             except IATError as e:  # (an IFC site that cannot be read: the default place)
                 ss.error = str(e)
             ss.sky_shown = state.model.scene.sky if state.model.scene is not None else None
@@ -161,6 +168,10 @@ def apply_pending(state: AppState) -> bool:
     if ss.pending is None or ed is None or rl is None or lt.day_cycle:
         return False
     new, ss.pending = ss.pending, None
+    if light_key(new) == light_key(_setting(ss, ed.scene) or ss.daylight_given()):  # the same light
+        ss.solved[id(ed.scene)] = (ed.scene, new)  # (e.g. the hour moved with the sun off, no sky)
+        ss.note(f"{new.clock_text()}: the same light, nothing to solve")
+        return False
     remesh = _moves_shadows(_setting(ss, rl.base_scene), new)  # against the last solution solved
     scene = ed.apply_state(daylight_state(new))
     ss.solved[id(scene)] = (scene, new)
@@ -168,6 +179,18 @@ def apply_pending(state: AppState) -> bool:
     lt.relight_version, lt.relight_submitted = ed.version, time.perf_counter()
     ss.note(f"submitted {new.clock_text()} ({'afresh' if remesh else 'on the mesh'})")
     return True
+
+
+def light_key(d: Daylight | None) -> str:
+    """What of ``d`` reaches the solve (its sun when up and on, its sky), as text to compare; None:
+    no daylight (a model's own lamps alone)."""
+    if d is None:
+        return json.dumps({"sky": None, "sun": None}, sort_keys=True)
+    st = daylight_state(d)
+    st.pop("azimuth"), st.pop("elevation")
+    if float(st["sun"].get("intensity", 0.0)) <= 0:
+        st["sun"] = None
+    return json.dumps(st, sort_keys=True)
 
 
 def shown_daylight(state: AppState) -> Daylight | None:
