@@ -12,6 +12,9 @@ import numpy as np
 
 #: Rec. 709 / sRGB luminance weights of linear RGB.
 LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+#: lm/W: radiometric values to photometric ones, ``LUMINOUS_EFFICACY x LUMINANCE_WEIGHTS . rgb``
+#: (RADIANCE's white efficacy; the one conversion, :mod:`iat.measure.photometry`)
+LUMINOUS_EFFICACY = 179.0
 
 
 def srgb_encode(x: np.ndarray) -> np.ndarray:

@@ -20,9 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from iat.camera import Camera
+from iat.color import LUMINANCE_WEIGHTS, LUMINOUS_EFFICACY
 from iat.errors import LoadError, OptionError
 from iat.io.glb import quat_to_matrix
 from iat.io.gltf_primitives import check_primitives, check_version, convert_primitives
+from iat.io.ies import read_ies
 from iat.io.images import decode_texture
 from iat.io.messages import one_line
 from iat.io.scene import Light, Material, Scene, Sky
@@ -325,11 +327,11 @@ class GltfDocument:
                     position=m[:3, 3].copy(),
                     direction=direction,
                     color=np.asarray(d.get("color", [1.0, 1.0, 1.0]), dtype=np.float64)[:3],
-                    intensity=float(d.get("intensity", 1.0)),
                     inner_cone=float(spot.get("innerConeAngle", 0.0)),
                     outer_cone=float(spot.get("outerConeAngle", np.pi / 4)),
                     name=name,
                     **_sun_disc(d),
+                    **{"intensity": float(d.get("intensity", 1.0)), **_ies(d, self.base)},
                 )
             )
         return out
@@ -390,6 +392,19 @@ class GltfDocument:
                         log.warning("%s: camera path %r ignored (%s)", self.path, name, one_line(e))
                 return paths
         return {}
+
+
+def _ies(d: dict, base: Path) -> dict:
+    """A point or spot light whose ``extras.ies`` names an IES LM-63 file (relative to the glTF):
+    ``{"ies": Photometry, "intensity": its peak candela in W/sr per unit colour}`` (the file's
+    candela through the one conversion, times ``extras.ies_scale``, default 1), or {}."""
+    extras = d.get("extras") or {}
+    if d.get("type", "point") == "directional" or not extras.get("ies"):
+        return {}
+    ies = read_ies(base / str(extras["ies"]))
+    y = float(np.asarray(d.get("color", [1.0, 1.0, 1.0]), dtype=np.float64)[:3] @ LUMINANCE_WEIGHTS)
+    scale = float(extras.get("ies_scale", 1.0))
+    return {"ies": ies, "intensity": scale * ies.peak / (LUMINOUS_EFFICACY * max(y, 1e-12))}
 
 
 def _sun_disc(d: dict) -> dict:

@@ -29,6 +29,7 @@ from iat.geometry.mesh import corner_positions, patch_areas, patch_normals
 from iat.geometry.pierce import PierceReport
 from iat.geometry.quadtree import bilinear
 from iat.geometry.sides import SideReport
+from iat.io.ies import Photometry
 
 
 @dataclass
@@ -69,6 +70,8 @@ class Light:
       radiometric); W/m² per unit colour on a surface facing a directional light (glTF lux)
     inner_cone, outer_cone : spot cone half-angles in radians
     angular_diameter : a directional light's disc, radians (the sun: 0.53 degrees)
+    ies : a point or spot light's IES distribution (:class:`iat.io.ies.Photometry`) about its nadir
+      ``direction``, or None; with one, ``intensity`` is its peak
     """
 
     kind: str = "point"
@@ -80,6 +83,7 @@ class Light:
     outer_cone: float = np.pi / 4
     name: str = ""
     angular_diameter: float = float(np.radians(0.53))
+    ies: Photometry | None = None
 
     def __post_init__(self):
         self.position = np.asarray(self.position, dtype=np.float64).reshape(3)
@@ -369,4 +373,6 @@ def scene_digest(scene: Scene) -> str:
         h.update(lt.kind.encode())
         for a in (lt.position, lt.direction, lt.radiant_intensity, [lt.inner_cone, lt.outer_cone]):
             h.update(np.ascontiguousarray(a, dtype="<f8").tobytes())
+        if lt.ies is not None:
+            h.update(lt.ies.digest())
     return h.hexdigest()

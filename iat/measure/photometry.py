@@ -29,11 +29,8 @@ import math
 
 import numpy as np
 
-from iat.color import LUMINANCE_WEIGHTS
+from iat.color import LUMINANCE_WEIGHTS, LUMINOUS_EFFICACY
 from iat.geometry import quadtree as qt
-
-#: lm/W: the luminous efficacy of equal-energy white (RADIANCE's WHTEFFICACY), the one conversion
-LUMINOUS_EFFICACY = 179.0
 
 #: albedo at or below which a surface's irradiance cannot be read from its radiance (NaN there)
 ALBEDO_FLOOR = 1e-4
@@ -93,8 +90,27 @@ def light_candela(light) -> float:
 
 
 def light_lumens(light) -> float:
-    """lm of a point or spot light (:func:`light_candela` x :func:`cone_solid_angle`)."""
+    """lm of a point or spot light (:func:`light_candela` x :func:`cone_solid_angle`, or x the
+    IES distribution's :meth:`~iat.io.ies.Photometry.solid_angle`)."""
+    if getattr(light, "ies", None) is not None:
+        return light_candela(light) * light.ies.solid_angle()
     return light_candela(light) * cone_solid_angle(light.kind, light.outer_cone)
+
+
+def ies_light(photometry, position, direction=(0.0, -1.0, 0.0), color=(1.0, 1.0, 1.0), name: str = ""):
+    """A point light of an IES distribution (:func:`iat.io.ies.read_ies`) at ``position``, its nadir
+    along ``direction``: ``intensity`` the file's peak candela through the one conversion."""
+    from iat.io.scene import Light
+
+    return Light(
+        kind="point",
+        position=position,
+        direction=direction,
+        color=color,
+        intensity=intensity_from_candela(photometry.peak, color),
+        ies=photometry,
+        name=name or photometry.name,
+    )
 
 
 def sun_illuminance(light) -> float:

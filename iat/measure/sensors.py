@@ -82,6 +82,8 @@ def _direct(sc: SensorScene, points: np.ndarray, normals: np.ndarray) -> np.ndar
             di = lt.direction / max(float(np.linalg.norm(lt.direction)), 1e-300)
             co, ci = math.cos(lt.outer_cone), math.cos(lt.inner_cone)
             att = np.clip((-(u @ di) - co) / max(1e-3, ci - co), 0.0, 1.0) ** 2
+        if lt.ies is not None:
+            att = att * lt.ies.relative(-u, lt.direction)
         ok = np.flatnonzero((cos > 0) & (att > 0) & (r > 1e-9))
         if len(ok):
             vis = sc.vis.visible(points[ok], u[ok], r[ok] * (1.0 - 1e-6))

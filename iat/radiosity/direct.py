@@ -49,6 +49,8 @@ class DirectLight:
             co, ci = math.cos(light.outer_cone), math.cos(light.inner_cone)
             scale = 1.0 / max(1e-3, ci - co)
             att = np.clip((cd - co) * scale, 0.0, 1.0) ** 2
+        if getattr(light, "ies", None) is not None:  # its IES distribution about its nadir (iat.io.ies)
+            att = att * light.ies.relative(-u, light.direction)
         near = r > 1e-12 * self.patches.scale
         free = np.where((cos > 0) & near, cos / np.maximum(r * r, 1e-300), 0.0)
         ok = np.flatnonzero((cos > 0) & (att > 0) & near)
@@ -241,4 +243,6 @@ class DirectLight:
 def light_power(lt) -> float:
     """Luminance power of a light (by magnitude: a difference of two lights may be negative)."""
     solid = 4 * np.pi if lt.kind == "point" else 2 * np.pi * (1 - math.cos(lt.outer_cone))
+    if getattr(lt, "ies", None) is not None:
+        solid = lt.ies.solid_angle()
     return abs(float(lt.radiant_intensity @ LUMINANCE_WEIGHTS)) * solid
