@@ -36,6 +36,8 @@ def _has(img: np.ndarray, rgb, tol: int = 3) -> bool:
 def test_false_colour_mode_shows_lux_and_luminance_with_a_legend(tmp_path, monkeypatch, gui_child):
     if gui_child():
         return
+    from imgui_bundle import ImVec2
+
     from iat.measure import photometry as ph
     from iat.radiosity import SolveOptions
     from iat.render.false_color import PALETTE
@@ -61,6 +63,13 @@ def test_false_colour_mode_shows_lux_and_luminance_with_a_legend(tmp_path, monke
             from PIL import Image
 
             Image.fromarray(got["lux"]).save(os.environ[SHOT_ENV])
+        x, y, w, h = s.view.rect  # the probe: the mouse over the middle of the view
+        ctx.mouse_move_to_pos(ImVec2(x + w * 0.45, y + h * 0.4))
+        wait_until(ctx, lambda: s.view.false_color.probed is not None, 30, "the probe's readout")
+        ctx.yield_(3)
+        got["probe"] = dict(s.view.false_color.probed)
+        got["albedo"] = s.model.solution.patch_albedo[got["probe"]["patch"]]
+        got["probe_shot"] = _shot(ctx, s, tmp_path / "probe.png")
         ctx.item_click("//**/Luminance (cd\\/m2)")  # (a slash in a label is escaped)
         wait_until(ctx, lambda: s.view.false_color.shown.quantity == "luminance", 30, "luminance")
         ctx.yield_(3)
@@ -86,3 +95,9 @@ def test_false_colour_mode_shows_lux_and_luminance_with_a_legend(tmp_path, monke
     assert np.abs(left - got["mesh"][:, : w // 2].reshape(-1, 3)).mean() > 10
     assert len(np.unique(left // 8, axis=0)) > 20
     assert np.abs(got["linear"].astype(int) - lum.astype(int)).mean() > 2  # the scale changed the picture
+    # the probe: lux and cd/m² of the surface under the mouse, L = rho E / pi on a diffuse surface
+    probe = got["probe"]
+    assert 1.0 < probe["lux"] <= got["lux_max"]
+    rho = float(np.asarray(got["albedo"]) @ [0.2126, 0.7152, 0.0722])
+    assert probe["cd_m2"] == pytest.approx(rho * probe["lux"] / np.pi, rel=0.02)
+    assert np.abs(got["probe_shot"].astype(int) - lux.astype(int)).max() > 100  # its label is drawn

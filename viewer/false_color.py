@@ -39,10 +39,28 @@ class FalseColorSettings:
     lo: float = 10.0
     hi: float = 10000.0
     shown: object = None
+    probe: bool = True
+    probed: dict | None = None
 
     def key(self) -> tuple:
-        """What the picture depends on, besides the solution and the camera."""
-        return (self.quantity, self.log, self.auto, float(self.lo), float(self.hi))
+        """What the picture depends on, besides the solution and the camera (with the probe on,
+        the mouse: its readout is drawn into the view)."""
+        return (
+            self.quantity,
+            self.log,
+            self.auto,
+            float(self.lo),
+            float(self.hi),
+            self.mouse() if self.probe else None,
+        )
+
+    @staticmethod
+    def mouse() -> tuple[int, int]:
+        """The mouse in window pixels (imgui's)."""
+        from imgui_bundle import imgui
+
+        m = imgui.get_io().mouse_pos
+        return (int(round(m.x)), int(round(m.y))) if abs(m.x) < 1e6 and abs(m.y) < 1e6 else (-1, -1)
 
     def scale(self, values):
         from iat.render.false_color import Scale, auto_scale
@@ -77,32 +95,79 @@ class FalseColorView:
         self._prog = program(ctx, "legend")
         self._quad = ctx.vertex_array(self._prog, [])
         self._tex = None
+        self._label = None  # the probe's readout texture
+        self._probe = None  # (Visibility of the drawn triangles, their corners, lux and cd/m² at them)
         self._key = None
         self._legend_key = None
         self._legend_size = (0, 0)
 
     def release(self) -> None:
-        for o in (self._tex, self._quad, self._prog):
+        if self._probe is not None:
+            self._probe[0].close()
+        for o in (self._tex, self._label, self._quad, self._prog):
             if o is not None:
                 try:
                     o.release()
                 except Exception:  # the context may already be gone
                     log.debug("release failed", exc_info=True)
-        self._tex = self._quad = self._prog = None
+        self._tex = self._label = self._quad = self._prog = None
         self.renderer.release()
 
     def _update(self, state) -> None:
         from iat.render.false_color import quantity_solution, vertex_colors
 
         sol, fc = state.model.solution, state.view.false_color
-        key = (id(sol), fc.key())
+        key = (id(sol), fc.key()[:5])
         if key == self._key:
             return
         values = vertex_values(fc.quantity, state.model.scene, sol)
         scale = fc.scale(values)
         self.renderer.set_solution(quantity_solution(sol, values, vertex_colors(values, scale)))
         fc.shown = scale
+        if self._probe is None or self._probe[4] is not sol:
+            self._probe_scene(state, sol)
         self._key = key
+
+    def _probe_scene(self, state, sol) -> None:
+        from iat.radiosity.visibility import Visibility
+
+        if self._probe is not None:
+            self._probe[0].close()
+        drawn = sol.drawn_mesh()
+        tri = np.asarray(drawn.triangles, dtype=np.int64).reshape(-1, 3)
+        lux = vertex_values("illuminance", state.model.scene, sol)
+        cd = vertex_values("luminance", state.model.scene, sol)
+        both = drawn.radiance(np.stack([lux, cd, np.zeros(len(lux))], axis=1))
+        self._probe = (
+            Visibility(drawn.position[tri], threads=1),
+            drawn.position[tri],
+            both[tri],
+            drawn.patch[tri[:, 0]],
+            sol,
+        )
+
+    def probe_at(self, cam, rect, mouse) -> dict | None:
+        """``{"lux", "cd_m2", "point", "patch"}`` of the surface under window pixel ``mouse`` in the
+        view ``rect`` (values linear over the drawn triangle, as the colours), or None (nothing)."""
+        from viewer.picking import mouse_ray
+
+        x, y, w, h = rect
+        if self._probe is None or not (x <= mouse[0] < x + w and y <= mouse[1] < y + h):
+            return None
+        vis, corners, vals = self._probe[:3]
+        o, d = mouse_ray(cam, rect, mouse)
+        tri, bary = vis.first_hits(o[None, :], d[None, :], np.array([1e7]))
+        if tri[0] < 0:
+            return None
+        b = np.array([1.0 - bary[0, 0] - bary[0, 1], bary[0, 0], bary[0, 1]])
+        v = b @ vals[tri[0]]
+        point = (b @ corners[tri[0]]).tolist()
+        return {
+            "lux": float(v[0]),
+            "cd_m2": float(v[1]),
+            "point": point,
+            "patch": int(self._probe[3][tri[0]]),
+        }
 
     def _legend(self, scale, height: int) -> tuple[int, int]:
         from iat.render.false_color import legend_image
@@ -136,7 +201,36 @@ class FalseColorView:
         self._tex.use(0)
         self._prog["image"] = 0
         self._quad.render(mode=moderngl.TRIANGLE_STRIP, vertices=4)
+        self._draw_probe(state, cam, viewport)
         ctx.viewport = (x, y, w, h)
+
+    def _draw_probe(self, state, cam, viewport) -> None:
+        """The readout under the mouse (``state.view.false_color.probed``), drawn beside it."""
+        import cv2
+
+        fc = state.view.false_color
+        fc.probed = self.probe_at(cam, state.view.rect, fc.mouse()) if fc.probe else None
+        if fc.probed is None:
+            return
+        lux = fc.probed["lux"]
+        text = f"{'?' if not np.isfinite(lux) else f'{lux:.0f}'} lx  {fc.probed['cd_m2']:.0f} cd/m2"
+        font, fs = cv2.FONT_HERSHEY_SIMPLEX, 0.5
+        (tw, th), _ = cv2.getTextSize(text, font, fs, 1)
+        img = np.full((th + 12, tw + 12, 3), 20, dtype=np.uint8)
+        cv2.putText(img, text, (6, th + 5), font, fs, (240, 240, 240), 1, cv2.LINE_AA)
+        if self._label is not None:
+            self._label.release()
+        self._label = self.ctx.texture(
+            (img.shape[1], img.shape[0]), 3, np.ascontiguousarray(np.flipud(img)).tobytes()
+        )
+        sx, sy = state.view.framebuffer_scale
+        rx, ry = (fc.mouse()[0] - state.view.rect[0]) * sx, (fc.mouse()[1] - state.view.rect[1]) * sy
+        vx, vy, vw, vh = (int(v) for v in viewport)
+        lx = int(min(vx + rx + 14, vx + vw - img.shape[1]))
+        ly = int(max(vy + vh - ry - 14 - img.shape[0], vy))
+        self.ctx.viewport = (lx, ly, img.shape[1], img.shape[0])
+        self._label.use(0)
+        self._quad.render(mode=5, vertices=4)  # GL_TRIANGLE_STRIP
 
 
 def settings_panel(state) -> None:
@@ -150,6 +244,8 @@ def settings_panel(state) -> None:
         if imgui.radio_button(label, fc.quantity == q):
             fc.quantity = q
     _, fc.log = imgui.checkbox("Log scale", fc.log)
+    imgui.same_line()
+    _, fc.probe = imgui.checkbox("Probe", fc.probe)
     imgui.same_line()
     _, fc.auto = imgui.checkbox("Auto range", fc.auto)
     if not fc.auto:
