@@ -119,12 +119,15 @@ def test_pierced_pairs_find_crossings_not_contacts():
     coplanar = [[-0.5, 0, 0], [0.5, 0, 0], [0, 0, 0.5]]
     grazing = [[3, -0.5, 0], [3, 0.5, 0.2], [3, 0.5, -0.2]]  # crosses the floor's plane, not the floor
     tri = np.array([floor, crossing, standing, on_edge, coplanar, grazing], dtype=float)
-    a, b, c, d = pierced_pairs(tri, np.arange(6), 1e-6)
-    assert len(c) == 0  # contacts are not looked for unless asked
+    pp = pierced_pairs(tri, np.arange(6), 1e-6)
+    a, b = pp.a, pp.b
+    assert len(pp.c) == 0  # contacts are not looked for unless asked
     assert b[a == 0].tolist() == [1]  # of the five, only the crossing one pierces the floor
     assert (2, 3) in zip(a.tolist(), b.tolist(), strict=True)  # (they cross each other)
-    a, b, _, _ = pierced_pairs(tri[:2], np.zeros(2, np.int64), 1e-6)  # one object: its own business
-    assert len(a) == 0
+    assert len(pierced_pairs(tri[:2], np.zeros(2, np.int64), 1e-6).a) == 0  # one object: its own business
+    pp = pierced_pairs(tri[[0, 3]], np.arange(2), 1e-6, contacts=True)  # the box's side rests on the floor
+    assert (pp.c.tolist(), pp.d.tolist()) == ([0], [1]) and len(pp.a) == 0
+    assert pp.contact_span[0].tolist() == pytest.approx([1.0, 1.0, 1.0])  # floor chord, edge, overlap
 
 
 def test_cut_faces_split_a_quad_along_the_crossing_and_mark_the_cut():
@@ -133,7 +136,8 @@ def test_cut_faces_split_a_quad_along_the_crossing_and_mark_the_cut():
         [[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0], [-1, 0.7, -1], [3, 0.7, -1], [1, 0.7, 2]], float
     )
     F = np.array([[0, 1, 2], [0, 2, 3], [4, 6, 5]])
-    a, b, _, _ = pierced_pairs(V[F], np.array([0, 0, 1]), 1e-9)
+    pp = pierced_pairs(V[F], np.array([0, 0, 1]), 1e-9)
+    a, b = pp.a, pp.b
     assert sorted(a.tolist()) == [0, 1] and b.tolist() == [2, 2]
     V2, F2, parent, barrier, n_cut = cut_faces(V, F, np.r_[a, b], np.r_[b, a], 1e-9)
     tri = V2[F2]
@@ -305,4 +309,4 @@ def test_madrid_house_faces_cut():
         scene = load_scene(MADRID)
     rep = scene.pierce
     # the window elements (stone) pass through the plastered wall they sit in: its faces are cut
-    assert (rep.pairs, rep.objects, rep.faces_cut, rep.pieces, rep.joined_regions) == (154, 10, 90, 518, 0)
+    assert (rep.pairs, rep.objects, rep.faces_cut, rep.pieces, rep.joined_regions) == (154, 10, 90, 482, 0)

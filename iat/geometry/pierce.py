@@ -15,7 +15,8 @@ are made:
    crossing loads exactly as before). A sweep over the triangles' boxes along the axis with the
    fewest overlaps, compiled with numba.
 2. :func:`cut_faces`: each pierced triangle is cut by the plane of every face that pierces it (the
-   whole triangle, restricted to the faces that really cross it), convex piece by convex piece;
+   whole triangle, restricted to the faces that really cross it, and to planes whose faces cross it
+   along at least :data:`MIN_CROSSING` of its chord there), convex piece by convex piece;
    the pieces are fanned into triangles, their vertices welded, their uvs interpolated. The piece
    edges that lie on a cut are **barriers**.
 3. :func:`region_labels`: patches may merge only within a side of every barrier. Coplanar,
@@ -47,6 +48,10 @@ CUTS = ("crossings", "all", "none")
 #: faces pierce each other when each has corners beyond this fraction of the scene diagonal on both
 #: sides of the other's plane and their crossing overlaps by more than that (0.1 mm in a 10 m house)
 PIERCE_TOL = 1e-5
+#: a face is cut along a plane only where the faces in that plane cross (or touch) it along at least
+#: this fraction of its chord on the plane (a bolt through a steel plate does not slice the plate
+#: from edge to edge; a slab through a wall's face crosses all of it)
+MIN_CROSSING = 0.25
 #: faces are coplanar neighbours of one region when their normals are within this (radians; as panels)
 REGION_ANGLE_TOL = 1e-3
 
@@ -58,8 +63,9 @@ class PierceReport:
     cut : whether the loader cut (``load_scene(cut=...)``); the counts are found either way
     pairs : pairs of triangles of different objects that pierce each other
     contacts : triangles that rest on a triangle of another object (counted with ``contacts``)
-    objects : objects (IFC elements, glTF primitives, OBJ groups) with a face to cut
-    faces_cut : triangles cut (0 when ``cut`` is False)
+    objects : objects (IFC elements, glTF primitives, OBJ groups) with a face in such a pair
+    faces_cut : triangles cut (0 when ``cut`` is False; a crossing shorter than
+      :data:`MIN_CROSSING` of the face's chord cuts nothing)
     pieces : triangles they became
     joined_regions : regions that joined around a cut's end (their faces merge no further)
     """
@@ -112,8 +118,9 @@ def _straddle(a, b, tri, normal, offset, tol, dist):
 
 
 @njit(cache=True, nogil=True)
-def _crossing(a, b, tri, normal, offset, tol, da, db, line):
-    """True when triangles a and b pierce each other (see :func:`pierced_pairs`)."""
+def _crossing(a, b, tri, normal, offset, tol, da, db, line, span):
+    """True when triangles a and b pierce each other (see :func:`pierced_pairs`); ``span`` (3,) gets
+    the lengths of a's and b's chords along the planes' common line and of their overlap."""
     if not _straddle(a, b, tri, normal, offset, tol, da):
         return False
     if not _straddle(b, a, tri, normal, offset, tol, db):
@@ -127,11 +134,12 @@ def _crossing(a, b, tri, normal, offset, tol, da, db, line):
     line /= n
     lo_a, hi_a = _interval(a, da, tri, line, tol)
     lo_b, hi_b = _interval(b, db, tri, line, tol)
-    return min(hi_a, hi_b) - max(lo_a, lo_b) > tol
+    span[0], span[1], span[2] = hi_a - lo_a, hi_b - lo_b, min(hi_a, hi_b) - max(lo_a, lo_b)
+    return span[2] > tol
 
 
 @njit(cache=True, nogil=True)
-def _rests_on(a, b, tri, normal, offset, tol, da, db, line):
+def _rests_on(a, b, tri, normal, offset, tol, da, db, line, span):
     """True when triangle b rests on triangle a: an edge of b lies in a's plane across a's inside,
     b stays on one side of that plane, and a has corners beyond ``tol`` on both sides of b's plane
     (a slab ending on a wall's face, a box on a floor; see :func:`pierced_pairs`)."""
@@ -153,80 +161,95 @@ def _rests_on(a, b, tri, normal, offset, tol, da, db, line):
     line /= n
     lo_a, hi_a = _interval(a, da, tri, line, tol)
     lo_b, hi_b = _interval(b, db, tri, line, tol)
-    return min(hi_a, hi_b) - max(lo_a, lo_b) > tol
+    span[0], span[1], span[2] = hi_a - lo_a, hi_b - lo_b, min(hi_a, hi_b) - max(lo_a, lo_b)
+    return span[2] > tol
 
 
 @njit(cache=True, nogil=True)
 def _sweep(tri, normal, offset, lo, hi, obj, order, axis, tol, contacts):
-    """(a, b) int64 pierced pairs and (c, d) contacts (triangle c cut by d's plane, with
-    ``contacts``): a sweep along ``axis`` over the boxes ``lo``, ``hi`` (T, 3) in ``order``
-    (sorted by ``lo[:, axis]``)."""
+    """Rows (i, j, kind) int64 and spans (chord of i, chord of j, overlap) float64 of the pairs of a
+    sweep along ``axis`` over the boxes ``lo``, ``hi`` (T, 3) in ``order`` (sorted by
+    ``lo[:, axis]``): kind 0, i < j cross each other; kind 1 (with ``contacts``), j rests on i."""
     cap = 1024
-    out_a = np.empty(cap, np.int64)
-    out_b = np.empty(cap, np.int64)
+    rows = np.empty((cap, 3), np.int64)
+    spans = np.empty((cap, 3))
     k = 0
-    ccap = 1024
-    out_c = np.empty(ccap, np.int64)
-    out_d = np.empty(ccap, np.int64)
-    kc = 0
     da = np.empty(3)
     db = np.empty(3)
     line = np.empty(3)
+    span = np.empty(3)
     n = len(order)
     for ii in range(n):
-        i = order[ii]
+        i0 = order[ii]
         for jj in range(ii + 1, n):
-            j = order[jj]
-            if lo[j, axis] > hi[i, axis]:
+            j0 = order[jj]
+            if lo[j0, axis] > hi[i0, axis]:
                 break
-            if obj[i] == obj[j]:
+            if obj[i0] == obj[j0]:
                 continue
             if (
-                lo[j, 0] > hi[i, 0]
-                or lo[i, 0] > hi[j, 0]
-                or lo[j, 1] > hi[i, 1]
-                or lo[i, 1] > hi[j, 1]
-                or lo[j, 2] > hi[i, 2]
-                or lo[i, 2] > hi[j, 2]
+                lo[j0, 0] > hi[i0, 0]
+                or lo[i0, 0] > hi[j0, 0]
+                or lo[j0, 1] > hi[i0, 1]
+                or lo[i0, 1] > hi[j0, 1]
+                or lo[j0, 2] > hi[i0, 2]
+                or lo[i0, 2] > hi[j0, 2]
             ):
                 continue
-            if not _crossing(i, j, tri, normal, offset, tol, da, db, line):
-                if not contacts:
+            i, j = min(i0, j0), max(i0, j0)
+            for kind in range(3):  # a crossing, else j resting on i, else i resting on j
+                if kind == 0:
+                    found = _crossing(i, j, tri, normal, offset, tol, da, db, line, span)
+                elif not contacts:
+                    break
+                elif kind == 1:
+                    found = _rests_on(i, j, tri, normal, offset, tol, da, db, line, span)
+                else:
+                    found = _rests_on(j, i, tri, normal, offset, tol, da, db, line, span)
+                if not found:
                     continue
-                for c, d in ((i, j), (j, i)):
-                    if _rests_on(c, d, tri, normal, offset, tol, da, db, line):
-                        if kc == ccap:
-                            ccap *= 2
-                            nc, nd = np.empty(ccap, np.int64), np.empty(ccap, np.int64)
-                            nc[:kc], nd[:kc] = out_c[:kc], out_d[:kc]
-                            out_c, out_d = nc, nd
-                        out_c[kc], out_d[kc] = c, d
-                        kc += 1
-                continue
-            if k == cap:
-                cap *= 2
-                na, nb = np.empty(cap, np.int64), np.empty(cap, np.int64)
-                na[:k], nb[:k] = out_a[:k], out_b[:k]
-                out_a, out_b = na, nb
-            out_a[k], out_b[k] = min(i, j), max(i, j)
-            k += 1
-    return out_a[:k], out_b[:k], out_c[:kc], out_d[:kc]
+                if k == cap:
+                    cap *= 2
+                    r2, s2 = np.empty((cap, 3), np.int64), np.empty((cap, 3))
+                    r2[:k], s2[:k] = rows[:k], spans[:k]
+                    rows, spans = r2, s2
+                rows[k, 0], rows[k, 1], rows[k, 2] = (j, i, 1) if kind == 2 else (i, j, min(kind, 1))
+                spans[k] = span
+                k += 1
+                break
+    return rows[:k], spans[:k]
 
 
-def pierced_pairs(tri: np.ndarray, objects: np.ndarray, tol: float, contacts: bool = False):
+@dataclass
+class Pairs:
+    """:func:`pierced_pairs`'s result.
+
+    a, b : (k,) int64, a < b, sorted: triangles that cross each other; span : (k, 3) float64 the
+      lengths of a's and b's chords along the line where their planes meet, and of the crossing
+    c, d : (m,) int64 sorted: triangle d rests on triangle c (an edge of d lies in c's plane across
+      c, d on one side of it, c on both sides of d's plane: c is cut by d's plane, d is not cut);
+      contact_span : (m, 3) float64 likewise (c's chord, d's edge, their overlap). Empty unless asked.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    span: np.ndarray
+    c: np.ndarray
+    d: np.ndarray
+    contact_span: np.ndarray
+
+
+def pierced_pairs(tri: np.ndarray, objects: np.ndarray, tol: float, contacts: bool = False) -> Pairs:
     """Pairs of triangles of different objects that pierce each other (and, with ``contacts``, that
-    rest on each other).
+    rest on each other): :class:`Pairs`.
 
     tri : (T, 3, 3) float64 world corners; objects : (T,) int64; tol : scene units (corners within
     it of a plane are on it, crossings no longer than it do not count).
-    Returns (a (k,), b (k,)) int64, a < b, sorted: the crossing pairs; and (c (m,), d (m,)) int64:
-    triangle d rests on triangle c (an edge of d lies in c's plane across c, d on one side of it,
-    c on both sides of d's plane: c is cut by d's plane, d is not cut), empty without ``contacts``.
     """
     tri = np.ascontiguousarray(tri, dtype=np.float64)
     none = np.zeros(0, np.int64)
     if len(tri) < 2:
-        return none, none, none, none
+        return Pairs(none, none, np.zeros((0, 3)), none, none, np.zeros((0, 3)))
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     offset = (n * tri[:, 0]).sum(axis=1)
@@ -238,9 +261,18 @@ def pierced_pairs(tri: np.ndarray, objects: np.ndarray, tol: float, contacts: bo
     axis = int(np.argmin(counts))
     order = np.argsort(lo[:, axis], kind="stable")
     obj = np.ascontiguousarray(objects, dtype=np.int64)
-    a, b, c, d = _sweep(tri, n, offset, lo, hi, obj, order, axis, float(tol), bool(contacts))
-    o, oc = np.lexsort((b, a)), np.lexsort((d, c))
-    return a[o], b[o], c[oc], d[oc]
+    rows, spans = _sweep(tri, n, offset, lo, hi, obj, order, axis, float(tol), bool(contacts))
+    cross, touch = rows[:, 2] == 0, rows[:, 2] == 1
+    o = np.lexsort((rows[cross, 1], rows[cross, 0]))
+    oc = np.lexsort((rows[touch, 1], rows[touch, 0]))
+    return Pairs(
+        rows[cross, 0][o],
+        rows[cross, 1][o],
+        spans[cross][o],
+        rows[touch, 0][oc],
+        rows[touch, 1][oc],
+        spans[touch][oc],
+    )
 
 
 @njit(cache=True, nogil=True)
@@ -341,20 +373,52 @@ def _cut_all(faces, tri, start, pn, pd, tol, maxv):
     return par[:r], cor[:r], bar[:r]
 
 
-def _face_planes(face: np.ndarray, by: np.ndarray, normal: np.ndarray, offset: np.ndarray, tol: float):
-    """Each cut face's distinct cutting planes: (face (k,) sorted, normal (k, 3), offset (k,)), the
-    planes of the faces ``by`` that cut it (coplanar ones once)."""
+def _plane_keys(face, by, normal, offset, tol, step=1e-7):
+    """(k, 5) int64 keys of (face, plane of ``by``): coplanar faces ``by`` (either orientation) share
+    one (normals rounded to ``step``, offsets to ``tol``); and (k, 3) normals, (k,) offsets of those
+    planes, oriented alike."""
     n, d = normal[by], offset[by]
     flip = np.where(
         np.abs(n[:, 0]) > 1e-9, n[:, 0] < 0, np.where(np.abs(n[:, 1]) > 1e-9, n[:, 1] < 0, n[:, 2] < 0)
     )
     n = np.where(flip[:, None], -n, n)
     d = np.where(flip, -d, d)
-    key = np.concatenate([face[:, None], np.round(n * 1e7), np.round(d / tol)[:, None]], axis=1)
-    key = key.astype(np.int64)
+    key = np.concatenate([face[:, None], np.round(n / step), np.round(d / tol)[:, None]], axis=1)
+    return key.astype(np.int64), n, d
+
+
+def _normals(V: np.ndarray, F: np.ndarray):
+    """(f, 3) unit normals and (f,) plane offsets of triangles F."""
+    tri = V[F]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    return normal, (normal * tri[:, 0]).sum(axis=1)
+
+
+def _face_planes(face: np.ndarray, by: np.ndarray, normal: np.ndarray, offset: np.ndarray, tol: float):
+    """Each cut face's distinct cutting planes: (face (k,) sorted, normal (k, 3), offset (k,)), the
+    planes of the faces ``by`` that cut it (coplanar ones once)."""
+    key, n, d = _plane_keys(face, by, normal, offset, tol)
     _, first = np.unique(key, axis=0, return_index=True)
     o = first[np.argsort(face[first], kind="stable")]
     return face[o], n[o], d[o]
+
+
+def _long_crossings(F, V, face, by, chord, overlap, tol):
+    """The (face, by) pairs whose plane crosses (or touches) the face along at least
+    :data:`MIN_CROSSING` of the face's chord on it, the overlaps of all coplanar ``by`` summed: a
+    bolt through a plate does not slice the plate, a slab through a wall's face does."""
+    if len(face) == 0:
+        return face, by
+    normal, offset = _normals(V, F)
+    key, _, _ = _plane_keys(face, by, normal, offset, 10.0 * tol, step=1e-4)  # near-coplanar: one plane
+    _, group = np.unique(key, axis=0, return_inverse=True)
+    group = group.reshape(-1)
+    total = np.bincount(group, weights=overlap)
+    longest = np.zeros(len(total))
+    np.maximum.at(longest, group, chord)
+    keep = (total >= MIN_CROSSING * longest)[group]
+    return face[keep], by[keep]
 
 
 def cut_faces(V: np.ndarray, F: np.ndarray, face: np.ndarray, by: np.ndarray, tol: float):
@@ -366,9 +430,7 @@ def cut_faces(V: np.ndarray, F: np.ndarray, face: np.ndarray, by: np.ndarray, to
     their parent), barrier (k, 2) int64 sorted vertex pairs of the edges on a cut, n_cut).
     """
     tri = V[F]
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-    offset = (normal * tri[:, 0]).sum(axis=1)
+    normal, offset = _normals(V, F)
     face, pn, pd = _face_planes(face, by, normal, offset, tol)
     cut, per = np.unique(face, return_counts=True)
     start = np.zeros(len(F) + 1, np.int64)
@@ -469,9 +531,12 @@ def cut_pierced(
     material = np.asarray(material, dtype=np.int64)
     used = V[np.unique(F)] if len(F) else np.zeros((1, 3))
     tol = tol_rel * max(float(np.linalg.norm(used.max(axis=0) - used.min(axis=0))), 1e-300)
-    a, b, c, d = pierced_pairs(V[F], objects, tol, contacts)
-    face, by = np.concatenate([a, b, c]), np.concatenate([b, a, d])
-    report = PierceReport(cut=cut, pairs=len(a), contacts=len(c), objects=len(np.unique(objects[face])))
+    pp = pierced_pairs(V[F], objects, tol, contacts)
+    face, by = np.concatenate([pp.a, pp.b, pp.c]), np.concatenate([pp.b, pp.a, pp.d])
+    chord = np.concatenate([pp.span[:, 0], pp.span[:, 1], pp.contact_span[:, 0]])
+    overlap = np.concatenate([pp.span[:, 2], pp.span[:, 2], pp.contact_span[:, 2]])
+    report = PierceReport(cut=cut, pairs=len(pp.a), contacts=len(pp.c), objects=len(np.unique(objects[face])))
+    face, by = _long_crossings(F, V, face, by, chord, overlap, tol)
     same = Pierced(V, F, face_uv, material, None, np.arange(len(F)), report)
     if not cut or len(face) == 0:
         return same
