@@ -99,11 +99,14 @@ def test_glass_passes_its_transmittance():
 
     def interior(sol, scene):
         from iat.geometry import quadtree as qt
+        from iat.radiosity.meshing import averaging_matrix
 
         p = qt.decode_key(sol.vert_key, 1 << sol.max_depth)[0]
-        floor = p == 0  # the floor patch: sunlit and sky-lit
         glass = scene.patch_transmission[p] > 0
-        return sol.vert_radiance[floor].mean(axis=0) @ LUMINANCE_WEIGHTS, sol.vert_radiance[glass]
+        # the floor patch's area mean (sunlit and sky-lit; a vertex mean would weigh where it refined)
+        m = averaging_matrix(sol.forest, sol.vert_key, sol.patch_corners, scene.patch_area)
+        floor = (m @ sol.vert_radiance.astype(np.float64))[0]
+        return floor @ LUMINANCE_WEIGHTS, sol.vert_radiance[glass]
 
     y_open, _ = interior(open_room, daylit_room())
     y_glass, on_glass = interior(glazed, glazed_scene)

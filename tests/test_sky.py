@@ -9,8 +9,10 @@ import sys
 import numpy as np
 import pytest
 
+from iat.color import LUMINANCE_WEIGHTS as LUMINANCE
 from iat.errors import LoadError
 from iat.io.scene import Sky
+from iat.radiosity import SolveOptions
 from iat.radiosity import sky as sk
 
 try:
@@ -393,3 +395,29 @@ def test_mitsuba_floor_irradiance(sky):
     assert emitter["type"] == ("constant" if np.array_equal(sky.ground, sky.radiance) else "envmap")
     seen = _floor_radiance(emitter)
     np.testing.assert_allclose(seen, 0.7 * sk.sky_irradiance(sky) / np.pi, rtol=0.03)
+
+
+def test_a_noisy_sky_estimate_is_made_again_finer(monkeypatch):
+    """In the window-lit room (a uniform sky through a 2 x 1.2 m opening) the back wall's direct sky
+    light estimated with two seeds: with a second, finer estimate where the first's quarters
+    disagree (``SKY_PASSES`` = 2) the two differ by 4.7 % (3.3 % a vertex), with one estimate of
+    1 024 directions by 11 % (the refinement split on that and multiplied it). The quarters'
+    spread underestimates a stratified estimate's error: 1 % (``SKY_NOISE``) is not what is left."""
+    import iat.radiosity.direct as direct
+    from iat.geometry import quadtree as qt
+    from iat.radiosity.solver import evaluate_direct
+    from tests.support.daylight import ROOM_WALLS, window_room
+
+    scene = window_room()
+    n = 1 << 6
+    i, j = np.meshgrid(np.arange(1, n, 4), np.arange(1, n, 4), indexing="ij")
+    keys = np.sort(qt.make_key(np.full(i.size, ROOM_WALLS["back (x=0)"]), i.ravel(), j.ravel(), n))
+
+    def spread() -> float:
+        a, b = (evaluate_direct(scene, keys, SolveOptions(seed=s)) @ LUMINANCE for s in (1, 2))
+        return float(np.std((a - b) / (0.5 * (a + b))))
+
+    two = spread()
+    monkeypatch.setattr(direct, "SKY_PASSES", 1)
+    one = spread()
+    assert two <= 0.06 and one >= 2.0 * two

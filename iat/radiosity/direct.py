@@ -12,7 +12,15 @@ import numpy as np
 from iat.color import LUMINANCE_WEIGHTS
 from iat.geometry import quadtree as qt
 from iat.radiosity.gathers import Gathers
-from iat.radiosity.options import DIRECT_SAMPLE_FACTOR, GATHER_BLOCK, SKY_SAMPLES, SUN_SAMPLES, SolveOptions
+from iat.radiosity.options import (
+    DIRECT_SAMPLE_FACTOR,
+    GATHER_BLOCK,
+    SKY_NOISE,
+    SKY_PASSES,
+    SKY_SAMPLES,
+    SUN_SAMPLES,
+    SolveOptions,
+)
 from iat.radiosity.patches import Patches, ReceiverGeometry
 from iat.radiosity.pointlight import lumped_light
 from iat.radiosity.sampling import disk_to_hemisphere, hash_uniform, luminance_of, pattern_side, rotated_disk
@@ -189,26 +197,50 @@ class DirectLight:
 
     def sky_irradiance(self, geo: ReceiverGeometry, check: Callable[[], None]) -> np.ndarray:
         """(n, 3) irradiance from the sky through whatever of each vertex's hemisphere is open:
-        ``pi`` times the mean sky radiance over ``SKY_SAMPLES`` cosine-distributed directions
-        (stratified, rotated per vertex) that leave the scene."""
-        out = np.zeros((len(geo.key), 3))
-        m = pattern_side(SKY_SAMPLES)
-        pat = self.gathers.pattern(self.patches.n_patches, m, 2)
-        size = max(1, GATHER_BLOCK * 16 // (m * m))
+        ``pi`` times the mean sky radiance over cosine-distributed directions that leave the scene,
+        ``SKY_SAMPLES`` of them (stratified, rotated per vertex). A vertex whose estimate's standard
+        error (from its pattern's four interleaved quarters, luminance) exceeds ``SKY_NOISE`` of it
+        is estimated again with 4 x the directions (twice as many strata a side), up to
+        ``SKY_PASSES`` estimates: through a window most of the hemisphere is wall, and the
+        refinement would split on that noise and multiply it."""
+        n = len(geo.key)
+        out = np.zeros((n, 3))
+        todo = np.arange(n)
+        for k in range(SKY_PASSES):
+            if not len(todo):
+                break
+            e, var = self._sky_pass(geo, todo, k, check)
+            out[todo] = e
+            todo = todo[np.sqrt(var) > SKY_NOISE * np.maximum(luminance_of(e), 1e-300)]
+        return out
 
-        def block(idx: np.ndarray) -> np.ndarray:  # the irradiance at these vertices
-            rot = hash_uniform(geo.key[idx], int(self.opts.seed) * 7919 + 29, 2)
+    def _sky_pass(self, geo: ReceiverGeometry, rows: np.ndarray, k: int, check) -> tuple:
+        """Estimate k of :meth:`sky_irradiance` at the vertices ``rows`` (r,), ``SKY_SAMPLES x 4^k``
+        directions each: (r, 3) irradiance and (r,) the variance of that estimate, from its four
+        interleaved quarters (luminance)."""
+        m = pattern_side(SKY_SAMPLES) << k
+        pat = self.gathers.pattern(self.patches.n_patches, m, 2)
+        quarter = (np.arange(m * m) // m % 2) * 2 + np.arange(m * m) % 2  # (i % 2, j % 2) of a stratum
+        size = max(1, GATHER_BLOCK * 16 // (m * m))
+        salt = int(self.opts.seed) * 7919 + 29
+
+        def block(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            rot = hash_uniform(geo.key[idx], salt, 2)
             dx, dy = rotated_disk(pat, rot[:, :1], rot[:, 1:2])
             t1, t2 = self.patches.tangent[geo.patch[idx], 0], self.patches.tangent[geo.patch[idx], 1]
             w = disk_to_hemisphere(dx, dy, t1, t2, geo.normal[idx])
             free = self._escape(geo, idx, w)
             L = sky_radiance(self.sky, w.reshape(-1, 3)).reshape(len(idx), m * m, 3)
-            return np.pi * np.einsum("ks,ksc->kc", free, L) / (m * m)
+            e = np.pi * np.einsum("ks,ksc->kc", free, L) / (m * m)
+            y = np.pi * free * luminance_of(L)  # (b, S) per sample
+            q = np.stack([y[:, quarter == j].mean(axis=1) for j in range(4)], axis=1)
+            return e, q.var(axis=1, ddof=1) / 4.0
 
-        blocks = [np.arange(a, min(a + size, len(geo.key))) for a in range(0, len(geo.key), size)]
-        for idx, e in zip(blocks, self.pool.imap(block, blocks, check), strict=True):
-            out[idx] = e
-        return out
+        blocks = [rows[a : a + size] for a in range(0, len(rows), size)]
+        out, var = np.zeros((len(rows), 3)), np.zeros(len(rows))
+        for j, (e, v) in zip(range(0, len(rows), size), self.pool.imap(block, blocks, check), strict=True):
+            out[j : j + len(e)], var[j : j + len(e)] = e, v
+        return out, var
 
     def max_mean_reflected(self) -> float:
         """Upper bound of the scene's area-mean reflected luminance radiance: all the emitted power
