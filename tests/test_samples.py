@@ -125,7 +125,7 @@ def test_house_and_halls_are_quads_cave_is_triangles(scenes):
         assert scenes[name].patch_is_quad.all(), name
     tri_share = 1.0 - scenes["cave"].patch_is_quad.mean()
     assert tri_share > 0.9
-    assert 500 <= scenes["cave"].n_patches <= 2500
+    assert 500 <= scenes["cave"].n_patches <= 2600  # 1 944 roots, 2 528 once the rocks crossing it cut it
 
 
 def test_lavapit_has_strong_emissive_lava(scenes):

@@ -457,27 +457,61 @@ def cut_faces(V: np.ndarray, F: np.ndarray, face: np.ndarray, by: np.ndarray, to
     return allV, allF[~bad], parent[~bad], barrier, len(cut)
 
 
-def region_labels(V: np.ndarray, F: np.ndarray, material: np.ndarray, barrier: np.ndarray):
-    """(f,) int64 region of each face and the number of regions that joined around a cut.
-
-    Regions: faces joined by edges shared with a face of the same material whose normal is within
-    :data:`REGION_ANGLE_TOL`, except ``barrier`` (k, 2) edges. Every face of a region holding both
-    sides of a barrier edge gets a region of its own (label ``-1 - face``); the others keep their
-    region's number. V (n, 3), F (f, 3) int64, material (f,) int64.
-    """
-    nf = len(F)
-    normal = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+def _coplanar_neighbours(V: np.ndarray, F: np.ndarray, group: np.ndarray):
+    """Faces sharing an edge: (fa, fb (e,) int64, edge key (e,) ``lo * n + hi`` of its vertices, ok
+    (e,) bool: same ``group`` (f,) and normals within :data:`REGION_ANGLE_TOL`)."""
+    normal, _ = _normals(V, F)
     e = np.sort(np.stack([F, np.roll(F, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
-    owner = np.repeat(np.arange(nf), 3)
-    nv = len(V)
-    key = e[:, 0] * nv + e[:, 1]
+    owner = np.repeat(np.arange(len(F)), 3)
+    key = e[:, 0] * len(V) + e[:, 1]
     o = np.argsort(key, kind="stable")
     ks, fo = key[o], owner[o]
     same = ks[1:] == ks[:-1]  # consecutive half-edges on one edge (pairs of a non-manifold edge chain)
     fa, fb, kk = fo[:-1][same], fo[1:][same], ks[1:][same]
+    ok = (group[fa] == group[fb]) & ((normal[fa] * normal[fb]).sum(axis=1) >= np.cos(REGION_ANGLE_TOL))
+    return fa, fb, kk, ok
+
+
+def _spread(V, F, group, face, by, tol):
+    """Each cut (face, by) carried to the whole flat surface of the face (faces joined by edges within
+    one ``group`` (f,): object and material, coplanar) wherever it crosses the plane of ``by``: the
+    cut line runs across the surface, not only across the triangles the other face meets (their
+    neighbours would keep the whole edge, a T-junction, and stay apart from the pieces)."""
+    if len(face) == 0:
+        return face, by
+    nf = len(F)
+    fa, fb, _, ok = _coplanar_neighbours(V, F, group)
+    g = coo_matrix((np.ones(int(ok.sum())), (fa[ok], fb[ok])), shape=(nf, nf))
+    k, surface = connected_components(g, directed=False)
+    normal, offset = _normals(V, F)
+    key, _, _ = _plane_keys(surface[face], by, normal, offset, tol)
+    _, first = np.unique(key, axis=0, return_index=True)
+    s_of, by_of = surface[face[first]], by[first]  # one representative per (surface, plane)
+    members = np.argsort(surface, kind="stable")
+    start = np.concatenate([[0], np.cumsum(np.bincount(surface, minlength=k))])
+    size = start[s_of + 1] - start[s_of]
+    rep = np.repeat(np.arange(len(s_of)), size)
+    f = members[start[s_of][rep] + np.arange(len(rep)) - np.repeat(np.cumsum(size) - size, size)]
+    d = np.einsum("fkc,fc->fk", V[F[f]], normal[by_of[rep]]) - offset[by_of[rep]][:, None]
+    cross = (d.max(axis=1) > tol) & (d.min(axis=1) < -tol)
+    return np.concatenate([face, f[cross]]), np.concatenate([by, by_of[rep][cross]])
+
+
+def region_labels(
+    V: np.ndarray, F: np.ndarray, material: np.ndarray, barrier: np.ndarray, parent: np.ndarray | None = None
+):
+    """(f,) int64 region of each face and the number of regions that joined around a cut.
+
+    Regions: faces joined by edges shared with a face of the same material whose normal is within
+    :data:`REGION_ANGLE_TOL`, except ``barrier`` (k, 2) edges. Every face of a region holding both
+    sides of a barrier edge gets a region of its own (label ``-1 - face``), and so does every face of
+    a region made of the pieces of one ``parent`` (f,) triangle (a cut triangle of a curved surface
+    stays triangles, as it was, rather than becoming a panel); the others keep their region's number.
+    V (n, 3), F (f, 3) int64, material (f,) int64.
+    """
+    nf, nv = len(F), len(V)
+    fa, fb, kk, ok = _coplanar_neighbours(V, F, material)
     on_barrier = np.isin(kk, barrier[:, 0] * nv + barrier[:, 1]) if len(barrier) else np.zeros(len(kk), bool)
-    ok = (material[fa] == material[fb]) & ((normal[fa] * normal[fb]).sum(axis=1) >= np.cos(REGION_ANGLE_TOL))
     link = ok & ~on_barrier
     g = coo_matrix((np.ones(int(link.sum())), (fa[link], fb[link])), shape=(nf, nf))
     _, region = connected_components(g, directed=False)
@@ -485,6 +519,9 @@ def region_labels(V: np.ndarray, F: np.ndarray, material: np.ndarray, barrier: n
     across = ok & on_barrier & (region[fa] == region[fb])
     joined = np.unique(region[fa[across]])
     lone = np.isin(region, joined)
+    if parent is not None:  # regions of one parent's pieces
+        pairs = np.unique(np.stack([region, parent], axis=1), axis=0)
+        lone |= (np.bincount(pairs[:, 0], minlength=nf) == 1)[region]
     region[lone] = -1 - np.flatnonzero(lone)
     return region, len(joined)
 
@@ -537,6 +574,8 @@ def cut_pierced(
     overlap = np.concatenate([pp.span[:, 2], pp.span[:, 2], pp.contact_span[:, 2]])
     report = PierceReport(cut=cut, pairs=len(pp.a), contacts=len(pp.c), objects=len(np.unique(objects[face])))
     face, by = _long_crossings(F, V, face, by, chord, overlap, tol)
+    group = np.unique(np.stack([objects, material], axis=1), axis=0, return_inverse=True)[1].reshape(-1)
+    face, by = _spread(V, F, group, face, by, tol)
     same = Pierced(V, F, face_uv, material, None, np.arange(len(F)), report)
     if not cut or len(face) == 0:
         return same
@@ -552,7 +591,7 @@ def cut_pierced(
     uvp = np.asarray(face_uv, dtype=np.float64)[parent]  # (f', 3, 2)
     uv = (1 - beta - gamma)[..., None] * uvp[:, None, 0] + beta[..., None] * uvp[:, None, 1]
     uv += gamma[..., None] * uvp[:, None, 2]
-    region, joined = region_labels(V2, F2, material[parent], barrier)
+    region, joined = region_labels(V2, F2, material[parent], barrier, parent)
     pairs, code = np.unique(np.stack([material[parent], region], axis=1), axis=0, return_inverse=True)
     report.faces_cut = int(n_cut)
     report.pieces = int(np.isin(parent, np.unique(face)).sum())
