@@ -243,6 +243,8 @@ def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, re
             if big is not None:  # an element larger than max_size must interpolate more closely
                 tol[big] *= BIG_TOLERANCE
             split = score > tol * (mean + eps_abs)
+            if big is not None:  # a large element dark at all its points may have them all inside
+                split |= big & (np.where(vm, vy, 0.0).max(axis=1) <= 0)  # walls (a slab under them)
             if not split.any():
                 break
             mask = np.zeros(forest.n_leaves, dtype=bool)
