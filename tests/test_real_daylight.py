@@ -282,6 +282,8 @@ def solve_and_bake(scene, quality: str):
 #: cases whose figures at the defaults were outside the issue's bounds when last measured
 #: (docs/benchmarks.md, "Real and generated buildings by daylight against Mitsuba")
 KNOWN_SHORT: dict[str, str] = {
+    "tidy": "measured 9.8 % at e2c8bcd, 11.0 % at 509d851 (after 33f446e): the bounced light, all in the "
+    "ambient term's final gather, +3 to +10 % too bright and blotchy (docs/benchmarks.md)",
     "near_white": "measured 16.6 % (bias -15.3 %): the ambient term's later bounces take albedo 0.95 "
     "(MAX_REFLECTANCE), not 0.97, and the room's light is nearly all in that term (2 shots)",
     "slab_ends_on_wall": "measured 67.9 % (bias +32 %): a roof that ends on the walls' faces is a contact, "
@@ -332,6 +334,8 @@ _SAME = (
 )
 #: cases whose error rose from draft to default to fine when last measured
 KNOWN_RISING: dict[str, str] = {
+    "wall_through_slab": "measured 15.9, 8.4, 9.0 % at 509d851 (draft, default, fine; 15.8, 9.1, 9.4 % at "
+    "e2c8bcd): fine's shots do not reach the room, so it is the default's error plus the solve's noise",
     "near_white": "measured 14.4 % at draft, 16.6 % at default and fine (the room too dark: see KNOWN_SHORT)",
 }
 #: cases above 5 % at fine when last measured
@@ -349,6 +353,7 @@ KNOWN_SHORT_FINE: dict[str, str] = {
 RISE_SLACK = 0.005
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CASES)
 def test_error_does_not_rise_along_the_presets(case, egl_ctx, tmp_path_factory):
     """From draft to default to fine the error does not rise."""
@@ -359,6 +364,7 @@ def test_error_does_not_rise_along_the_presets(case, egl_ctx, tmp_path_factory):
     assert errs[1] <= errs[0] + RISE_SLACK and errs[2] <= errs[1] + RISE_SLACK, errs
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CASES)
 def test_within_five_percent_at_fine(case, egl_ctx, tmp_path_factory):
     """At ``--quality fine``: at most 5 % mean relative error on the lit pixels, at most 1 % black."""
