@@ -243,9 +243,6 @@ def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, re
             if big is not None:  # an element larger than max_size must interpolate more closely
                 tol[big] *= BIG_TOLERANCE
             split = score > tol * (mean + eps_abs)
-            if big is not None:  # a large root dark at all its points may have them all inside walls
-                dark = np.where(vm, vy, 0.0).max(axis=1) <= 0  # (a slab under them): split it once
-                split |= big & dark & (sub.leaf_level == 0)
             if not split.any():
                 break
             mask = np.zeros(forest.n_leaves, dtype=bool)
