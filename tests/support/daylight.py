@@ -15,8 +15,11 @@ SUN_DIRECTION = -np.array([1.0, 1.2, 0.2]) / np.linalg.norm([1.0, 1.2, 0.2])
 CAMERA = Camera(eye=[0.6, 1.6, 4.6], target=[3.0, 0.6, 1.5], yfov=75.0, znear=0.05, zfar=50.0)
 
 
-def daylit_room(glass: float | None = None, sun: float = 600.0, sky=(30.0, 35.0, 45.0)) -> Scene:
-    """The room as quads facing inwards; ``glass``: the window's transmittance (None: open)."""
+def room_scene(size, window, materials: list, glass: bool = False) -> Scene:
+    """A room of ``size`` (w, h, d) as quads facing inwards: floor (material 0), ceiling (1), the walls
+    z = 0, z = d, x = 0 and the window wall x = w in four quads around ``window`` (z0, z1, y0, y1)
+    (2), and with ``glass`` a pane in the opening (3)."""
+    w, h, d = size
     V: list = []
     C: list = []
     M: list = []
@@ -26,25 +29,29 @@ def daylit_room(glass: float | None = None, sun: float = 600.0, sky=(30.0, 35.0,
         V.extend(p)
         M.append(mat)
 
-    quad([(0, 0, 0), (0, 0, D), (W, 0, D), (W, 0, 0)], 0)  # floor
-    quad([(0, H, 0), (W, H, 0), (W, H, D), (0, H, D)], 1)  # ceiling
-    quad([(0, 0, 0), (W, 0, 0), (W, H, 0), (0, H, 0)], 2)
-    quad([(0, 0, D), (0, H, D), (W, H, D), (W, 0, D)], 2)
-    quad([(0, 0, 0), (0, H, 0), (0, H, D), (0, 0, D)], 2)
-    z0, z1, y0, y1 = WINDOW
-    for za, zb, ya, yb in [(0, D, 0, y0), (0, D, y1, H), (0, z0, y0, y1), (z1, D, y0, y1)]:
-        quad([(W, ya, za), (W, ya, zb), (W, yb, zb), (W, yb, za)], 2)
-    if glass is not None:
-        quad([(W, y0, z0), (W, y0, z1), (W, y1, z1), (W, y1, z0)], 3)
+    quad([(0, 0, 0), (0, 0, d), (w, 0, d), (w, 0, 0)], 0)  # floor
+    quad([(0, h, 0), (w, h, 0), (w, h, d), (0, h, d)], 1)  # ceiling
+    quad([(0, 0, 0), (w, 0, 0), (w, h, 0), (0, h, 0)], 2)
+    quad([(0, 0, d), (0, h, d), (w, h, d), (w, 0, d)], 2)
+    quad([(0, 0, 0), (0, h, 0), (0, h, d), (0, 0, d)], 2)
+    z0, z1, y0, y1 = window
+    for za, zb, ya, yb in [(0, d, 0, y0), (0, d, y1, h), (0, z0, y0, y1), (z1, d, y0, y1)]:
+        quad([(w, ya, za), (w, ya, zb), (w, yb, zb), (w, yb, za)], 2)
+    if glass:
+        quad([(w, y0, z0), (w, y0, z1), (w, y1, z1), (w, y1, z0)], 3)
+    V, C, M = np.array(V, float), np.array(C), np.array(M)
+    return Scene(vertices=V, patch_corners=C, patch_material=M, materials=materials)
+
+
+def daylit_room(glass: float | None = None, sun: float = 600.0, sky=(30.0, 35.0, 45.0)) -> Scene:
+    """The room as quads facing inwards; ``glass``: the window's transmittance (None: open)."""
     mats = [
         Material("floor", albedo=[0.5, 0.45, 0.4]),
         Material("ceiling", albedo=[0.8, 0.8, 0.8]),
         Material("wall", albedo=[0.7, 0.7, 0.7]),
         Material("glass", albedo=[0.0, 0.0, 0.0], transmission=float(glass or 0.0)),
     ]
-    scene = Scene(
-        vertices=np.array(V, float), patch_corners=np.array(C), patch_material=np.array(M), materials=mats
-    )
+    scene = room_scene((W, H, D), WINDOW, mats, glass is not None)
     if sun:
         scene.lights = [Light(kind="directional", direction=SUN_DIRECTION, intensity=sun, name="sun")]
     if sky is not None:
@@ -63,33 +70,12 @@ ROOM_WALLS = {"back (x=0)": 4, "side (z=0)": 2, "floor": 0}
 
 
 def window_room() -> Scene:
-    """The room as inward quads: floor 0, ceiling 1, walls z=0 2, z=D 3, x=0 4, and the window wall
-    x=W in four quads around the opening."""
-    Wr, Hr, Dr = ROOM_W, ROOM_H, ROOM_D
-    V: list = []
-    C: list = []
-    M: list = []
-
-    def quad(p, mat):
-        C.append([len(V), len(V) + 1, len(V) + 2, len(V) + 3])
-        V.extend(p)
-        M.append(mat)
-
-    quad([(0, 0, 0), (0, 0, Dr), (Wr, 0, Dr), (Wr, 0, 0)], 0)
-    quad([(0, Hr, 0), (Wr, Hr, 0), (Wr, Hr, Dr), (0, Hr, Dr)], 1)
-    quad([(0, 0, 0), (Wr, 0, 0), (Wr, Hr, 0), (0, Hr, 0)], 2)
-    quad([(0, 0, Dr), (0, Hr, Dr), (Wr, Hr, Dr), (Wr, 0, Dr)], 2)
-    quad([(0, 0, 0), (0, Hr, 0), (0, Hr, Dr), (0, 0, Dr)], 2)
-    z0, z1, y0, y1 = ROOM_WINDOW
-    for za, zb, ya, yb in [(0, Dr, 0, y0), (0, Dr, y1, Hr), (0, z0, y0, y1), (z1, Dr, y0, y1)]:
-        quad([(Wr, ya, za), (Wr, ya, zb), (Wr, yb, zb), (Wr, yb, za)], 2)
+    """The window-lit room (:func:`room_scene`), no glass, under a uniform sky over a grey ground."""
     mats = [
         Material("floor", albedo=[0.5, 0.45, 0.4]),
         Material("ceiling", albedo=[0.8, 0.8, 0.8]),
         Material("wall", albedo=[0.7, 0.7, 0.7]),
     ]
-    scene = Scene(
-        vertices=np.array(V, float), patch_corners=np.array(C), patch_material=np.array(M), materials=mats
-    )
+    scene = room_scene((ROOM_W, ROOM_H, ROOM_D), ROOM_WINDOW, mats)
     scene.sky = Sky(kind="uniform", radiance=ROOM_SKY, ground=ROOM_GROUND * np.asarray(ROOM_SKY))
     return scene
