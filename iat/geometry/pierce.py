@@ -118,13 +118,10 @@ def _straddle(a, b, tri, normal, offset, tol, dist):
 
 
 @njit(cache=True, nogil=True)
-def _crossing(a, b, tri, normal, offset, tol, da, db, line, span):
-    """True when triangles a and b pierce each other (see :func:`pierced_pairs`); ``span`` (3,) gets
-    the lengths of a's and b's chords along the planes' common line and of their overlap."""
-    if not _straddle(a, b, tri, normal, offset, tol, da):
-        return False
-    if not _straddle(b, a, tri, normal, offset, tol, db):
-        return False
+def _chords(a, b, tri, normal, tol, da, db, line, span):
+    """The chords of triangles a and b (their signed distances ``da``, ``db`` (3,) from each other's
+    plane) along the planes' common ``line`` (3,): ``span`` (3,) gets a's, b's and their overlap;
+    True when they overlap by more than ``tol`` (False for parallel planes)."""
     line[0] = normal[a, 1] * normal[b, 2] - normal[a, 2] * normal[b, 1]
     line[1] = normal[a, 2] * normal[b, 0] - normal[a, 0] * normal[b, 2]
     line[2] = normal[a, 0] * normal[b, 1] - normal[a, 1] * normal[b, 0]
@@ -136,6 +133,17 @@ def _crossing(a, b, tri, normal, offset, tol, da, db, line, span):
     lo_b, hi_b = _interval(b, db, tri, line, tol)
     span[0], span[1], span[2] = hi_a - lo_a, hi_b - lo_b, min(hi_a, hi_b) - max(lo_a, lo_b)
     return span[2] > tol
+
+
+@njit(cache=True, nogil=True)
+def _crossing(a, b, tri, normal, offset, tol, da, db, line, span):
+    """True when triangles a and b pierce each other (see :func:`pierced_pairs`); ``span`` (3,) gets
+    the lengths of a's and b's chords along the planes' common line and of their overlap."""
+    if not _straddle(a, b, tri, normal, offset, tol, da):
+        return False
+    if not _straddle(b, a, tri, normal, offset, tol, db):
+        return False
+    return _chords(a, b, tri, normal, tol, da, db, line, span)
 
 
 @njit(cache=True, nogil=True)
@@ -152,17 +160,7 @@ def _rests_on(a, b, tri, normal, offset, tol, da, db, line, span):
         on += abs(db[i]) <= tol
     if on != 2:
         return False
-    line[0] = normal[a, 1] * normal[b, 2] - normal[a, 2] * normal[b, 1]
-    line[1] = normal[a, 2] * normal[b, 0] - normal[a, 0] * normal[b, 2]
-    line[2] = normal[a, 0] * normal[b, 1] - normal[a, 1] * normal[b, 0]
-    n = np.sqrt(line[0] ** 2 + line[1] ** 2 + line[2] ** 2)
-    if n < 1e-12:
-        return False
-    line /= n
-    lo_a, hi_a = _interval(a, da, tri, line, tol)
-    lo_b, hi_b = _interval(b, db, tri, line, tol)
-    span[0], span[1], span[2] = hi_a - lo_a, hi_b - lo_b, min(hi_a, hi_b) - max(lo_a, lo_b)
-    return span[2] > tol
+    return _chords(a, b, tri, normal, tol, da, db, line, span)
 
 
 @njit(cache=True, nogil=True)
