@@ -1,0 +1,321 @@
+"""Embree 4 through its C API, called from numba kernels (issue 41).
+
+The library is the one embreex bundles (``embreex.libs/libembree4*.so*``), else a system
+``libembree4``; ``$IAT_EMBREE_LIB`` names another, and ``IAT_EMBREE_C=0`` turns this path off
+(:func:`available` is then False and :class:`~iat.radiosity.visibility.Visibility` uses embreex).
+
+:class:`EmbreeScene` builds a device and a scene of (T, 3, 3) triangles with ctypes and keeps both
+handles until :meth:`EmbreeScene.close`. The kernels take the scene's handle and the addresses of
+``rtcOccluded1`` / ``rtcIntersect1`` as int64 arguments (:class:`Entry`) and call them through
+:func:`call3`, an ``@intrinsic`` that calls a function pointer given as an integer: no address is
+compiled into the code as a constant, so the kernels stay ``cache=True`` (an address changes from
+one process to the next).
+
+Embree 4's single-ray records (``rtcore_ray.h``), 16-byte aligned: ``RTCRay`` is 12 words, ``org``
+(0-2), ``tnear`` 3, ``dir`` (4-6), ``time`` 7, ``tfar`` 8, ``mask`` 9, ``id`` 10, ``flags`` 11
+(48 bytes); ``RTCRayHit`` is that ray then ``RTCHit``: ``Ng`` (12-14), ``u`` 15, ``v`` 16, ``primID``
+17, ``geomID`` 18, ``instID[1]`` 19 and, when the library is built with instance arrays,
+``instPrimID[1]`` 20 (80 or 96 bytes: :func:`ray_record` gives 96). The query arguments
+(``RTCOccludedArguments``, ``RTCIntersectArguments``) are passed as NULL: Embree's defaults, as
+embreex passes them, so both answer ray for ray alike. ``rtcOccluded1`` sets ``tfar`` to -inf on a
+hit; ``rtcIntersect1`` sets ``tfar``, ``u, v``, ``primID`` and ``geomID`` (left at
+``RTC_INVALID_GEOMETRY_ID`` on a miss). Scenes are built with ``RTC_SCENE_FLAG_ROBUST``, as embreex
+4.4 builds its own (without it, Embree's faster triangle test gives other ``tfar, u, v`` in the last
+bits on 6 % of the hits, and may answer differently on an edge).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import glob
+import os
+import threading
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+from llvmlite import ir
+from numba import njit, prange, types
+from numba.extending import intrinsic
+
+#: environment variable: "0" turns the C API path off (embreex traces instead)
+EMBREE_C_ENV = "IAT_EMBREE_C"
+#: environment variable: the path of a libembree4 to load instead of embreex's
+EMBREE_LIB_ENV = "IAT_EMBREE_LIB"
+#: rays per parallel task of the tracing kernels (one ray record each)
+RAY_BLOCK = 2048
+
+_INVALID = 0xFFFFFFFF
+_RTC_GEOMETRY_TYPE_TRIANGLE = 0
+_RTC_SCENE_FLAG_ROBUST = 1 << 2
+_RTC_BUFFER_TYPE_INDEX, _RTC_BUFFER_TYPE_VERTEX = 0, 1
+_RTC_FORMAT_UINT3, _RTC_FORMAT_FLOAT3 = 0x5003, 0x9003
+
+_LOCK = threading.Lock()
+_LIB: list = []  # [CDLL or None] once looked for
+
+
+def library_path() -> str | None:
+    """The path of the libembree4 to load (``$IAT_EMBREE_LIB``, embreex's, a system one), or None."""
+    env = os.environ.get(EMBREE_LIB_ENV)
+    if env:
+        return env
+    try:
+        import embreex
+
+        found = sorted(glob.glob(str(Path(embreex.__path__[0]).parent / "embreex.libs" / "libembree4*.so*")))
+        if found:
+            return found[0]
+    except ImportError:
+        pass
+    return ctypes.util.find_library("embree4")
+
+
+def _load():
+    """The library with the signatures used here, or None when there is none (or it fails to load)."""
+    path = library_path()
+    if path is None:
+        return None
+    try:
+        lib = ctypes.CDLL(path)
+    except OSError:
+        return None
+    vp, size, uint, cint = ctypes.c_void_p, ctypes.c_size_t, ctypes.c_uint, ctypes.c_int
+    sigs = {
+        "rtcNewDevice": (vp, [ctypes.c_char_p]),
+        "rtcReleaseDevice": (None, [vp]),
+        "rtcGetDeviceError": (cint, [vp]),
+        "rtcNewScene": (vp, [vp]),
+        "rtcReleaseScene": (None, [vp]),
+        "rtcCommitScene": (None, [vp]),
+        "rtcSetSceneFlags": (None, [vp, cint]),
+        "rtcNewGeometry": (vp, [vp, cint]),
+        "rtcSetNewGeometryBuffer": (vp, [vp, cint, uint, cint, size, size]),
+        "rtcCommitGeometry": (None, [vp]),
+        "rtcAttachGeometry": (uint, [vp, vp]),
+        "rtcReleaseGeometry": (None, [vp]),
+    }
+    try:
+        for name, (res, args) in sigs.items():
+            fn = getattr(lib, name)
+            fn.restype, fn.argtypes = res, args
+        lib.rtcOccluded1, lib.rtcIntersect1  # noqa: B018 (both entry points exist)
+    except AttributeError:
+        return None
+    return lib
+
+
+def library():
+    """The loaded library (ctypes), or None (looked for once per process)."""
+    with _LOCK:
+        if not _LIB:
+            _LIB.append(_load())
+        return _LIB[0]
+
+
+def available() -> bool:
+    """Whether the C API path is on (not ``IAT_EMBREE_C=0``) and the library loads."""
+    if os.environ.get(EMBREE_C_ENV, "1").strip() in ("0", "false", "no", "off"):
+        return False
+    return library() is not None
+
+
+class Entry(NamedTuple):
+    """The entry points' addresses, as the kernels take them (int64)."""
+
+    occluded1: int
+    intersect1: int
+
+
+def entry_points() -> Entry:
+    """The addresses of ``rtcOccluded1`` and ``rtcIntersect1`` in the loaded library."""
+    lib = library()
+    if lib is None:
+        raise RuntimeError("libembree4 not found")
+    addr = [ctypes.cast(getattr(lib, n), ctypes.c_void_p).value for n in ("rtcOccluded1", "rtcIntersect1")]
+    return Entry(*(np.int64(a) for a in addr))
+
+
+class EmbreeScene:
+    """A device and a static scene of one triangle geometry, built through the C API.
+
+    triangles : (T, 3, 3) vertices (stored float32, as embreex stores them); T may be 0.
+    ``handle`` is the scene's address (int64, 0 when there are no triangles: nothing to hit) and
+    ``entry`` the query entry points, both as the kernels take them. :meth:`close` (also on
+    collection) releases the scene and the device; the kernels must not be called after it."""
+
+    def __init__(self, triangles: np.ndarray):
+        lib = library()
+        if lib is None:
+            raise RuntimeError("libembree4 not found")
+        self._lib = lib
+        self.entry = entry_points()
+        self.n_triangles = 0
+        self._device = self._scene = None
+        self.handle = np.int64(0)
+        verts = np.ascontiguousarray(triangles, dtype=np.float32).reshape(-1, 3)
+        if len(verts) == 0:
+            return
+        self._device = lib.rtcNewDevice(None)
+        if not self._device:
+            raise RuntimeError("rtcNewDevice failed")
+        self._scene = lib.rtcNewScene(self._device)
+        lib.rtcSetSceneFlags(self._scene, _RTC_SCENE_FLAG_ROBUST)  # as embreex builds its scenes
+        geom = lib.rtcNewGeometry(self._device, _RTC_GEOMETRY_TYPE_TRIANGLE)
+        n = len(verts)
+        vbuf = lib.rtcSetNewGeometryBuffer(geom, _RTC_BUFFER_TYPE_VERTEX, 0, _RTC_FORMAT_FLOAT3, 12, n)
+        ibuf = lib.rtcSetNewGeometryBuffer(geom, _RTC_BUFFER_TYPE_INDEX, 0, _RTC_FORMAT_UINT3, 12, n // 3)
+        if not (vbuf and ibuf):
+            lib.rtcReleaseGeometry(geom)
+            self.close()
+            raise RuntimeError(f"Embree buffers not made (error {lib.rtcGetDeviceError(self._device)})")
+        ctypes.memmove(vbuf, verts.ctypes.data, verts.nbytes)
+        index = np.arange(n, dtype=np.uint32)
+        ctypes.memmove(ibuf, index.ctypes.data, index.nbytes)
+        lib.rtcCommitGeometry(geom)
+        lib.rtcAttachGeometry(self._scene, geom)
+        lib.rtcReleaseGeometry(geom)  # the scene holds it
+        lib.rtcCommitScene(self._scene)
+        err = lib.rtcGetDeviceError(self._device)
+        if err:
+            self.close()
+            raise RuntimeError(f"Embree scene not built (error {err})")
+        self.n_triangles = n // 3
+        self.handle = np.int64(self._scene)
+
+    def close(self) -> None:
+        """Release the scene and the device (idempotent)."""
+        lib = getattr(self, "_lib", None)
+        if lib is None:
+            return
+        if self._scene:
+            lib.rtcReleaseScene(self._scene)
+        if self._device:
+            lib.rtcReleaseDevice(self._device)
+        self._scene = self._device = None
+        self.handle = np.int64(0)
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+# -- calling the entry points from numba ------------------------------------------------------
+@intrinsic
+def call3(typingctx, fn, a, b, c):
+    """``fn(a, b, c)`` for a C function ``void fn(void *, void *, void *)`` whose address is the
+    integer ``fn``, the three pointers given as integers (0: NULL)."""
+    if not all(isinstance(x, types.Integer) for x in (fn, a, b, c)):
+        return None
+    sig = types.void(fn, a, b, c)
+
+    def codegen(context, builder, signature, args):
+        ptr = ir.IntType(8).as_pointer()
+        fnty = ir.FunctionType(ir.VoidType(), [ptr, ptr, ptr])
+        f = builder.inttoptr(args[0], fnty.as_pointer())
+        builder.call(f, [builder.inttoptr(x, ptr) for x in args[1:]])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@njit(cache=True, nogil=True)
+def ray_record():
+    """A 96-byte, 16-byte aligned ``RTCRayHit`` (or ``RTCRay``: its first 48 bytes): (24,) float32
+    and the same memory as (24,) uint32."""
+    buf = np.empty(28, np.float32)
+    a = ((16 - buf.ctypes.data % 16) % 16) // 4
+    rec = buf[a : a + 24]
+    return rec, rec.view(np.uint32)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _set_ray(rec, bits, ox, oy, oz, dx, dy, dz, tfar):
+    rec[0], rec[1], rec[2], rec[3] = ox, oy, oz, 0.0
+    rec[4], rec[5], rec[6], rec[7] = dx, dy, dz, 0.0
+    rec[8] = tfar
+    bits[9], bits[10], bits[11] = _INVALID, 0, 0  # mask (all), id, flags
+
+
+@njit(cache=True, nogil=True)
+def occluded1(fn, scene, rec, bits, ox, oy, oz, dx, dy, dz, tfar):
+    """True when ``rtcOccluded1`` (address ``fn``) finds a hit in ``scene`` on the ray before tfar
+    (float32 arguments, as embreex takes them); rec, bits: a :func:`ray_record`."""
+    if scene == 0:
+        return False
+    _set_ray(rec, bits, ox, oy, oz, dx, dy, dz, tfar)
+    call3(fn, scene, rec.ctypes.data, 0)
+    return rec[8] < 0  # tfar is -inf after a hit
+
+
+@njit(cache=True, nogil=True)
+def intersect1(fn, scene, rec, bits, ox, oy, oz, dx, dy, dz, tfar):
+    """The triangle ``rtcIntersect1`` (address ``fn``) finds first in ``scene`` on the ray before
+    tfar (-1: none); the hit's ``u, v`` are then ``rec[15], rec[16]``."""
+    if scene == 0:
+        return -1
+    _set_ray(rec, bits, ox, oy, oz, dx, dy, dz, tfar)
+    bits[17], bits[18], bits[19] = _INVALID, _INVALID, _INVALID  # primID, geomID, instID
+    call3(fn, scene, rec.ctypes.data, 0)
+    if bits[18] == _INVALID:
+        return -1
+    return np.int64(bits[17])
+
+
+@njit(cache=True, nogil=True)
+def visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, dx, dy, dz, tfar):
+    """What of a ray's light gets through before tfar (float64): 0 when something opaque in
+    ``scene`` lies on it, else the transmittance ``glass_tau`` of the first triangle of ``glass`` it
+    crosses (1 if none)."""
+    if occluded1(occ, scene, rec, bits, ox, oy, oz, dx, dy, dz, tfar):
+        return 0.0
+    if glass == 0:
+        return 1.0
+    p = intersect1(isect, glass, rec, bits, ox, oy, oz, dx, dy, dz, tfar)
+    return 1.0 if p < 0 else glass_tau[p]
+
+
+# -- queries over arrays of rays (prange over blocks of RAY_BLOCK rays) -----------------------
+@njit(cache=True, parallel=True, nogil=True)
+def trace_occluded(fn, scene, o, d, t, out):
+    """``out[i]`` (n,) bool: whether ``rtcOccluded1`` finds a hit on ray i (o, d (n, 3), t (n,)
+    float32) before t[i]."""
+    n = o.shape[0]
+    for b in prange((n + RAY_BLOCK - 1) // RAY_BLOCK):
+        rec, bits = ray_record()
+        for i in range(b * RAY_BLOCK, min(n, (b + 1) * RAY_BLOCK)):
+            out[i] = occluded1(
+                fn, scene, rec, bits, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i]
+            )
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def trace_visible(occ, isect, scene, glass, glass_tau, o, d, t, out):
+    """``out[i]`` (n,) float64: :func:`visible1` of ray i."""
+    n = o.shape[0]
+    for b in prange((n + RAY_BLOCK - 1) // RAY_BLOCK):
+        rec, bits = ray_record()
+        for i in range(b * RAY_BLOCK, min(n, (b + 1) * RAY_BLOCK)):
+            out[i] = visible1(
+                occ, isect, scene, glass, glass_tau, rec, bits,
+                o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i],
+            )  # fmt: skip
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def trace_first_hits(fn, scene, o, d, t, prim, bary):
+    """``prim[i]`` (n,) int64 the triangle ray i meets first before t[i] (-1: none) and ``bary[i]``
+    (n, 2) float64 the hit's (u, v) (0 where none), by ``rtcIntersect1``."""
+    n = o.shape[0]
+    for b in prange((n + RAY_BLOCK - 1) // RAY_BLOCK):
+        rec, bits = ray_record()
+        for i in range(b * RAY_BLOCK, min(n, (b + 1) * RAY_BLOCK)):
+            p = intersect1(fn, scene, rec, bits, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i])
+            prim[i] = p
+            if p >= 0:
+                bary[i, 0], bary[i, 1] = rec[15], rec[16]
+            else:
+                bary[i, 0], bary[i, 1] = 0.0, 0.0
