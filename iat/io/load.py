@@ -39,6 +39,7 @@ import numpy as np
 
 from iat.errors import Cancelled, IATWarning, LoadError, OptionError
 from iat.geometry.discontinuity import split_discontinuities
+from iat.geometry.faults import fault_faces
 from iat.geometry.mesh import (
     compact_vertices,
     corner_positions,
@@ -429,6 +430,7 @@ def load_scene(
         log.info("%s: dropped %d zero-area faces of %d", path, int(bad.sum()), len(F))
         F, M, UV, objects = F[~bad], M[~bad], UV[~bad], objects[~bad]
     again = repeated_faces(F)
+    repeats = V[F[again]]  # the coincident faces of Scene.faults (iat.geometry.faults)
     if again.any():  # each copy would receive the light there and reflect it again
         msg = f"{path}: dropped {int(again.sum())} faces repeating another in the same place"
         warnings.warn(IATWarning(msg), stacklevel=2)
@@ -447,12 +449,14 @@ def load_scene(
         enclosures=ext != ".ifc",
         probes=None if gl is None else [lt.position for lt in gl.lights(world) if lt.kind != "directional"],
     )
+    turned = (side.faces != F).any(axis=1)  # inside-out faces turned outward (Scene.faults)
     F, UV = side.faces, side.face_uv
     n_mat = len(materials)  # faces that get a back face carry material + n_mat until the patches are made
     M = np.where(side.back, M + n_mat, M)
     # faces other objects pierce are cut along the crossings; (material, side of the cuts) pairs
     # stand in for the materials until the patches are made (iat.geometry.pierce)
     pierced = cut_pierced(V, F, M, UV, objects, cut=cut != "none", contacts=cut == "all")
+    faults = fault_faces(V, F, turned, side.back, pierced.parent, repeats)
     V, F, UV, M, code_material = pierced.vertices, pierced.faces, pierced.face_uv, pierced.code, pierced.codes
     report(_STAGES["weld"], "merging quads")
     corners, pmat, puv = merge_quads(V, F, M, UV)
@@ -492,6 +496,7 @@ def load_scene(
         clip_patch=clip_patch,
         sides=side.report,
         pierce=pierced.report,
+        faults=faults,
     )
     if gl is not None:
         report(_STAGES["split"], "reading lights and cameras")

@@ -25,6 +25,7 @@ import numpy as np
 
 from iat.camera import Camera
 from iat.errors import OptionError
+from iat.geometry.faults import FaultFaces
 from iat.geometry.mesh import corner_positions, patch_areas, patch_normals
 from iat.geometry.pierce import PierceReport
 from iat.geometry.quadtree import bilinear
@@ -185,6 +186,9 @@ class Scene:
       sheets given a back face), or None for a scene built in memory
     pierce : the loader's :class:`~iat.geometry.pierce.PierceReport` (faces other objects pierce,
       cut along the crossings), or None for a scene built in memory
+    faults : the faces the loader found faulty (:class:`~iat.geometry.faults.FaultFaces`: inside-out
+      solids turned, open sheets given a back, faces cut by a crossing, repeats dropped; which patches
+      carry them: :func:`iat.geometry.faults.patch_faults`), or None for a scene built in memory
     """
 
     vertices: np.ndarray
@@ -201,6 +205,7 @@ class Scene:
     sky: Sky | None = None
     sides: SideReport | None = None
     pierce: PierceReport | None = None
+    faults: FaultFaces | None = None
 
     def __post_init__(self):
         self.vertices = np.asarray(self.vertices, dtype=np.float64).reshape(-1, 3)
