@@ -17,12 +17,30 @@ textured part of the default bake), texture memory, the IAT image's error agains
 and IAT against the mesh.
 
     .venv/bin/python benchmarks/real_models_bench.py [figures] [panels]   (under xvfb-run or with EGL)
+
+Part ``daylight`` (issue 36's before and after): each IFC file of ``../shared/real-models`` solved
+by the sun on :data:`SUN` at the model's place (IfcSite, else the default place) and the sky
+:data:`SKY`, at each preset, by the code of each tree given (``--tree LABEL=DIR``, repeatable; the
+default: this checkout as ``now``): one child process a solve (``PYTHONPATH=DIR``, :data:`CHILD`),
+at most ``--cap`` seconds, one at a time. Per run: load and solve seconds, patches, elements, shots,
+unshot fraction, the largest vertex radiance, a :class:`~iat.errors.SolveError` if one stopped it,
+the child's peak resident memory (``wait4``'s ``ru_maxrss``: also of a child stopped at the cap),
+the load average before and after, and for a run stopped at the cap its last progress line. Rows
+go to ``--json`` as each run ends (a run already there is not redone):
+
+    .venv/bin/python benchmarks/real_models_bench.py daylight --tree before=/tmp/before --tree now=.
+        [--models madrid,tekla,...] [--presets draft,default] [--cap 900] [--json F]
 """
 
 from __future__ import annotations
 
+import json
+import os
+import signal
+import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -220,12 +238,185 @@ def figures_table(paths: dict, renderer: Renderer, out: Path) -> None:
         )
 
 
+#: the real models of part ``daylight``: short name -> file in :data:`REAL_MODELS`
+REAL_MODELS = Path(__file__).resolve().parents[2] / "shared" / "real-models"
+DAYLIGHT_MODELS = {
+    "madrid": "revit2021-madrid-house.ifc",
+    "tekla": "tekla2019-carwash-structure.ifc",
+    "openhouse": "ifcopenshell-open-house-ifc4.ifc",
+    "swept": "blenderbim-swept-solid.ifc",
+}
+#: issue 36's light: the sun at 10:00 on the solstice at the model's place, a uniform sky
+SUN = "2026-06-21T10:00"
+SKY = "uniform:30,35,45"
+#: seconds between the child's progress lines
+PROGRESS_EVERY = 30.0
+
+#: one solve in a child process of another tree (only API both sides of issue 36 have); argv: model,
+#: preset, sun, sky; prints PROGRESS lines and one RESULT line of JSON
+CHILD = r"""
+import json, sys, time
+import numpy as np
+import iat
+from iat.io.load import load_scene
+from iat.lighting.daylight_default import DaylightRequest, apply_daylight
+from iat.radiosity import SolveOptions, solve
+path, quality, sun, sky = sys.argv[1:5]
+print("TREE", iat.__file__, flush=True)
+t0 = time.perf_counter()
+scene = load_scene(path)
+load_s = time.perf_counter() - t0
+print("LIGHT", apply_daylight(scene, DaylightRequest(sun=sun, sky=sky)), flush=True)
+last = [0.0]
+def progress(fraction, message=""):
+    now = time.perf_counter() - t0
+    if now - last[0] >= EVERY_S:
+        last[0] = now
+        print(f"PROGRESS {now:.0f} s {fraction:.3f} {message}", flush=True)
+    return True
+out = {"load_s": load_s, "patches": int(scene.n_patches)}
+t1 = time.perf_counter()
+try:
+    sol = solve(scene, SolveOptions.preset(quality), progress=progress)
+except Exception as e:  # SolveError (issue 36) or another failure: its one line
+    out.update(solve_s=time.perf_counter() - t1, error=f"{type(e).__name__}: {e}")
+else:
+    st, rad = sol.stats, np.asarray(sol.vert_radiance, dtype=np.float64)
+    out.update(
+        solve_s=time.perf_counter() - t1,
+        elements=int(st["elements"]),
+        shots=int(st["shots"]),
+        unshot=float(st.get("unshot_fraction", float("nan"))),
+        ambient_fraction=float(st.get("ambient_luminance_fraction", float("nan"))),
+        max_radiance=float(rad.max()) if rad.size else 0.0,
+        finite=bool(np.isfinite(rad).all()),
+    )
+print("RESULT " + json.dumps(out), flush=True)
+""".replace("EVERY_S", repr(PROGRESS_EVERY))
+
+
+def run_child(tree: Path, model: Path, preset: str, cap: float, log: Path) -> dict:
+    """One :data:`CHILD` solve of ``model`` at ``preset`` by the code in ``tree``, stopped (SIGKILL to
+    its process group) after ``cap`` seconds; its output goes to ``log``. Returns the RESULT's fields
+    (none when stopped) and ``wall_s``, ``peak_rss_mib`` (the child's ``ru_maxrss``), ``stopped``,
+    ``returncode``, ``last_lines`` (the output's last progress and other lines)."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    t0 = time.perf_counter()
+    with open(log, "w") as f:
+        p = subprocess.Popen(
+            [sys.executable, "-c", CHILD, str(model), preset, SUN, SKY],
+            cwd=tree,
+            env=env,
+            stdout=f,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+        stopped = threading.Event()
+
+        def stop():
+            stopped.set()
+            os.killpg(p.pid, signal.SIGKILL)
+
+        timer = threading.Timer(cap, stop)
+        timer.start()
+        _, status, usage = os.wait4(p.pid, 0)
+        timer.cancel()
+        p.returncode = os.waitstatus_to_exitcode(status)
+    lines = log.read_text(errors="replace").splitlines()
+    row = {
+        "wall_s": round(time.perf_counter() - t0, 1),
+        "peak_rss_mib": round(usage.ru_maxrss / 1024, 1),
+        "stopped": stopped.is_set(),
+        "returncode": p.returncode,
+        "last_lines": [ln[:300] for ln in lines[-4:]],
+        "light": next((ln[6:] for ln in lines if ln.startswith("LIGHT ")), None),
+        "tree_file": next((ln[5:] for ln in lines if ln.startswith("TREE ")), None),
+    }
+    for ln in lines:
+        if ln.startswith("RESULT "):
+            row.update(json.loads(ln[7:]))
+    return row
+
+
+def daylight_part(trees: dict, models: list, presets: list, cap: float, json_path: Path) -> None:
+    """Part ``daylight``: every model, preset and tree, one at a time, rows into ``json_path``."""
+    result = (
+        json.loads(json_path.read_text()) if json_path.is_file() else {"sun": SUN, "sky": SKY, "rows": []}
+    )
+    done = {(r["model"], r["preset"], r["tree"]) for r in result["rows"]}
+    logs = Path(__file__).resolve().parents[1] / "out" / "real_models_daylight"
+    logs.mkdir(parents=True, exist_ok=True)
+    for name in models:
+        for preset in presets:
+            for label, tree in trees.items():
+                if (name, preset, label) in done:
+                    continue
+                commit = subprocess.run(
+                    ["git", "rev-parse", "--short", "HEAD"], cwd=tree, capture_output=True, text=True
+                ).stdout.strip()
+                load_before = [round(x, 2) for x in os.getloadavg()]
+                date = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+                row = run_child(
+                    tree,
+                    REAL_MODELS / DAYLIGHT_MODELS[name],
+                    preset,
+                    cap,
+                    logs / f"{name}-{preset}-{label}.log",
+                )
+                row = {
+                    "model": name,
+                    "preset": preset,
+                    "tree": label,
+                    "commit": commit,
+                    "date": date,
+                    "load_before": load_before,
+                    "load_after": [round(x, 2) for x in os.getloadavg()],
+                    **row,
+                }
+                result["rows"].append(row)
+                json_path.write_text(json.dumps(result, indent=1) + "\n")
+                what = (
+                    "stopped at the cap"
+                    if row["stopped"]
+                    else row.get("error")
+                    or (
+                        f"{row.get('solve_s', float('nan')):.1f} s, {row.get('elements')} elements, "
+                        f"{row.get('shots')} shots, max radiance {row.get('max_radiance', float('nan')):.3g}"
+                    )
+                )
+                print(
+                    f"{name} {preset} {label}: {what}; {row['peak_rss_mib']} MiB; load {load_before}",
+                    flush=True,
+                )
+
+
 def main(argv: list[str] | None = None) -> int:
-    parts = set(sys.argv[1:] if argv is None else argv) or {"figures", "panels"}
-    unknown = parts - {"figures", "panels"}
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("parts", nargs="*", help="figures, panels, daylight (default: figures panels)")
+    ap.add_argument("--tree", action="append", default=[], metavar="LABEL=DIR", help="daylight: a tree")
+    ap.add_argument("--models", default=",".join(DAYLIGHT_MODELS), help="daylight: the models")
+    ap.add_argument("--presets", default="draft,default", help="daylight: the presets")
+    ap.add_argument("--cap", type=float, default=900.0, help="daylight: seconds a run may take")
+    ap.add_argument(
+        "--json",
+        default=str(Path(__file__).with_name("real_models_daylight.json")),
+        help="daylight: the rows' file",
+    )
+    args = ap.parse_args(argv)
+    parts = set(args.parts) or {"figures", "panels"}
+    unknown = parts - {"figures", "panels", "daylight"}
     if unknown:
-        print(f"unknown part(s): {', '.join(sorted(unknown))} (figures, panels)", file=sys.stderr)
+        print(f"unknown part(s): {', '.join(sorted(unknown))} (figures, panels, daylight)", file=sys.stderr)
         return 2
+    if "daylight" in parts:
+        trees = dict(t.split("=", 1) for t in args.tree) or {"now": "."}
+        trees = {k: Path(v).resolve() for k, v in trees.items()}
+        daylight_part(trees, args.models.split(","), args.presets.split(","), args.cap, Path(args.json))
+        parts.discard("daylight")
+        if not parts:
+            return 0
     with tempfile.TemporaryDirectory(prefix="iat-real-") as tmp:
         out = Path(tmp)
         paths = generate(out)

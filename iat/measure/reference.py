@@ -37,6 +37,15 @@ Conventions (checked by ``tests/test_reference.py``)
   spot references match the solver inside the inner cone and only roughly in the
   transition ring.
 
+- Glass (``transmission > 0``) as the solver has it (:mod:`iat.radiosity.visibility`): it does not
+  occlude, multiplies the light crossing it by its transmittance, keeps the rest and reflects
+  nothing: a ``mask`` of black, rendered with ``volpath``, whose shadow rays pass a mask times its
+  null transmission (``path``'s ``ray_test`` stops there: no sun or lamp behind a pane). The solver
+  counts the first pane a ray crosses only, so the faces of one pane (a thin solid, double
+  glazing: faces within :data:`PANE_DEPTH` along their normal, :func:`pane_layers`) pass the k-th
+  root each; panes farther apart multiply (the solver: the first only). Scenes without glass keep
+  ``path`` and their keys.
+
 Variant: ``scalar_rgb`` (works everywhere). ``llvm_ad_rgb`` is used when the
 environment variable ``IAT_MITSUBA_VARIANT`` names it, or when
 ``DRJIT_LIBLLVM_PATH`` is set and a small probe render in a subprocess succeeds
@@ -67,6 +76,7 @@ __all__ = [
     "render_reference",
     "render_reference_cached",
     "reference_key",
+    "pane_layers",
     "REFERENCE_VERSION",
 ]
 
@@ -88,6 +98,11 @@ def box_filtered_render(
 
 #: bump when the way references are built changes, so cached ``.npy`` files are redone
 REFERENCE_VERSION = 1
+#: glass faces within this distance (m) along their normal are one pane (:func:`pane_layers`)
+PANE_DEPTH = 0.1
+#: how references pass light through glass: part of the key of a scene with glass only (the keys
+#: of glass-free scenes are unchanged)
+GLASS_MODEL = f"volpath, mask, first pane: faces within {PANE_DEPTH} m"
 
 _VARIANT: str | None = None
 
@@ -177,6 +192,58 @@ def _make_mesh(mi, name: str, positions: np.ndarray, faces: np.ndarray, props):
     return mesh
 
 
+def pane_layers(tris: np.ndarray, depth: float | None = None) -> np.ndarray:
+    """(t,) int64: of glass triangles ``tris`` (t, 3, 3), how many faces (distinct planes, itself
+    included) the line along each one's normal through its centroid crosses within ``depth`` m
+    (default :data:`PANE_DEPTH`) either side: 1 for a sheet, 2 for a pane modelled as a thin solid, 4
+    for double glazing of two such panes."""
+    from embreex import rtcore_scene as rtcs
+    from embreex.mesh_construction import TriangleMesh
+
+    tris = np.asarray(tris, dtype=np.float64).reshape(-1, 3, 3)
+    depth = PANE_DEPTH if depth is None else float(depth)
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    sc = rtcs.EmbreeScene()
+    v = np.ascontiguousarray(tris.reshape(-1, 3), dtype=np.float32)
+    TriangleMesh(sc, v, np.arange(len(v), dtype=np.int32).reshape(-1, 3))
+    origin = tris.mean(axis=1) - depth * n
+    left = np.full(len(tris), 2 * depth)
+    count = np.zeros(len(tris), dtype=np.int64)
+    live = np.flatnonzero(left > 0)
+    step = 1e-4 * max(depth, 1.0)  # past a hit (coplanar neighbours hit at one distance: one face)
+    while len(live):
+        res = sc.run(
+            np.ascontiguousarray(origin[live], dtype=np.float32),
+            np.ascontiguousarray(n[live], dtype=np.float32),
+            dists=np.ascontiguousarray(left[live], dtype=np.float32),
+            output=1,
+        )
+        hit = np.asarray(res["primID"]) >= 0
+        live, t = live[hit], np.asarray(res["tfar"], dtype=np.float64)[hit] + step
+        count[live] += 1
+        origin[live] += t[:, None] * n[live]
+        left[live] -= t
+        live = live[left[live] > 0]
+    return np.maximum(count, 1)
+
+
+def _glass_parts(m: int, tris: np.ndarray, tau: float) -> dict:
+    """``{name: (triangles, bsdf)}`` of glass material ``m``'s triangles as the solver has glass: a
+    ``mask`` of black (it passes ``tau``, keeps the rest, reflects nothing). The solver counts the first
+    glass a ray crosses only, so each of a pane's k faces (:func:`pane_layers`) passes ``tau ** (1 / k)``
+    and a ray through the whole pane keeps ``tau``."""
+    black = {"type": "diffuse", "reflectance": _rgb(np.zeros(3))}
+    layers = pane_layers(tris)
+    return {
+        f"material_{m}" + (f"_faces_{k}" if k > 1 else ""): (
+            tris[layers == k],
+            {"type": "mask", "opacity": 1.0 - tau ** (1.0 / k), "material": black},
+        )
+        for k in np.unique(layers).tolist()
+    }
+
+
 def build_mitsuba_scene(
     scene: Scene,
     camera: Camera,
@@ -200,9 +267,11 @@ def build_mitsuba_scene(
         raise ValueError(f"image size must be positive, got {size}")
 
     eye, target, up = _camera_frame(camera)
+    # with glass: volpath, whose shadow rays pass a mask (path's stop there: no sun behind a pane)
+    kind = "volpath" if any(m.transmission > 0 for m in scene.materials) else "path"
     d: dict = {
         "type": "scene",
-        "integrator": {"type": "path", "max_depth": int(max_depth), "rr_depth": int(rr_depth)},
+        "integrator": {"type": kind, "max_depth": int(max_depth), "rr_depth": int(rr_depth)},
         "sensor": {
             "type": "perspective",
             "fov": float(camera.yfov),
@@ -226,19 +295,20 @@ def build_mitsuba_scene(
 
     for m, tris in _group_triangles(scene).items():
         mat = scene.materials[m]
-        positions = tris.reshape(-1, 3)
-        faces = np.arange(len(positions)).reshape(-1, 3)
         bsdf = {"type": "diffuse", "reflectance": _rgb(np.clip(mat.albedo, 0.0, 1.0))}
         if two_sided:
             bsdf = {"type": "twosided", "material": bsdf}
-        if mat.transmission > 0:  # thin glass as the solver has it: passes that much, keeps none
-            black = {"type": "diffuse", "reflectance": _rgb(np.zeros(3))}
-            bsdf = {"type": "mask", "opacity": 1.0 - float(mat.transmission), "material": black}
-        props = mi.Properties()
-        props["bsdf"] = mi.load_dict(bsdf)
-        if np.any(mat.emission > 0):
-            props["emitter"] = mi.load_dict({"type": "area", "radiance": _rgb(np.maximum(mat.emission, 0.0))})
-        d[f"material_{m}"] = _make_mesh(mi, f"material_{m}", positions, faces, props)
+        parts = {f"material_{m}": (tris, bsdf)}
+        if mat.transmission > 0:
+            parts = _glass_parts(m, tris, float(mat.transmission))
+        for name, (part, part_bsdf) in parts.items():
+            positions = part.reshape(-1, 3)
+            props = mi.Properties()
+            props["bsdf"] = mi.load_dict(part_bsdf)
+            if np.any(mat.emission > 0):
+                emission = _rgb(np.maximum(mat.emission, 0.0))
+                props["emitter"] = mi.load_dict({"type": "area", "radiance": emission})
+            d[name] = _make_mesh(mi, name, positions, np.arange(len(positions)).reshape(-1, 3), props)
 
     for k, light in enumerate(scene.lights):
         inten = _rgb(light.radiant_intensity)
@@ -355,6 +425,8 @@ def reference_key(
         "rr_depth": int(rr_depth),
         "two_sided": bool(two_sided),
     }
+    if any(m.transmission > 0 for m in scene.materials):
+        meta["glass"] = GLASS_MODEL
     hsh.update(json.dumps(meta, sort_keys=True).encode())
     return hsh.hexdigest()[:24]
 
