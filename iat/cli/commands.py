@@ -21,6 +21,7 @@ import numpy as np
 from iat.cli.analysis import add_analyse_parser, add_false_color_flags, open_overcast, render_false_color
 from iat.cli.args import join_negative_values, parse_size, parse_vec
 from iat.cli.daylight import add_daylight_flags, apply_to, check_solution_flags, daylight_request
+from iat.cli.faults import add_faults_flag, render_view
 from iat.cli.warning_lines import WarningLines, warning_printer
 from iat.errors import IATError, IATWarning, OptionError
 from iat.progress import ProgressBar
@@ -364,7 +365,7 @@ def cmd_render(args) -> int:
         cam = scene.default_camera()
     if args.false_color:  # lux, cd/m² or daylight factor with a legend (iat.cli.analysis)
         return _emit(args, render_false_color(args, scene, sol, cam, size, out)) or 0
-    if sol is None and sset is None and mode == "iat":  # an exported bake, drawn as baked
+    if sol is None and sset is None and mode == "iat" and not args.faults:  # an exported bake, as baked
         from iat.render.glb_view import render_glb
 
         img = render_glb(args.input, cam, size)
@@ -375,7 +376,7 @@ def cmd_render(args) -> int:
     else:
         from iat.color import auto_exposure
 
-        save_png(out, img, exposure=args.exposure if args.exposure else auto_exposure(img))
+        save_png(out, img, exposure=1.0 if args.faults else args.exposure or auto_exposure(img))
     info = {"output": str(out), "mode": mode, "size": list(size)}
     if sset is not None:
         a, b, w = sset.weights(args.at)
@@ -405,7 +406,7 @@ def _render_solution(args, scene, sol, sset, cam, size, mode) -> np.ndarray:
                 from iat.bake.baker import Baker
 
                 r.set_baked(Baker(sol, scene).bake(_bake_policy(args)))
-        return r.render(cam, size=size, mode=mode)
+        return render_view(args, r, scene, cam, size, mode)  # --faults: tinted (iat.cli.faults)
     finally:
         r.release()
 
@@ -714,6 +715,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--size", default="640x480")
     s.add_argument("--exposure", type=float, help="PNG exposure (default: automatic)")
     add_false_color_flags(s)
+    add_faults_flag(s)
     bake_flags(s)
     solve_flags(s)
     s.add_argument("--json", action="store_true")

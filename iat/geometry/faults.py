@@ -217,13 +217,3 @@ def fault_counts(bits: np.ndarray) -> dict[str, int]:
     """{kind: patches carrying it} of :func:`patch_faults`' bits (P,) uint8."""
     b = np.asarray(bits, dtype=np.uint8)
     return {k: int((b & (1 << i) > 0).sum()) for i, k in enumerate(FAULTS)}
-
-
-def shown_kind(bits: np.ndarray, shown: int) -> np.ndarray:
-    """(P,) int64 the index in :data:`FAULTS` of the kind a patch is tinted with (the first of its
-    bits that ``shown``, a mask of bits, lets through), -1 for none."""
-    b = np.asarray(bits, dtype=np.int64) & int(shown)
-    out = np.full(len(b), -1, dtype=np.int64)
-    for k in range(len(FAULTS) - 1, -1, -1):  # the first kind in order wins
-        out[(b >> k) & 1 > 0] = k
-    return out

@@ -116,8 +116,7 @@ class Renderer:
         for name in ("mesh", "iat", "preview", "composite", "glass", "sky"):
             self._programs[name] = self._reg.add(gl.program(ctx, name))
         self._fullscreen = self._reg.add(ctx.vertex_array(self._programs["composite"], []))
-        # bound to the detail unit when a draw has no detail texture, so that unit never holds a
-        # texture that is also the render target (a feedback loop in diff mode)
+        # on the detail unit when a draw has no detail texture (never the target: a diff-mode feedback loop)
         self._white = self._reg.add(ctx.texture((1, 1), 4, np.ones(4, np.float32).tobytes(), dtype="f4"))
         mesh, iat, preview = self._programs["mesh"], self._programs["iat"], self._programs["preview"]
         mesh_attrs = [("position", 3), ("color", 3), ("color_b", 3), ("detail_uv", 2), ("detail", 1)]
@@ -132,16 +131,15 @@ class Renderer:
         self._sky = None  # the sky's equirectangular texture, or None: a black background
         self._has = {"preview": False, "mesh": False, "iat": False}
         self._page_tex = PageTexture(ctx, self._reg)
-        self._page_scale = 1.0
+        self._page_scale, self._lod_on = 1.0, True
         self._lod = LodDrawer(ctx, self._reg)  # a Baked with a LOD chain (iat.render.lod)
-        self._lod_on = True
         self._baked_args: tuple | None = None
         # solution sets: per-state vertex colours (CPU) of the solution mesh and of the baked mesh
         # part, the (a, b) pair uploaded as color / color_b, the states and pages per state in IAT mode
         self._colors: dict[str, list[np.ndarray]] = {"mesh": [], "iat": []}
         self._colors_pair: dict[str, tuple[int, int]] = {"mesh": (0, 0), "iat": (0, 0)}
-        self._iat_states = 1
-        self._iat_pages = 1
+        self._iat_states = self._iat_pages = 1
+        self.overlays: list = []  # drawn over the surfaces after the mode (iat.render.fault_tint)
         self._blend: tuple[int, int, float] = (0, 0, 0.0)
         self._detail: dict[str, dict[int, Any]] = {"iat": {}, "preview": {}}
         self._targets: dict[str, _Target] = {}
@@ -719,6 +717,8 @@ class Renderer:
                     ctx.scissor = None
                 else:
                     self._draw_mode(mode, clip, exposure, tonemap, stats)
+                for o in self.overlays:  # over the surfaces, under the sky and glass
+                    o.draw(clip, tonemap)
                 if mode != "preview":
                     self._draw_sky_and_glass(camera, w / h, clip, exposure, tonemap)
         finally:
