@@ -13,7 +13,14 @@ from iat.radiosity.visibility import Visibility
 from tests.test_radiosity import furnace_box
 
 
-def test_coarse_grids_are_the_lattice_grid_subsampled():
+def _trapezoid(grid: np.ndarray) -> np.ndarray:
+    """(3,) the mean of a (m+1, m+1, 3) lattice field over its square by the trapezoid rule."""
+    w = np.ones(grid.shape[0])
+    w[[0, -1]] = 0.5
+    return np.einsum("i,j,ijc->c", w, w, grid) / (grid.shape[0] - 1) ** 2
+
+
+def test_coarse_grids_keep_the_lattice_field_integral():
     f = qt.roots(np.array([True, False, True]), 4)
     rng = np.random.default_rng(2)
     for _ in range(3):  # uneven leaves: some larger than the coarse step, some smaller
@@ -21,11 +28,19 @@ def test_coarse_grids_are_the_lattice_grid_subsampled():
     keys = qt.vertex_keys(f)
     values = rng.random((len(keys), 3))
     lat = Lattice(f, keys)
-    for g in (2, 4, 16):
+    quads = np.flatnonzero(f.patch_is_quad)
+    for g in (4, 16):  # 4: each point the tent-weighted mean of 4 x 4 cells; 16: the lattice itself
         coarse = lat.coarse_grids(values, g)
-        step = f.n // g
-        for p in range(f.n_patches):
-            np.testing.assert_array_equal(coarse[p], lat.grid(p, values)[::step, ::step])
+        for p in quads:
+            np.testing.assert_allclose(_trapezoid(coarse[p]), _trapezoid(lat.grid(p, values)), rtol=1e-12)
+    for p in range(f.n_patches):
+        np.testing.assert_array_equal(lat.coarse_grids(values, 16)[p], lat.grid(p, values))
+    flat = np.tile([0.2, 0.5, 0.7], (len(keys), 1))  # a uniform field stays uniform, triangles too
+    coarse = lat.coarse_grids(flat, 2)
+    i, j = np.meshgrid(np.arange(3), np.arange(3), indexing="ij")
+    for p in range(f.n_patches):
+        read = np.ones((3, 3), bool) if f.patch_is_quad[p] else i + j <= 2  # what a triangle reads
+        np.testing.assert_allclose(coarse[p][read], np.broadcast_to([0.2, 0.5, 0.7], (read.sum(), 3)))
 
 
 def test_world_triangle_uv_maps_onto_the_world_triangles():

@@ -86,7 +86,7 @@ def _solve_options(args):
     from iat.radiosity import SolveOptions
 
     kw = {}
-    for name in ("max_depth", "tolerance", "max_edge", "samples", "convergence"):
+    for name in ("max_depth", "tolerance", "max_edge", "samples", "convergence", "ambient_rays"):
         v = getattr(args, name, None)
         if v is not None:
             kw[name] = v
@@ -570,6 +570,7 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--tolerance", type=float, help="relative radiance change that splits an element")
         sp.add_argument("--max-edge", type=float, dest="max_edge", help="pre-split patches longer than this")
         sp.add_argument("--samples", type=int, help="shooter samples for visibility")
+        sp.add_argument("--ambient-rays", type=int, dest="ambient_rays", help="rays a vertex of the ambient term (256)")
         sp.add_argument(
             "--convergence",
             type=float,

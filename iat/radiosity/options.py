@@ -72,19 +72,18 @@ RESOLVE_MAX_CHANGE = 1.0
 #: PEAK_SAMPLE_LIMIT times (:func:`iat.radiosity.sampling.peak_factor`; the daylit room's sunlit floor)
 PEAK_RATIO = 4.0
 PEAK_SAMPLE_LIMIT = 3.0
-#: rays per vertex of the ambient term (its final gather of the unshot light), a count
-AMBIENT_RAYS = 64
 #: rays of the ambient term traced and read at a time, a count (their buffers stay in the caches)
 AMBIENT_BLOCK_RAYS = 1 << 17
-#: side of the grid, a power of 2, on which the ambient term reads a patch's unshot light where its rays land
+#: side of the grid, a power of 2, on which the ambient term reads a patch's unshot light where its rays
+#: land (each point the tent-weighted mean around it: :meth:`iat.radiosity.sampling.Lattice.coarse_grids`)
 AMBIENT_GRID = 8
 #: the ambient term's later bounces are summed until a bounce adds under this fraction of the first
 AMBIENT_BOUNCE_TOL = 1e-4
 #: ... or this many bounces, a count
 AMBIENT_MAX_BOUNCES = 500
 #: upper bound of the albedo in the ambient term's later bounces and of the measured reflected
-#: fraction r (keeps their sum finite in an albedo-1 room)
-MAX_REFLECTANCE = 0.95
+#: fraction r (keeps their sum finite in an albedo-1 room; at 0.95 a room of albedo 0.97 was 16 % dark)
+MAX_REFLECTANCE = 0.99
 #: stage C refines once the unshot power is below this times ``convergence`` of the received power
 #: (it was sqrt(convergence), 22 % at the default: a daylit room's indirect light was then 10 %
 #: low against Mitsuba, 2.4 % now; the house: 38.0 k -> 43.6 k elements, 57 -> 78 s, one run)
@@ -168,6 +167,10 @@ class SolveOptions:
         convergence: a final gather of it from every vertex, its later bounces summed on the
         patches (see :mod:`iat.radiosity.solver`, D); False leaves it out (the result is then
         darker by about ``convergence`` times the interreflection gain).
+    ambient_rays : int, default 256. Rays per vertex of the ambient term's final gather (draft 64,
+        fine and final 1024). In a sunlit room whose bounced light is nearly all in that term, its
+        noise is most of the error: 64 rays 7.7 %, 256 5.1 % against Mitsuba (the daylit test room
+        of tests/test_real_daylight.py; docs/benchmarks.md, "The ambient term's rays").
     """
 
     max_depth: int = 6
@@ -183,6 +186,7 @@ class SolveOptions:
     criterion: str = "interpolation"
     refine_indirect: bool = True
     ambient: bool = True
+    ambient_rays: int = 256
 
     def validate(self) -> SolveOptions:
         """Raise :class:`iat.errors.OptionError` on an out-of-range option; return self."""
@@ -214,6 +218,8 @@ class SolveOptions:
             bad("convergence", "must be in (0, 1]")
         if not 1 <= integer("samples") <= 1024:
             bad("samples", "must be between 1 and 1024")
+        if not 1 <= integer("ambient_rays") <= 4096:
+            bad("ambient_rays", "must be between 1 and 4096")
         if not integer("max_shots") >= 0:
             bad("max_shots", "must be >= 0")
         if self.max_edge is not None and not num("max_edge") > 0:
@@ -274,8 +280,8 @@ class SolveOptions:
 #: "Quality presets"): the mesh (depth, tolerance) buys little past the defaults; the unshot
 #: remainder (convergence) and the samples do
 QUALITY_PRESETS: dict[str, dict] = {
-    "draft": {"max_depth": 4, "samples": 8},
+    "draft": {"max_depth": 4, "samples": 8, "ambient_rays": 64},
     "default": {},
-    "fine": {"convergence": 0.01},
-    "final": {"convergence": 0.005, "tolerance": 0.05, "samples": 32},
+    "fine": {"convergence": 0.01, "ambient_rays": 1024},
+    "final": {"convergence": 0.005, "tolerance": 0.05, "samples": 32, "ambient_rays": 1024},
 }

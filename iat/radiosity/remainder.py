@@ -1,7 +1,7 @@
 """The ambient term (stage D of :mod:`iat.radiosity.solver`): what the light still unshot at
 convergence adds over all its later bounces, by a final gather of it.
 
-Every vertex casts ``AMBIENT_RAYS`` cosine-distributed rays (one stratified pattern for all, so
+Every vertex casts ``ambient_rays`` (:class:`~iat.radiosity.options.SolveOptions`) cosine-distributed rays (one stratified pattern for all, so
 the result varies smoothly) and takes, where each first meets a front face, the unshot radiance
 there (the patch's field on its ``AMBIENT_GRID`` x ``AMBIENT_GRID`` lattice, times its shot gain):
 their mean times the vertex's albedo is the remainder's first bounce ``R1``, at the resolution of
@@ -28,19 +28,18 @@ from iat.radiosity.options import (
     AMBIENT_BOUNCE_TOL,
     AMBIENT_GRID,
     AMBIENT_MAX_BOUNCES,
-    AMBIENT_RAYS,
     MAX_REFLECTANCE,
 )
 from iat.radiosity.sampling import concentric_disk, pattern_side
 from iat.radiosity.state import Mesh
 
 
-def hemisphere_rays(ctx, geo):
+def hemisphere_rays(ctx, geo, rays: int):
     """Per block of vertices (``AMBIENT_BLOCK_RAYS`` rays at most, or one vertex): their slice,
-    their ``AMBIENT_RAYS`` cosine-distributed rays in vertex order (the same pattern at every
+    their ``rays`` (rounded up to a square) cosine-distributed rays in vertex order (the same pattern at every
     vertex) as embreex takes them, origins and directions (b k, 3) float32, the directions (b k, 3)
     float64, and k. The arrays are reused for the next block."""
-    m = pattern_side(AMBIENT_RAYS)
+    m = pattern_side(rays)
     pat = ctx.gathers.pattern(ctx.patches.n_patches, m, 0)  # (a patch index no shooter has)
     dx, dy = concentric_disk(pat[:, 0], pat[:, 1])
     k = pat.shape[0]
@@ -56,7 +55,7 @@ def hemisphere_rays(ctx, geo):
         yield sl, o[:b], d[:b], w[:b], k
 
 
-def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, check, tally: bool):
+def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, rays: int, check, tally: bool):
     """(V, 3) each vertex's mean, over its :func:`hemisphere_rays`, of the radiance ``grids``
     ((P, g+1, g+1, 3): each patch's field on a g x g lattice) where they meet a front face, and,
     when ``tally``, the (V, P) CSR fraction of each vertex's rays that meet each patch (else None).
@@ -68,7 +67,7 @@ def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, check
     means = np.ascontiguousarray(grids.reshape(len(grids), -1, 3).mean(axis=1))  # (P, 3), for twins
     mean = np.zeros((len(geo.key), 3))
     per_vertex, cols, counts = [], [], []  # (V, P) CSR by rows: the kernel writes them in vertex order
-    for sl, o, d, w, k in hemisphere_rays(ctx, geo):
+    for sl, o, d, w, k in hemisphere_rays(ctx, geo, rays):
         tri, bary = vis.first_hits(o, d, np.full(len(o), 4.0 * ctx.patches.scale, dtype=np.float32))
         r, c, f = np.empty(len(o), np.int64), np.empty(len(o), np.int64), np.empty(len(o))
         m = ambient_hits(
@@ -101,20 +100,22 @@ def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, check
     return mean, sparse.csr_matrix((np.concatenate(counts), np.concatenate(cols), indptr), shape=shape)
 
 
-def ambient_term(ctx, mesh: Mesh, vis, scene, unshot: np.ndarray, gain: np.ndarray, check) -> np.ndarray:
+def ambient_term(
+    ctx, mesh: Mesh, vis, scene, unshot: np.ndarray, gain: np.ndarray, rays: int, check
+) -> np.ndarray:
     """(V, 3) the reflected radiance the unshot light adds over all its later bounces (see the
     module docstring), on the solve's ``mesh`` (V vertices).
 
-    unshot : (V, 3) unshot radiance; gain : (P,) each patch's shot gain."""
+    unshot : (V, 3) unshot radiance; gain : (P,) each patch's shot gain; rays : per vertex."""
     geo, avg, rho, lattice = mesh.geo, mesh.M, mesh.rho, mesh.lattice
     g = min(AMBIENT_GRID, ctx.patches.n)
     tris = scene.world_triangle_patch()[vis.opaque], scene.world_triangle_uv()[vis.opaque]
     grids = lattice.coarse_grids(unshot, g) * gain[:, None, None, None]
-    first, fv = hemisphere_gather(ctx, geo, vis, *tris, grids, check, True)
+    first, fv = hemisphere_gather(ctx, geo, vis, *tris, grids, rays, check, True)
     r1 = rho * first
     grids = lattice.coarse_grids(r1, g)
     grids[ctx.patches.clipped] = np.asarray(avg @ r1)[ctx.patches.clipped][:, None, None, :]
-    second, _ = hemisphere_gather(ctx, geo, vis, *tris, grids, check, False)  # the same rays again
+    second, _ = hemisphere_gather(ctx, geo, vis, *tris, grids, rays, check, False)  # the same rays again
     r2 = rho * second
     rho_p = np.minimum(np.asarray(ctx.patches.albedo, dtype=np.float64), MAX_REFLECTANCE)
     src = np.asarray(avg @ r2)

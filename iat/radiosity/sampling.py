@@ -13,6 +13,12 @@ from iat.radiosity.bundles import ShooterArrays
 from iat.radiosity.kernels import hash_keys, leaf_fields
 
 
+#: a coarse grid point is the tent-weighted mean of this many fine points per cell side
+COARSE_SUB = 4
+#: patches whose fine fields are read at once
+COARSE_CHUNK = 256
+
+
 def hash_uniform(keys: np.ndarray, salt: int, k: int = 2) -> np.ndarray:
     """(n, k) float64 in [0, 1): k splitmix64 hashes of (key, salt) (:func:`.kernels.hash_keys`)."""
     keys = np.ascontiguousarray(keys, dtype=np.int64).reshape(-1)
@@ -178,10 +184,26 @@ class Lattice:
 
     def coarse_grids(self, values: np.ndarray, g: int) -> np.ndarray:
         """(P, g+1, g+1, 3) every patch's field on the ``g`` x ``g`` lattice (``g`` a power of 2, at
-        most N): :meth:`grid` at every (N / g)-th point, for all patches at once.
+        most N), each point the tent-weighted mean of the field around it (read ``COARSE_SUB`` times
+        finer per side): the coarse grid's piecewise-linear field keeps the fine one's integral, so a
+        sun patch smaller than a coarse cell keeps its power wherever it falls.
         values : (V, 3) at the lattice's vertex keys."""
         g = min(int(g), self.n)
-        return self._fields(self.order, self.forest.n_patches, 0, self.n // g, values)
+        r = min(COARSE_SUB, self.n // g)  # fine points per coarse cell, per side
+        fine = g * r
+        tent = (r - np.abs(np.arange(1 - r, r))) / r  # (2r - 1,)
+        ij = np.arange(fine + 1)
+        edge = np.where((ij == 0) | (ij == fine), 0.5, 1.0)
+        quad = edge[:, None] * edge[None, :]  # the fine points' shares of the patch (trapezoid rule)
+        tri = np.where(ij[:, None] + ij[None, :] <= fine, quad, 0.0)  # a triangle's lattice points
+        out = np.empty((self.forest.n_patches, g + 1, g + 1, 3))
+        for a in range(0, self.forest.n_patches, COARSE_CHUNK):
+            b = min(a + COARSE_CHUNK, self.forest.n_patches)
+            leaves = self.order[self.starts[a] : self.starts[b]]
+            f = self._fields(leaves, b - a, a, self.n // fine, values)
+            w = np.where(self.forest.patch_is_quad[a:b, None, None], quad[None], tri[None])
+            out[a:b] = _tent_down(f * w[..., None], tent, r) / np.maximum(_tent_down(w[..., None], tent, r), 1e-300)
+        return out
 
     def _fields(self, leaves: np.ndarray, count: int, first: int, step: int, values: np.ndarray):
         """(count, N/step + 1, N/step + 1, 3) the fields of patches ``first`` on from ``leaves``."""
@@ -192,6 +214,17 @@ class Lattice:
             fo.patch_is_quad, self.corner, np.ascontiguousarray(values, dtype=np.float64),
         )  # fmt: skip
         return out
+
+
+def _tent_down(f: np.ndarray, tent: np.ndarray, r: int) -> np.ndarray:
+    """(P, g+1, g+1, C) the sums of ``tent`` x ``tent``-weighted windows of f (P, g r + 1, g r + 1, C)
+    centred on every r-th point (windows cut at the edges)."""
+    pad = len(tent) // 2
+    for axis in (1, 2):
+        fp = np.pad(f, [(pad, pad) if a == axis else (0, 0) for a in range(4)])
+        n = f.shape[axis]
+        f = sum(w * np.take(fp, np.arange(k, k + n, r), axis=axis) for k, w in enumerate(tent))
+    return f
 
 
 def pattern_side(samples: int) -> int:

@@ -65,9 +65,9 @@ C. **Refinement on the total radiance** (``refine_indirect``), once, after the
    power in a closed scene, what came in in an open one).
 D. **Ambient term** (``ambient``; after Cohen et al. 1988, as a final gather): the light still
    unshot at convergence, carried through all its later bounces (:mod:`.remainder`). Every
-   vertex casts ``AMBIENT_RAYS`` cosine-distributed rays (one pattern for all vertices, so it
+   vertex casts ``ambient_rays`` cosine-distributed rays (one pattern for all vertices, so it
    varies smoothly) and reads the unshot radiance where each first meets a front face (the
-   patch's field on an ``AMBIENT_GRID`` lattice, times its shot gain): their mean times its
+   patch's field on an ``AMBIENT_GRID`` lattice, tent-filtered, times its shot gain): their mean times its
    albedo is the remainder's first bounce, where it falls (a sunlit building's interior gets
    its own sunlit floor's light, not a share spread over the exterior). The same rays, traced
    again, read that first bounce where they land for the second (a panel cell gives its patch
