@@ -25,12 +25,13 @@ def distribution(gamma_deg, c_deg):
     return np.where(g <= np.pi / 2, PEAK * np.cos(g) ** 2 * (1 + 0.5 * np.cos(2 * c)) / 1.5, 0.0)
 
 
-def ies_text(step_v=2.5, step_h=5.0) -> str:
+def ies_text(step_v=2.5, step_h=5.0, multiplier=1.0) -> str:
+    """The LM-63 file of :func:`distribution` (its candela times ``multiplier``)."""
     v = np.arange(0.0, 180.0 + 1e-9, step_v)
     h = np.arange(0.0, 360.0 + 1e-9, step_h)
     cd = distribution(v[None, :], h[:, None])
     head = ["IESNA:LM-63-2002", "[TEST] issue 39", "[MANUFAC] none", "TILT=NONE"]
-    nums = [1, -1, 1, len(v), len(h), 1, 2, 0.1, 0.1, 0.0, 1.0, 1.0, 30.0, *v, *h, *cd.ravel()]
+    nums = [1, -1, multiplier, len(v), len(h), 1, 2, 0.1, 0.1, 0.0, 1.0, 1.0, 30.0, *v, *h, *cd.ravel()]
     rows = [" ".join(f"{x:.6g}" for x in nums[k : k + 10]) for k in range(0, len(nums), 10)]
     return "\n".join(head + rows) + "\n"
 
@@ -130,3 +131,27 @@ def test_a_gltf_light_names_its_ies_file_in_extras(tmp_path):
     (tmp_path / "downlight.ies").write_text("TILT=NONE\n1 2\n")
     with pytest.raises(LoadError, match="downlight.ies"):
         load_scene(tmp_path / "lit.gltf")
+
+
+def test_light_edits_keep_the_distribution_and_the_viewer_loads_one(tmp_path):
+    """Moving or recolouring a light keeps its IES distribution; ``viewer.lights.load_ies`` gives a
+    light one at the file's peak (the status line says so), and a bad file raises one line naming
+    it, the light unchanged."""
+    from iat.errors import IATError
+    from iat.lighting.editor import LightEditor
+    from iat.lighting.edits import edit_light
+    from viewer.lights import load_ies
+
+    light = ph.ies_light(parse_ies(ies_text(), "d.ies"), position=[1.0, 2.0, 1.0])
+    scene = scene_of(grid_quads(0, 2, 0, 2, 0.0, 1, 1), [0], [Material("f", albedo=np.full(3, 0.5))], [light])
+    moved = edit_light(scene, 0, position=[0.5, 2.0, 0.5], color=[1.0, 0.9, 0.8])
+    assert moved.lights[0].ies is light.ies
+    ed = LightEditor(edit_light(scene, 0, ies=None, intensity=1.0))
+    (tmp_path / "bad.ies").write_text("TILT=NONE\n1 2\n")
+    with pytest.raises(IATError, match="bad.ies") as e:
+        load_ies(ed, 0, tmp_path / "bad.ies")
+    assert "\n" not in str(e.value) and ed.lights[0].ies is None and ed.version == 0
+    (tmp_path / "down.ies").write_text(ies_text(multiplier=2.0))
+    status = load_ies(ed, 0, tmp_path / "down.ies")
+    assert ed.lights[0].ies.name == "down.ies" and ph.light_candela(ed.lights[0]) == pytest.approx(2 * PEAK)
+    assert "down.ies" in status and "2000 cd peak" in status

@@ -30,7 +30,7 @@ from viewer import false_color
 from viewer.bake_worker import snap_scale
 from viewer.daylight import model_north, sun_facts, sun_label
 from viewer.eta import JobEta
-from viewer.lights import new_light_intensity, new_light_position
+from viewer.lights import ies_controls, new_light_intensity, new_light_position
 from viewer.navigation import paths_file
 from viewer.state import MODE_LABELS, MODES, AppState
 
@@ -473,6 +473,7 @@ def lighting_panel(state: AppState) -> None:
         )
         if changed:
             ed.edit(k, intensity=max(float(v), 0.0))
+        ies_controls(state, ed, k)
 
     em = ed.emissive()
     if em:

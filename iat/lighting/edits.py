@@ -37,6 +37,7 @@ def copy_light(lt: Light, **changes) -> Light:
         "outer_cone": float(lt.outer_cone),
         "name": lt.name,
         "angular_diameter": float(getattr(lt, "angular_diameter", Light().angular_diameter)),
+        "ies": lt.ies,
     }
     kw.update(changes)
     return checked_light(Light(**kw))
@@ -112,10 +113,13 @@ def _material_index(scene: Scene, material: int | str) -> int:
 
 def edit_light(scene: Scene, index: int | str, **changes) -> Scene:
     """A new Scene with light ``index`` (or name) changed: any of ``position``, ``direction``,
-    ``color``, ``intensity``, ``inner_cone``, ``outer_cone``, ``kind``, ``name``.
+    ``color``, ``intensity``, ``inner_cone``, ``outer_cone``, ``kind``, ``name``, ``ies`` (an
+    :class:`~iat.io.ies.Photometry` or None).
     Raises :class:`~iat.errors.OptionError` on an unknown field or a bad value."""
     i = light_index(scene, index)
-    allowed = {"position", "direction", "color", "intensity", "inner_cone", "outer_cone", "kind", "name"}
+    allowed = {
+        *("position", "direction", "color", "intensity", "inner_cone", "outer_cone", "kind", "name", "ies")
+    }
     bad = set(changes) - allowed
     if bad:
         raise OptionError(f"unknown light field(s): {', '.join(sorted(bad))}")
