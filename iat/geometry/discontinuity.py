@@ -244,11 +244,12 @@ def _detail_uv(puv: np.ndarray, is_quad: bool, uv: np.ndarray) -> np.ndarray:
     return (1 - u - v) * puv[0] + u * puv[1] + v * puv[2]
 
 
-def _cut_patch(poly: np.ndarray, segs: np.ndarray, size: float) -> list[np.ndarray]:
+def _cut_patch(poly: np.ndarray, segs: np.ndarray, size: float) -> tuple[list[np.ndarray], np.ndarray]:
     """Convex pieces of ``poly`` (k, 2) cut along segments ``segs`` (s, 2, 2), longest first, at most
-    :data:`MAX_CUTS_PER_PATCH` of them, none leaving a piece narrower than ``size`` (scene units)."""
+    :data:`MAX_CUTS_PER_PATCH` of them, none leaving a piece narrower than ``size`` (scene units).
+    Returns (pieces, lines (c, 2, 2): the segments that cut)."""
     tol = 1e-7 * size
-    pieces = [poly]
+    pieces, lines = [poly], []
     order = np.argsort(-np.linalg.norm(segs[:, 1] - segs[:, 0], axis=1), kind="stable")
     cuts = 0
     for p0, p1 in segs[order]:
@@ -273,7 +274,9 @@ def _cut_patch(poly: np.ndarray, segs: np.ndarray, size: float) -> list[np.ndarr
                 cut = True
         pieces = out
         cuts += cut
-    return pieces
+        if cut:
+            lines.append((p0, p1))
+    return pieces, np.array(lines, np.float64).reshape(-1, 2, 2)
 
 
 def split_discontinuities(scene, lights=None):
@@ -313,7 +316,7 @@ def split_discontinuities(scene, lights=None):
         origin, axes = polycut.plane_frame(corners3[p], normal[p])
         poly = (corners3[p, :k] - origin) @ axes.T
         mine = seg[seg_patch == p]
-        pieces = _cut_patch(poly, (mine - origin) @ axes.T, min_piece)
+        pieces, lines = _cut_patch(poly, (mine - origin) @ axes.T, min_piece)
         if len(pieces) < 2:
             continue
         pieces = [
@@ -322,7 +325,10 @@ def split_discontinuities(scene, lights=None):
         pts, roots = [], []
         for piece in pieces:
             base = sum(len(x) for x in pts)
-            roots += [[base + i for i in r] for r in polycut.to_roots(piece, QUAD_SKEW_TOL)]
+            for r in polycut.to_roots(piece, QUAD_SKEW_TOL):
+                if len(r) == 3:  # a shadow line on a leg, not the hypotenuse (the texture's lattice)
+                    r = polycut.legs_on_lines(piece, r, lines, 1e-6 * min_piece)
+                roots.append([base + i for i in r])
             pts.append(piece)
         pts2 = np.concatenate(pts)
         children[int(p)] = (origin + pts2 @ axes, roots, pts2)

@@ -135,3 +135,25 @@ def shorten(poly: np.ndarray, aspect: float, length: float) -> list[np.ndarray]:
         else:
             todo.extend(halves)
     return out
+
+
+def legs_on_lines(poly: np.ndarray, tri: list[int], lines: np.ndarray, tol: float) -> list[int]:
+    """``tri`` (3 corner indices into ``poly`` (k, 2)) rotated so that its hypotenuse, edge 1-2 of a
+    triangle root's lattice (``u + v = 1``), lies on none of ``lines`` (c, 2, 2) (within ``tol``)
+    when one of its edges does not: a shadow along a leg is a function of one lattice axis, which
+    a texture's bilinear lookup reproduces, while across the hypotenuse it mixes values from either
+    side of the line (docs/baking.md, "Cut roots"). The winding is kept."""
+    if not len(lines):
+        return tri
+    d = lines[:, 1] - lines[:, 0]
+    d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+
+    def on_a_line(p: np.ndarray, q: np.ndarray) -> bool:
+        off = [np.abs(d[:, 0] * (x[1] - lines[:, 0, 1]) - d[:, 1] * (x[0] - lines[:, 0, 0])) for x in (p, q)]
+        return bool(((off[0] <= tol) & (off[1] <= tol)).any())
+
+    for shift in range(3):
+        r = tri[shift:] + tri[:shift]
+        if not on_a_line(poly[r[1]], poly[r[2]]):
+            return r
+    return tri
