@@ -46,7 +46,7 @@ import glfw  # isort: skip
 
 from iat.errors import IATError
 from iat.radiosity import SolveOptions
-from viewer import background_io, controls, overlay, panels, sun_panel
+from viewer import background_io, controls, faults_view, overlay, panels, sun_panel
 from viewer.bake_worker import BakeSource, BakeWorker
 from viewer.jobs import Opened, OpenJob, SetJob, error_text
 from viewer.navigation import CameraPath, load_paths, paths_file, save_paths, walker
@@ -173,6 +173,7 @@ class ViewerApp:
             self._window("Tuning", "LeftSpace", panels.tuning_panel),
             self._window("View", "LeftBottom", panels.view_panel),
             self._window("Model", "LeftBottom", panels.file_panel),
+            self._window("Model faults", "LeftBottom", faults_view.panel),
             self._window("Stats", "RightSpace", panels.stats_panel),
             self._window("Lighting", "RightBottom", panels.lighting_panel),
             self._window("Sun & sky", "RightSpace", sun_panel.sun_sky_panel),
@@ -335,12 +336,8 @@ class ViewerApp:
         lit = opened.solution is not None  # an exported bake has its light in its textures
         s.lighting.editor = LightEditor(opened.scene) if lit else None
         s.lighting.relighter = ProgressRelighter(opened.solution, opened.scene) if lit else None
-        (
-            s.lighting.relight_version,
-            s.lighting.relights,
-            s.lighting.relight_step,
-            s.lighting.relight_seconds,
-        ) = 0, 0, (0, 0), 0.0
+        lt = s.lighting
+        lt.relight_version, lt.relights, lt.relight_step, lt.relight_seconds = 0, 0, (0, 0), 0.0
         s.lighting.selected_light = 0 if opened.scene.lights else -1
         s.lighting.dragging_light = False
         s.lighting.set_job, s.lighting.solution_set, s.lighting.day_cycle, s.lighting.day_time = (
@@ -397,6 +394,7 @@ class ViewerApp:
         panels.error_window(s)
         overlay.view_overlay(s)
         sun_panel.frame(self)  # the Sun & sky panel's change to the re-solve, the sky, the sun's disc
+        faults_view.frame(self)  # the Model faults panel's choices to the view's tint
         busy = s.jobs.opening or s.jobs.rebaking or s.lighting.relighting or s.lighting.solving_day_cycle
         moving = s.paths.player or s.paths.recorder or s.view.looking or s.lighting.dragging_light
         if self.idle and (busy or moving or (self.view3d is not None and self.view3d.dirty)):
