@@ -390,6 +390,51 @@ def daylight_part(trees: dict, models: list, presets: list, cap: float, json_pat
                 )
 
 
+def daylight_markdown(result: dict) -> str:
+    """The rows of part ``daylight`` as a Markdown table, before and after side by side (the first two
+    trees of the rows), then the last progress line of each run stopped at the cap."""
+    rows = {(r["model"], r["preset"], r["tree"]): r for r in result["rows"]}
+    trees = list(dict.fromkeys(r["tree"] for r in result["rows"]))[:2]
+    keys = list(dict.fromkeys((r["model"], r["preset"]) for r in result["rows"]))
+
+    def cell(r, field, fmt="{:,}"):
+        if r is None:
+            return "not run"
+        if r.get("stopped"):
+            return f"> {r['wall_s']:.0f} s (stopped)" if field == "solve_s" else "-"
+        if "error" in r:
+            return r["error"][:60] if field == "solve_s" else "-"
+        v = r.get(field)
+        return "-" if v is None else fmt.format(v)
+
+    out = [
+        f"| model | preset | {' → '.join(trees)}: patches | solve s | elements | shots | max vertex radiance "
+        "| peak RSS MiB | load at start |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    notes = []
+    for model, preset in keys:
+        rs = [rows.get((model, preset, t)) for t in trees]
+        pair = [
+            " → ".join(f(r) for r in rs)
+            for f in (
+                lambda r: "-" if r is None or "patches" not in r else f"{r['patches']:,}",
+                lambda r: cell(r, "solve_s", "{:.0f}"),
+                lambda r: cell(r, "elements"),
+                lambda r: cell(r, "shots"),
+                lambda r: cell(r, "max_radiance", "{:.3g}"),
+                lambda r: "-" if r is None else f"{r['peak_rss_mib']:,.0f}",
+                lambda r: "-" if r is None else f"{r['load_before'][0]:.1f}",
+            )
+        ]
+        out.append(f"| {model} | {preset} | " + " | ".join(pair) + " |")
+        for t, r in zip(trees, rs, strict=True):
+            if r is not None and r.get("stopped"):
+                last = [ln for ln in r["last_lines"] if ln.startswith("PROGRESS")] or ["-"]
+                notes.append(f"- {model} {preset} {t}: stopped at {r['wall_s']:.0f} s; last: `{last[-1]}`")
+    return "\n".join(out + [""] + notes) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     import argparse
 
@@ -399,6 +444,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--models", default=",".join(DAYLIGHT_MODELS), help="daylight: the models")
     ap.add_argument("--presets", default="draft,default", help="daylight: the presets")
     ap.add_argument("--cap", type=float, default=900.0, help="daylight: seconds a run may take")
+    ap.add_argument("--table", action="store_true", help="daylight: print the JSON's table, run nothing")
     ap.add_argument(
         "--json",
         default=str(Path(__file__).with_name("real_models_daylight.json")),
@@ -413,6 +459,9 @@ def main(argv: list[str] | None = None) -> int:
     if "daylight" in parts:
         trees = dict(t.split("=", 1) for t in args.tree) or {"now": "."}
         trees = {k: Path(v).resolve() for k, v in trees.items()}
+        if args.table:
+            print(daylight_markdown(json.loads(Path(args.json).read_text())), end="")
+            return 0
         daylight_part(trees, args.models.split(","), args.presets.split(","), args.cap, Path(args.json))
         parts.discard("daylight")
         if not parts:
