@@ -294,15 +294,22 @@ def trace_occluded(fn, scene, o, d, t, out):
 
 @njit(cache=True, parallel=True, nogil=True)
 def trace_visible(occ, isect, scene, glass, glass_tau, o, d, t, out):
-    """``out[i]`` (n,) float64: :func:`visible1` of ray i."""
+    """``out[i]`` (n,) float64: :func:`visible1` of ray i. Returns how many rays were traced against
+    the glass (those that nothing opaque stops, when there is glass)."""
     n = o.shape[0]
-    for b in prange((n + RAY_BLOCK - 1) // RAY_BLOCK):
+    nb = (n + RAY_BLOCK - 1) // RAY_BLOCK
+    through = np.zeros(nb, dtype=np.int64)
+    for b in prange(nb):
         rec, bits = ray_record()
         for i in range(b * RAY_BLOCK, min(n, (b + 1) * RAY_BLOCK)):
-            out[i] = visible1(
+            v = visible1(
                 occ, isect, scene, glass, glass_tau, rec, bits,
                 o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i],
             )  # fmt: skip
+            out[i] = v
+            if glass != 0 and v > 0:
+                through[b] += 1
+    return through.sum()
 
 
 @njit(cache=True, parallel=True, nogil=True)

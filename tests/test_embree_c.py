@@ -1,0 +1,186 @@
+"""Embree's C API from numba kernels (:mod:`iat.radiosity.embree`, issue 41) against embreex: the same
+answers ray for ray on real scenes (the sample house, a glazed room), the same solves to the bit, the
+kernels cacheable across processes, and the fallback to embreex."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from iat.io.load import load_scene
+from iat.radiosity import SolveOptions, embree, solve
+from iat.radiosity.visibility import Visibility
+from tests.support.daylight import daylit_room
+
+ROOT = Path(__file__).resolve().parent.parent
+pytestmark = pytest.mark.skipif(not embree.available(), reason="libembree4 not found")
+
+
+def scene_rays(scene, n: int, seed: int = 0):
+    """n rays as the solver casts them: from random points on the patches, off the surface, (a) in
+    cosine directions as far as the scene's diagonal, a random fraction of it for a third of them,
+    and (b) towards the corners of random patches (the edges and vertices where the triangle tests
+    must agree), stopping just short of them."""
+    rng = np.random.default_rng(seed)
+    area = scene.patch_area
+    p = rng.choice(len(area), size=n, p=area / area.sum())
+    c = scene.corner_positions[p]
+    u, v = rng.random(n), rng.random(n)
+    tu, tv = np.where(u + v > 1, 1 - u, u), np.where(u + v > 1, 1 - v, v)
+    quad = scene.patch_is_quad[p][:, None]
+    pos_q = (
+        c[:, 0] * ((1 - u) * (1 - v))[:, None]
+        + c[:, 1] * (u * (1 - v))[:, None]
+        + c[:, 2] * (u * v)[:, None]
+        + c[:, 3] * ((1 - u) * v)[:, None]
+    )
+    pos = np.where(
+        quad, pos_q, c[:, 0] + (c[:, 1] - c[:, 0]) * tu[:, None] + (c[:, 2] - c[:, 0]) * tv[:, None]
+    )
+    nrm = scene.patch_normal[p]
+    lo, hi = scene.bounds
+    diag = float(np.linalg.norm(hi - lo))
+    o = pos + 1e-4 * diag * nrm
+    r, phi = np.sqrt(rng.random(n)), 2 * np.pi * rng.random(n)
+    helper = np.where(np.abs(nrm[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    t1 = np.cross(nrm, helper)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(nrm, t1)
+    d = (r * np.cos(phi))[:, None] * t1 + (r * np.sin(phi))[:, None] * t2 + np.sqrt(1 - r * r)[:, None] * nrm
+    t = np.full(n, diag)
+    t[: n // 3] *= rng.random(n // 3)
+    half = n // 2  # the second half aims at patch corners
+    q = rng.integers(0, len(area), n - half)
+    target = scene.corner_positions[q, rng.integers(0, 3, n - half)]
+    to = target - o[half:]
+    dist = np.linalg.norm(to, axis=1)
+    d[half:] = to / np.maximum(dist, 1e-30)[:, None]
+    t[half:] = dist * (1 - 1e-6)
+    return o, d, t
+
+
+def glazed_room():
+    return daylit_room(glass=0.7)
+
+
+def sample(name: str):
+    return load_scene(ROOT / "sample_models" / f"{name}.glb")
+
+
+def same_answers(scene, n: int) -> dict:
+    """Each query of both backends on the same rays: {query: whether they agree exactly}."""
+    o, d, t = scene_rays(scene, n)
+    out = {}
+    with Visibility.of_scene(scene, backend="embreex") as a, Visibility.of_scene(scene, backend="c") as b:
+        assert (a.backend, b.backend) == ("embreex", "c")
+        out["occluded"] = np.array_equal(a.occluded(o, d, t), b.occluded(o, d, t))
+        va, vb = a.visible(o, d, t), b.visible(o, d, t)
+        out["visible"] = np.array_equal(va, vb)
+        out["first_hit"] = np.array_equal(a.first_hit(o, d, t), b.first_hit(o, d, t))
+        (pa, ba), (pb, bb) = a.first_hits(o, d, t), b.first_hits(o, d, t)
+        hit = pa >= 0
+        out["first_hits"] = np.array_equal(pa, pb) and np.array_equal(ba[hit], bb[hit])
+        out["rays counted"] = a.rays == b.rays
+        out["some hit, some free"] = 0 < hit.mean() < 1 and 0 < va.mean() < 1
+        if scene.patch_transmission.any():
+            out["some through glass"] = bool(((va > 0) & (va < 1)).any())
+    return out
+
+
+@pytest.mark.parametrize("make", [lambda: sample("house"), lambda: sample("house_day"), glazed_room])
+def test_same_answers_as_embreex(make):
+    """Ray for ray, the C API's answers are embreex's: occlusion, the glass's transmittance, the first
+    hit and its barycentric coordinates to the bit (both build robust scenes)."""
+    res = same_answers(make(), 200_000)
+    assert all(res.values()), res
+
+
+def test_threads_do_not_change_answers():
+    scene = sample("house")
+    o, d, t = scene_rays(scene, 50_000, seed=3)
+    with Visibility.of_scene(scene, threads=1) as one, Visibility.of_scene(scene, threads=2) as two:
+        assert np.array_equal(one.visible(o, d, t), two.visible(o, d, t))
+        with two.on_this_thread():
+            assert two.ray_threads() == 1
+            assert np.array_equal(one.first_hits(o, d, t)[0], two.first_hits(o, d, t)[0])
+
+
+def test_empty_scene_and_no_rays():
+    with Visibility(np.zeros((0, 3, 3))) as vis:
+        o = np.zeros((3, 3))
+        d = np.tile([0.0, 0.0, 1.0], (3, 1))
+        assert not vis.occluded(o, d, np.ones(3)).any()
+        assert (vis.visible(o, d, np.ones(3)) == 1).all()
+        assert (vis.first_hit(o, d, np.ones(3)) == -1).all()
+        assert len(vis.occluded(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))) == 0
+
+
+def test_fallback_to_embreex(monkeypatch):
+    """``IAT_EMBREE_C=0``, or no library, gives embreex's path."""
+    monkeypatch.setenv(embree.EMBREE_C_ENV, "0")
+    assert not embree.available()
+    with Visibility(np.eye(3)[None]) as vis:
+        assert vis.backend == "embreex" and vis.embree_args() is None
+    monkeypatch.delenv(embree.EMBREE_C_ENV)
+    monkeypatch.setenv(embree.EMBREE_LIB_ENV, "/nonexistent/libembree4.so.4")
+    monkeypatch.setattr(embree, "_LIB", [])
+    assert not embree.available()
+    with Visibility(np.eye(3)[None]) as vis:
+        assert vis.backend == "embreex"
+
+
+def test_closed_scene_releases_handles():
+    vis = Visibility(np.eye(3)[None])
+    assert vis.embree_args()[2] != 0
+    vis.close()
+    assert vis._c.handle == 0
+    vis.close()  # twice is fine
+
+
+def test_kernels_cache_across_processes(tmp_path):
+    """The kernels take the entry points' addresses as arguments: a second process loads them from
+    numba's cache (the library at another address there) and still answers right."""
+    code = textwrap.dedent(
+        """
+        import numpy as np
+        from iat.radiosity import embree
+        from iat.radiosity.visibility import Visibility
+        with Visibility(np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], float), backend="c") as vis:
+            o = np.array([[0.2, 0.2, 1.0], [2.0, 2.0, 1.0]])
+            d = np.array([[0.0, 0.0, -1.0]] * 2)
+            assert vis.occluded(o, d, np.full(2, 5.0)).tolist() == [True, False]
+            prim, bary = vis.first_hits(o, d, np.full(2, 5.0))
+            assert prim.tolist() == [0, -1] and np.allclose(bary[0], [0.2, 0.2])
+        print("hits", sum(len(k.stats.cache_hits) for k in (embree.trace_occluded, embree.trace_first_hits)))
+        """
+    )
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    runs = [
+        subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True)
+        for _ in range(2)
+    ]
+    for r in runs:
+        assert r.returncode == 0, r.stderr[-3000:]
+    assert runs[0].stdout.strip() == "hits 0"  # compiled ...
+    assert runs[1].stdout.strip() == "hits 2"  # ... then loaded from the cache
+
+
+@pytest.mark.parametrize("make", [lambda: sample("cornell_box"), glazed_room])
+def test_solves_same_bits(make, monkeypatch):
+    """A solve with the C API (its gathers trace their own rays) is the embreex solve to the bit."""
+    scene = make()
+    glazed = scene.patch_transmission.any()  # sun and sky through the glass, at draft's cost
+    opts = SolveOptions.preset("draft", convergence=0.2) if glazed else SolveOptions()
+    monkeypatch.setenv(embree.EMBREE_C_ENV, "0")
+    ref = solve(scene, opts)
+    monkeypatch.delenv(embree.EMBREE_C_ENV)
+    sol = solve(scene, opts)
+    assert np.array_equal(ref.vert_key, sol.vert_key)
+    assert np.array_equal(ref.vert_radiance, sol.vert_radiance)
+    assert ref.stats["rays"] == sol.stats["rays"]
