@@ -1,6 +1,7 @@
 """The gather kernels' arguments in typed bundles (:class:`ShooterArrays`, :class:`ReceiverRows`,
-:class:`Samples`, :class:`ShotField`), and the calls of :mod:`iat.radiosity.kernels` that take
-them: a gather passes four bundles where the kernels take 19 to 25 plain arrays and flags."""
+:class:`Samples`, :class:`ShotField`), and the calls of :mod:`iat.radiosity.kernels` (and
+:mod:`iat.radiosity.traced`) that take them: a gather passes four bundles where the kernels take 19
+to 36 plain arrays and flags."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from iat.radiosity import kernels
+from iat.radiosity import kernels, traced
 
 
 class ShooterArrays(NamedTuple):
@@ -124,4 +125,20 @@ def finish_rows(smp: Samples, vis, fb, rows: ReceiverRows, sh: ShooterArrays, fl
     return kernels.gather_finish(
         smp.off, smp.w, vis, smp.u, smp.v, fb, smp.wsum, fld.has_field, fld.flat, fld.nl, rows.x, sh.geom,
         sh.uvc, sh.linear_uv, sh.is_quad, sh.para, fld.mean, fld.clamp_lo, fld.clamp_hi,
+    )  # fmt: skip
+
+
+def traced_rows(
+    embree_args: tuple, ii, key, salt, correlated, ff, normal, patch, tangent, f, f_direction, origin32,
+    pat, sh: ShooterArrays, fld: ShotField,
+):  # fmt: skip
+    """:func:`~iat.radiosity.traced.gather_traced` of a receiver set: ``embree_args``
+    (:meth:`~iat.radiosity.visibility.Visibility.embree_args`), the rows as :func:`receiver_rows`
+    takes them, the pattern ``pat``, the shooter ``sh`` and the field ``fld``; returns ``(out (b, 3),
+    seen (b,), rays (b,), glass rays)``."""
+    return traced.gather_traced(
+        *embree_args, ii, key, salt, correlated, ff, normal, patch, tangent, f, f_direction, origin32,
+        pat, sh.geom, sh.uvc, sh.poly_n, sh.poly_o, sh.tol, sh.is_quad, sh.para, sh.linear_uv, sh.area,
+        sh.mask, sh.has_mask, sh.t32, sh.half_eps, fld.has_field, fld.flat, fld.nl, fld.mean, fld.clamp_lo,
+        fld.clamp_hi,
     )  # fmt: skip

@@ -6,12 +6,20 @@ found fully occluded."""
 from __future__ import annotations
 
 import threading
+import time
 from typing import NamedTuple
 
 import numpy as np
 
 from iat.radiosity import kernels
-from iat.radiosity.bundles import ShooterArrays, ShotField, finish_rows, receiver_rows, sample_rays
+from iat.radiosity.bundles import (
+    ShooterArrays,
+    ShotField,
+    finish_rows,
+    receiver_rows,
+    sample_rays,
+    traced_rows,
+)
 from iat.radiosity.formfactor import point_polygon
 from iat.radiosity.options import (
     CULL_RAYS,
@@ -294,22 +302,12 @@ class Gathers:
         sets = [(geo, *self.form_factors(s, geo, cull, patches)) for geo, patches in parts]
         shot_job = _Shot(self.shooter(s).kernel_args(), pat, salt, correlated, fld, sets)
 
-        # blocks of at most GATHER_BLOCK receivers; a large set in as many as there are threads
-        jobs = []
-        for k, (_, idx, _) in enumerate(sets):
-            size = GATHER_BLOCK
-            if len(idx) >= SPLIT_RECEIVERS:
-                size = min(size, -(-len(idx) // self.vis.threads))
-            jobs += [(k, slice(a, a + size)) for a in range(0, len(idx), size)]
-        outs = [np.zeros(len(idx) if field is None else (len(idx), 3)) for _, idx, _ in sets]
-        rays_p = [np.zeros(self.patches.n_patches) for _ in sets]
-        seen_p = [np.zeros(self.patches.n_patches) for _ in sets]
-        results = self.pool.imap(lambda job: self._block(shot_job, job), jobs, no_check)
-        for (k, sl), res in zip(jobs, results, strict=True):
-            if res is not None:
-                outs[k][sl] = res[0]
-                rays_p[k] += res[1]
-                seen_p[k] += res[2]
+        embree_args = self.vis.embree_args()
+        if embree_args is not None:  # each set in one kernel that traces its own rays
+            done = [self._traced(shot_job, k, embree_args) for k in range(len(sets))]
+            outs, rays_p, seen_p = ([d[j] for d in done] for j in range(3))
+        else:
+            outs, rays_p, seen_p = self._blocks(shot_job, field is not None)
         with self._lock:
             for k, (_, idx, _) in enumerate(sets):
                 if len(idx) == 0:
@@ -320,6 +318,49 @@ class Gathers:
                 else:
                     self._vis_rays[s], self._vis_seen[s] = rays_p[k], seen_p[k]
         return [(idx, out) for (_, idx, _), out in zip(sets, outs, strict=True)]
+
+    def _traced(self, shot: _Shot, k: int, embree_args: tuple):
+        """Set k of a gather in one :func:`~iat.radiosity.traced.gather_traced` call on the ray
+        threads: its rows' values, and the rays traced and seen per receiver patch (P,)."""
+        geo, idx, f = shot.sets[k]
+        P = self.patches.n_patches
+        if len(idx) == 0:
+            return np.zeros(0 if not shot.field.has_field else (0, 3)), np.zeros(P), np.zeros(P)
+        t0 = time.perf_counter()
+        with self.vis.kernel_threads():
+            out, seen, rays, through = traced_rows(
+                embree_args, idx, geo.key, shot.salt, shot.correlated, geo.ff, geo.normal, geo.patch,
+                self.patches.tangent, np.ascontiguousarray(f, dtype=np.float64), F_DIRECTION, geo.origin32(),
+                shot.pat, shot.shooter, shot.field,
+            )  # fmt: skip
+        self.vis.count(int(rays.sum()) + int(through), time.perf_counter() - t0)
+        patch = geo.patch[idx]
+        return (
+            out if shot.field.has_field else out[:, 0],
+            np.bincount(patch, weights=rays, minlength=P),
+            np.bincount(patch, weights=seen, minlength=P),
+        )
+
+    def _blocks(self, shot: _Shot, has_field: bool) -> tuple[list, list, list]:
+        """A gather's sets in blocks of at most ``GATHER_BLOCK`` receivers (a large set in as many
+        as there are threads) on the gather threads, each traced with :meth:`Visibility.visible`
+        (embreex's path): per set its rows' values, rays and rays seen per receiver patch."""
+        jobs = []
+        for k, (_, idx, _) in enumerate(shot.sets):
+            size = GATHER_BLOCK
+            if len(idx) >= SPLIT_RECEIVERS:
+                size = min(size, -(-len(idx) // self.vis.threads))
+            jobs += [(k, slice(a, a + size)) for a in range(0, len(idx), size)]
+        outs = [np.zeros(len(idx) if not has_field else (len(idx), 3)) for _, idx, _ in shot.sets]
+        rays_p = [np.zeros(self.patches.n_patches) for _ in shot.sets]
+        seen_p = [np.zeros(self.patches.n_patches) for _ in shot.sets]
+        results = self.pool.imap(lambda job: self._block(shot, job), jobs, no_check)
+        for (k, sl), res in zip(jobs, results, strict=True):
+            if res is not None:
+                outs[k][sl] = res[0]
+                rays_p[k] += res[1]
+                seen_p[k] += res[2]
+        return outs, rays_p, seen_p
 
     def _block(self, shot: _Shot, job: tuple[int, slice]):
         """One block of receivers of a gather, ``job = (set, rows)``: its rows' values, and the

@@ -398,31 +398,45 @@ def gather_rays(pat, rot, x, nr, t1, t2, near, origin32, geom, uvc, poly_n, poly
         off[i + 1] = off[i] + cnt[i]
     k = off[b]
     ws, us, vs = buf[3, :k], buf[4, :k], buf[5, :k]
-    tiny = np.float32(1e-30)
-    zero = np.float32(0.0)
     for i in prange(b):
         p = i * 2 * S
         for q in range(off[i], off[i + 1]):
             ws[q], us[q], vs[q] = sw[p], su[p], sv[p]
-            u32, v32 = np.float32(su[p]), np.float32(sv[p])
-            p += 1
-            r2 = zero
             for c in range(3):
-                tc = u32 * t32[1, c]
-                tc += v32 * t32[2, c]
-                tc += t32[0, c]
-                if not para:
-                    tc += (u32 * v32) * t32[3, c]
-                dc = tc - origin32[i, c]
                 ro[q, c] = origin32[i, c]
-                rd[q, c] = dc
-                r2 += dc * dc
-            r = np.float32(math.sqrt(r2))
-            rr = max(r, tiny)
-            for c in range(3):
-                rd[q, c] = rd[q, c] / rr
-            rt[q] = max(r - half_eps, zero)
+            rd[q, 0], rd[q, 1], rd[q, 2], rt[q] = sample_ray(su[p], sv[p], t32, para, origin32[i], half_eps)
+            p += 1
     return off, wsum, ws, us, vs, ro[:k], rd[:k], rt[:k]
+
+
+@njit(cache=True, error_model="numpy")
+def _target(u32, v32, t32, para, c):
+    """Coordinate c of the float32 ray target ``base + u e1 + v e2 (+ u v e3)`` of ``t32``."""
+    tc = u32 * t32[1, c]
+    tc += v32 * t32[2, c]
+    tc += t32[0, c]
+    if not para:
+        tc += (u32 * v32) * t32[3, c]
+    return tc
+
+
+@njit(cache=True, error_model="numpy")
+def sample_ray(u, v, t32, para, o32, half_eps):
+    """The shadow ray of the sample at lattice parameters (u, v) from the float32 origin o32 (3,): its
+    unit direction and its length less ``half_eps`` (float32 ``dx, dy, dz, tfar``) to the sample's
+    target on the shooter (:func:`gather_rays`)."""
+    u32, v32 = np.float32(u), np.float32(v)
+    zero = np.float32(0.0)
+    dx = _target(u32, v32, t32, para, 0) - o32[0]
+    dy = _target(u32, v32, t32, para, 1) - o32[1]
+    dz = _target(u32, v32, t32, para, 2) - o32[2]
+    r2 = zero
+    r2 += dx * dx
+    r2 += dy * dy
+    r2 += dz * dz
+    r = np.float32(math.sqrt(r2))
+    rr = max(r, np.float32(1e-30))
+    return dx / rr, dy / rr, dz / rr, max(r - half_eps, zero)
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -596,63 +610,80 @@ def gather_finish(off, ws, vis, us, vs, fb, wsum, has_field, flat, nl, x, geom, 
             wvis += wr
             sv += vis[q]
             if has_field:
-                xx, yy = us[q] * nl, vs[q] * nl
-                a = min(np.int64(xx), nl - 1)
-                bb = min(np.int64(yy), nl - 1)
-                fx, fy = xx - a, yy - bb
-                i00 = a * (nl + 1) + bb
-                sxy = fx + fy
-                lower = sxy <= 1.0
-                w_base = abs(1.0 - sxy) * wr
-                i_base = i00 if lower else i00 + nl + 2
-                w10 = (fx if lower else 1.0 - fy) * wr
-                w01 = (fy if lower else 1.0 - fx) * wr
-                i10, i01 = i00 + nl + 1, i00 + 1
-                val = flat[i_base, 0] * w_base
-                val += flat[i10, 0] * w10
-                val += flat[i01, 0] * w01
-                res0 += val
-                val = flat[i_base, 1] * w_base
-                val += flat[i10, 1] * w10
-                val += flat[i01, 1] * w01
-                res1 += val
-                val = flat[i_base, 2] * w_base
-                val += flat[i10, 2] * w10
-                val += flat[i01, 2] * w01
-                res2 += val
+                v0, v1, v2 = field_terms(flat, nl, us[q], vs[q], wr)
+                res0 += v0
+                res1 += v1
+                res2 += v2
         seen[i] = sv
-        frac = wvis / (wsum[i] if wsum[i] > 0 else 1.0)
-        fv = fb[i] * frac  # analytic F x visible fraction
-        if not has_field:
-            out[i, 0] = fv
-            continue
-        # control variate: the field at the receiver's foot on the shooter for near receivers,
-        # the shooter's mean for far ones
-        if para:
-            rx, ry, rz = x[i, 0] - geom[0, 0], x[i, 1] - geom[0, 1], x[i, 2] - geom[0, 2]
-            fu, fw = _clip_uv(
-                rx * geom[5, 0] + ry * geom[5, 1] + rz * geom[5, 2],
-                rx * geom[6, 0] + ry * geom[6, 1] + rz * geom[6, 2],
-                is_quad,
-            )
-        else:
-            hh = (x[i, 0] - geom[0, 0]) * geom[1, 0] + (x[i, 1] - geom[0, 1]) * geom[1, 1]
-            hh += (x[i, 2] - geom[0, 2]) * geom[1, 2]
-            fu, fw = _inverse_bilinear(
-                x[i, 0] - hh * geom[1, 0], x[i, 1] - hh * geom[1, 1], x[i, 2] - hh * geom[1, 2],
-                geom, uvc, linear_uv, is_quad,
-            )  # fmt: skip
-        w_near = min(1.0, 2.0 * fb[i])
-        for c in range(3):
-            cv = w_near * _sample_lattice(flat, nl, fu, fw, c) + (1.0 - w_near) * field_mean[c]
-            res = (res0 if c == 0 else res1 if c == 1 else res2) - cv * wvis
-            val = fv * cv + res
-            if clamp_lo:
-                val = max(val, 0.0)
-            if clamp_hi:
-                val = min(val, 0.0)
-            out[i, c] = val
+        finish_row(out, i, fb[i], wsum[i], wvis, res0, res1, res2, x[i], has_field, flat, nl, geom, uvc,
+                   linear_uv, is_quad, para, field_mean, clamp_lo, clamp_hi)  # fmt: skip
     return out, seen
+
+
+@njit(cache=True, error_model="numpy")
+def field_terms(flat, nl, u, v, wr):
+    """The field flat ((nl+1)**2, 3) at lattice parameters (u, v), weighted by wr: three channels."""
+    xx, yy = u * nl, v * nl
+    a = min(np.int64(xx), nl - 1)
+    bb = min(np.int64(yy), nl - 1)
+    fx, fy = xx - a, yy - bb
+    i00 = a * (nl + 1) + bb
+    sxy = fx + fy
+    lower = sxy <= 1.0
+    w_base = abs(1.0 - sxy) * wr
+    i_base = i00 if lower else i00 + nl + 2
+    w10 = (fx if lower else 1.0 - fy) * wr
+    w01 = (fy if lower else 1.0 - fx) * wr
+    i10, i01 = i00 + nl + 1, i00 + 1
+    v0 = flat[i_base, 0] * w_base
+    v0 += flat[i10, 0] * w10
+    v0 += flat[i01, 0] * w01
+    v1 = flat[i_base, 1] * w_base
+    v1 += flat[i10, 1] * w10
+    v1 += flat[i01, 1] * w01
+    v2 = flat[i_base, 2] * w_base
+    v2 += flat[i10, 2] * w10
+    v2 += flat[i01, 2] * w01
+    return v0, v1, v2
+
+
+@njit(cache=True, error_model="numpy")
+def finish_row(out, i, fbi, wsi, wvis, res0, res1, res2, xi, has_field, flat, nl, geom, uvc, linear_uv,
+               is_quad, para, field_mean, clamp_lo, clamp_hi):  # fmt: skip
+    """Row i of :func:`gather_finish`'s ``out`` from the row's sums over its samples: ``wvis`` (the
+    visible weights), ``res0..2`` (:func:`field_terms`); fbi its form factor, wsi its weight sum,
+    xi (3,) its point."""
+    frac = wvis / (wsi if wsi > 0 else 1.0)
+    fv = fbi * frac  # analytic F x visible fraction
+    if not has_field:
+        out[i, 0] = fv
+        return
+    # control variate: the field at the receiver's foot on the shooter for near receivers,
+    # the shooter's mean for far ones
+    if para:
+        rx, ry, rz = xi[0] - geom[0, 0], xi[1] - geom[0, 1], xi[2] - geom[0, 2]
+        fu, fw = _clip_uv(
+            rx * geom[5, 0] + ry * geom[5, 1] + rz * geom[5, 2],
+            rx * geom[6, 0] + ry * geom[6, 1] + rz * geom[6, 2],
+            is_quad,
+        )
+    else:
+        hh = (xi[0] - geom[0, 0]) * geom[1, 0] + (xi[1] - geom[0, 1]) * geom[1, 1]
+        hh += (xi[2] - geom[0, 2]) * geom[1, 2]
+        fu, fw = _inverse_bilinear(
+            xi[0] - hh * geom[1, 0], xi[1] - hh * geom[1, 1], xi[2] - hh * geom[1, 2],
+            geom, uvc, linear_uv, is_quad,
+        )  # fmt: skip
+    w_near = min(1.0, 2.0 * fbi)
+    for c in range(3):
+        cv = w_near * _sample_lattice(flat, nl, fu, fw, c) + (1.0 - w_near) * field_mean[c]
+        res = (res0 if c == 0 else res1 if c == 1 else res2) - cv * wvis
+        val = fv * cv + res
+        if clamp_lo:
+            val = max(val, 0.0)
+        if clamp_hi:
+            val = min(val, 0.0)
+        out[i, c] = val
 
 
 @njit(cache=True, parallel=True, nogil=True, error_model="numpy")

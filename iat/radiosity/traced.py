@@ -1,0 +1,91 @@
+"""Gathers that trace their own rays (issue 41): a shot's sample set-up, Embree traversal and sum in
+one ``nogil`` numba call, the rays never materialised as arrays.
+
+:func:`gather_traced` is :func:`~iat.radiosity.kernels.block_inputs`, then
+:func:`~iat.radiosity.kernels.gather_rays`, :meth:`~iat.radiosity.visibility.Visibility.visible` and
+:func:`~iat.radiosity.kernels.gather_finish` row by row: the same samples (:func:`._row_weights`), the
+same float32 rays (:func:`.kernels.sample_ray`), traced by the same Embree calls
+(:func:`.embree.visible1`), summed in the same order (:func:`.kernels.field_terms`,
+:func:`.kernels.finish_row`), so its rows are those of the three-step path to the bit
+(``tests/test_embree_c.py``). Rows are spread over the calling thread's numba threads in tasks of
+``ROWS`` (``prange``); each row is one task's, in a fixed order, so the thread count changes nothing.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from iat.radiosity.embree import ray_record, visible1
+from iat.radiosity.kernels import _hash_row, _row_weights, field_terms, finish_row, sample_ray
+
+#: receivers per parallel task (one set of scratch arrays each)
+ROWS = 32
+
+
+@njit(cache=True, parallel=True, nogil=True, error_model="numpy")
+def gather_traced(occ, isect, scene, glass, glass_tau,
+                  ii, key, salt, correlated, ff, normal, patch, tangent, f, f_direction, origin32,
+                  pat, geom, uvc, poly_n, poly_o, tol, is_quad, para, linear_uv, area, mask, has_mask, t32,
+                  half_eps, has_field, flat, nl, field_mean, clamp_lo, clamp_hi):  # fmt: skip
+    """What the receivers ``ii`` (b,) of a receiver set gather from one shooter, their rays traced here.
+
+    occ, isect, scene, glass, glass_tau : :meth:`Visibility.embree_args`; ii ... origin32 as
+    :func:`.kernels.block_inputs` takes them (f (b,): the rows' form factors); pat ... half_eps the
+    pattern and the shooter as :func:`.kernels.gather_rays`; has_field ... clamp_hi the field as
+    :func:`.kernels.gather_finish`. Returns ``out`` (b, 3) (gather_finish's), ``seen`` (b,) what of
+    each row's rays got through (summed), ``rays`` (b,) int64 each row's rays, and how many rays were
+    traced against the glass besides.
+    """
+    b, S = ii.shape[0], pat.shape[0]
+    n_s = float(S)
+    out = np.zeros((b, 3))
+    seen = np.zeros(b)
+    rays = np.zeros(b, dtype=np.int64)
+    tasks = (b + ROWS - 1) // ROWS
+    through = np.zeros(tasks, dtype=np.int64)
+    for task in prange(tasks):
+        lo = task * ROWS
+        m = min(b, lo + ROWS) - lo
+        rot, x, nr = np.empty((m, 4)), np.empty((m, 3)), np.empty((m, 3))
+        t1, t2 = np.empty((m, 3)), np.empty((m, 3))
+        o32 = np.empty((m, 3), dtype=np.float32)
+        sw, su, sv = np.empty(2 * S), np.empty(2 * S), np.empty(2 * S)
+        rec, bits = ray_record()
+        for j in range(m):  # block_inputs' rows
+            r = ii[lo + j]
+            p = patch[r]
+            _hash_row(0 if correlated else key[r], salt, rot, j)
+            for c in range(3):
+                x[j, c] = ff[r, c]
+                nr[j, c] = normal[r, c]
+                t1[j, c] = tangent[p, 0, c]
+                t2[j, c] = tangent[p, 1, c]
+                o32[j, c] = origin32[r, c]
+        for j in range(m):
+            i = lo + j
+            cnt, wsum = _row_weights(j, pat, rot, x, nr, t1, t2, f[i] >= f_direction, n_s, geom, uvc, poly_n,
+                                     poly_o, tol, is_quad, para, linear_uv, area, mask, has_mask, sw, su, sv,
+                                     0)  # fmt: skip
+            ox, oy, oz = o32[j, 0], o32[j, 1], o32[j, 2]
+            wvis = 0.0
+            sv_sum = 0.0
+            res0 = res1 = res2 = 0.0
+            for q in range(cnt):
+                dx, dy, dz, tfar = sample_ray(su[q], sv[q], t32, para, o32[j], half_eps)
+                vis = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, dx, dy, dz, tfar)
+                if glass != 0 and vis > 0:
+                    through[task] += 1
+                wr = sw[q] * vis  # as gather_finish sums them
+                wvis += wr
+                sv_sum += vis
+                if has_field:
+                    v0, v1, v2 = field_terms(flat, nl, su[q], sv[q], wr)
+                    res0 += v0
+                    res1 += v1
+                    res2 += v2
+            rays[i] = cnt
+            seen[i] = sv_sum
+            finish_row(out, i, f[i], wsum, wvis, res0, res1, res2, x[j], has_field, flat, nl, geom, uvc,
+                       linear_uv, is_quad, para, field_mean, clamp_lo, clamp_hi)  # fmt: skip
+    return out, seen, rays, through.sum()
