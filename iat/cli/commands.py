@@ -325,6 +325,7 @@ def cmd_bake(args) -> int:
 def cmd_render(args) -> int:
     from iat.camera import Camera
     from iat.io.images import save_npy, save_png
+    from iat.radiosity.inputs import is_solution_path
 
     size = parse_size(args.size)
     out = Path(args.output)
@@ -338,8 +339,8 @@ def cmd_render(args) -> int:
             raise OptionError("--set renders solutions: use --mode mesh, iat, split or diff")
         scene, sset = _open_set(args)
         sol = sset.first
-    elif Path(args.input).suffix.lower() in (".glb", ".gltf") and (
-        mode == "preview" or _is_export(args.input)
+    elif (mode == "preview" and not is_solution_path(args.input)) or (  # a model's preview needs no solve
+        Path(args.input).suffix.lower() in (".glb", ".gltf") and _is_export(args.input)
     ):
         if mode not in ("iat", "preview"):
             raise OptionError(f"{args.input} is an exported bake: render it with --mode iat (or preview)")
