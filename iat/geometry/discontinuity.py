@@ -23,9 +23,11 @@ For each point or spot light (a sun: parallel projection along its direction):
    chord (:data:`MIN_CHORD`), and is skipped when a piece would be a sliver (:data:`MIN_PIECE`);
    long thin pieces are halved across (:data:`PIECE_ASPECT`). Convex pieces become roots:
    triangles, near-parallelogram quads (:data:`iat.geometry.mesh.QUAD_SKEW_TOL`), else fans from
-   the corner that gives the best worst triangle. At most :data:`MAX_CUTS_PER_PATCH` cuts per root
-   and :data:`MAX_NEW_PATCHES` new roots in all (receivers with the longest boundary first), so a
-   real model cannot explode.
+   the corner that gives the best worst triangle, each triangle turned so that no shadow line is its
+   hypotenuse where another edge is free (:func:`iat.geometry.polycut.legs_on_lines`). At most
+   :data:`MAX_CUTS_PER_PATCH` cuts per root, and new roots at most :data:`MAX_NEW_FRACTION` of the
+   scene's roots (at least :data:`MIN_NEW_PATCHES`, at most :data:`MAX_NEW_PATCHES`; receivers with
+   the longest boundary first), so a real model cannot explode.
 
 Panel cells covered only in part (clip triangles) are not cut: their clip triangles are in the
 cell's lattice and a piece would need its own; they keep stair-stepped shadows. Glass neither
@@ -69,6 +71,11 @@ PIECE_LENGTH = 1.0 / 24.0
 #: most cuts per root, and most new roots in all (the receivers with the longest boundary first)
 MAX_CUTS_PER_PATCH = 8
 MAX_NEW_PATCHES = 20000
+#: ... and at most this fraction of the scene's roots (but :data:`MIN_NEW_PATCHES` at least): each
+#: root shoots on its own, so the solve's shots grow with them (the house, uncut 965 roots: all its
+#: cuts +76 % roots, +63 % shots, +37 % CPU time; a quarter: +26 %, +21 %, +7 %; docs/benchmarks.md)
+MAX_NEW_FRACTION = 0.25
+MIN_NEW_PATCHES = 256
 
 
 def _unit(a: np.ndarray) -> np.ndarray:
@@ -308,9 +315,9 @@ def split_discontinuities(scene, lights=None):
     length = np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1)
     total = np.bincount(seg_patch, weights=length, minlength=scene.n_patches)
     children: dict[int, tuple[np.ndarray, list[list[int]], np.ndarray]] = {}
-    new_roots = 0
+    new_roots, most = 0, min(MAX_NEW_PATCHES, max(MIN_NEW_PATCHES, int(MAX_NEW_FRACTION * scene.n_patches)))
     for p in np.argsort(-total, kind="stable")[: np.count_nonzero(total)]:
-        if new_roots >= MAX_NEW_PATCHES:
+        if new_roots >= most:
             break
         k = 4 if is_quad[p] else 3
         origin, axes = polycut.plane_frame(corners3[p], normal[p])
