@@ -36,7 +36,6 @@ Conventions (checked by ``tests/test_reference.py``)
   ``cutoff_angle`` (the outer cone); glTF's falloff is smooth in cos(angle), so
   spot references match the solver inside the inner cone and only roughly in the
   transition ring.
-
 - Glass (``transmission > 0``) as the solver has it (:mod:`iat.radiosity.visibility`): it does not
   occlude, multiplies the light crossing it by its transmittance, keeps the rest and reflects
   nothing: a ``mask`` of black, rendered with ``volpath``, whose shadow rays pass a mask times its
@@ -75,6 +74,8 @@ __all__ = [
     "build_mitsuba_scene",
     "render_reference",
     "render_reference_cached",
+    "render_irradiance",
+    "render_irradiance_cached",
     "reference_key",
     "pane_layers",
     "REFERENCE_VERSION",
@@ -244,55 +245,13 @@ def _glass_parts(m: int, tris: np.ndarray, tau: float) -> dict:
     }
 
 
-def build_mitsuba_scene(
-    scene: Scene,
-    camera: Camera,
-    size: tuple[int, int] = (256, 256),
-    seed: int = 0,
-    max_depth: int = -1,
-    rr_depth: int = 16,
-    two_sided: bool = False,
-):
-    """Build the ``mi.Scene`` for a :class:`Scene` seen from ``camera``.
-
-    size : (w, h) pixels. One ``mi.Mesh`` per material (diffuse BSDF of its
-    albedo; an ``area`` emitter of its emission when that is non-zero), point
-    and spot emitters for the lights, a ``path`` integrator and a perspective
-    sensor (vertical ``yfov``, box filter, independent sampler seeded by ``seed``).
-    """
-    mi = _import_mitsuba()
-    mitsuba_variant()
-    w, h = (int(size[0]), int(size[1]))
-    if w <= 0 or h <= 0:
-        raise ValueError(f"image size must be positive, got {size}")
-
-    eye, target, up = _camera_frame(camera)
+def _content(mi, scene: Scene, max_depth: int, rr_depth: int, two_sided: bool) -> dict:
+    """The ``mi.load_dict`` entries of a :class:`Scene` but its sensor: a ``path`` integrator, one
+    ``mi.Mesh`` per material (diffuse BSDF of its albedo; an ``area`` emitter of its emission when that
+    is non-zero), point, spot and directional emitters for the lights, and the sky."""
     # with glass: volpath, whose shadow rays pass a mask (path's stop there: no sun behind a pane)
     kind = "volpath" if any(m.transmission > 0 for m in scene.materials) else "path"
-    d: dict = {
-        "type": "scene",
-        "integrator": {"type": kind, "max_depth": int(max_depth), "rr_depth": int(rr_depth)},
-        "sensor": {
-            "type": "perspective",
-            "fov": float(camera.yfov),
-            "fov_axis": "y",
-            "near_clip": float(camera.znear),
-            "far_clip": float(camera.zfar),
-            "to_world": mi.ScalarTransform4f().look_at(
-                origin=eye.tolist(), target=target.tolist(), up=up.tolist()
-            ),
-            "film": {
-                "type": "hdrfilm",
-                "width": w,
-                "height": h,
-                "pixel_format": "rgb",
-                "component_format": "float32",
-                "rfilter": {"type": "box"},
-            },
-            "sampler": {"type": "independent", "seed": int(seed)},
-        },
-    }
-
+    d: dict = {"integrator": {"type": kind, "max_depth": int(max_depth), "rr_depth": int(rr_depth)}}
     for m, tris in _group_triangles(scene).items():
         mat = scene.materials[m]
         bsdf = {"type": "diffuse", "reflectance": _rgb(np.clip(mat.albedo, 0.0, 1.0))}
@@ -312,6 +271,8 @@ def build_mitsuba_scene(
 
     for k, light in enumerate(scene.lights):
         inten = _rgb(light.radiant_intensity)
+        if getattr(light, "ies", None) is not None:
+            raise ValueError(f"light {k} ({light.name!r}): Mitsuba has no IES distribution")
         if light.kind == "point":
             d[f"light_{k}"] = {"type": "point", "position": light.position.tolist(), "intensity": inten}
         elif light.kind == "spot":
@@ -335,6 +296,55 @@ def build_mitsuba_scene(
             raise ValueError(f"light {k} ({light.name!r}): unsupported kind {light.kind!r}")
     if getattr(scene, "sky", None) is not None:
         d["sky"] = mitsuba_emitter(scene.sky)
+    return d
+
+
+def build_mitsuba_scene(
+    scene: Scene,
+    camera: Camera,
+    size: tuple[int, int] = (256, 256),
+    seed: int = 0,
+    max_depth: int = -1,
+    rr_depth: int = 16,
+    two_sided: bool = False,
+):
+    """Build the ``mi.Scene`` for a :class:`Scene` seen from ``camera``.
+
+    size : (w, h) pixels. The scene's content (:func:`_content`) and a perspective sensor (vertical
+    ``yfov``, box filter, independent sampler seeded by ``seed``).
+    """
+    mi = _import_mitsuba()
+    mitsuba_variant()
+    w, h = (int(size[0]), int(size[1]))
+    if w <= 0 or h <= 0:
+        raise ValueError(f"image size must be positive, got {size}")
+
+    eye, target, up = _camera_frame(camera)
+    content = _content(mi, scene, max_depth, rr_depth, two_sided)
+    d: dict = {
+        "type": "scene",
+        "integrator": content.pop("integrator"),
+        "sensor": {
+            "type": "perspective",
+            "fov": float(camera.yfov),
+            "fov_axis": "y",
+            "near_clip": float(camera.znear),
+            "far_clip": float(camera.zfar),
+            "to_world": mi.ScalarTransform4f().look_at(
+                origin=eye.tolist(), target=target.tolist(), up=up.tolist()
+            ),
+            "film": {
+                "type": "hdrfilm",
+                "width": w,
+                "height": h,
+                "pixel_format": "rgb",
+                "component_format": "float32",
+                "rfilter": {"type": "box"},
+            },
+            "sampler": {"type": "independent", "seed": int(seed)},
+        },
+        **content,
+    }
     return mi.load_dict(d)
 
 
@@ -365,37 +375,13 @@ def render_reference(
     return np.ascontiguousarray(out.reshape(h, w, -1)[..., :3])
 
 
-def reference_key(
-    scene: Scene,
-    camera: Camera,
-    size: tuple[int, int],
-    spp: int,
-    seed: int = 0,
-    max_depth: int = -1,
-    rr_depth: int = 16,
-    two_sided: bool = False,
-) -> str:
-    """Hex SHA-256 (first 24 digits) of everything a reference depends on."""
+def _scene_digest(scene: Scene):
+    """``(hash, meta)``: a SHA-256 fed with the scene's arrays (geometry, materials, sky) and the
+    JSON-able description of its lights and the reference version."""
     hsh = hashlib.sha256()
-
-    def arr(a, dtype):
-        a = np.ascontiguousarray(np.asarray(a, dtype=dtype))
+    for a in _scene_arrays(scene):
         hsh.update(str(a.shape).encode())
         hsh.update(a.tobytes())
-
-    arr(scene.vertices, np.float64)
-    arr(scene.patch_corners, np.int64)
-    arr(scene.patch_material, np.int64)
-    if len(scene.clip_patch):
-        arr(scene.clip_uv, np.float64)
-        arr(scene.clip_patch, np.int64)
-    arr([m.albedo for m in scene.materials] or np.zeros((0, 3)), np.float64)
-    arr([m.emission for m in scene.materials] or np.zeros((0, 3)), np.float64)
-    if any(m.transmission > 0 for m in scene.materials):
-        arr([m.transmission for m in scene.materials], np.float64)
-    sky = getattr(scene, "sky", None)
-    if sky is not None:
-        arr(sky_equirect(sky, 64), np.float32)
     meta = {
         "version": REFERENCE_VERSION,
         "lights": [
@@ -410,25 +396,84 @@ def reference_key(
             ]
             for l in scene.lights
         ],
-        "camera": [
-            camera.eye.tolist(),
-            camera.target.tolist(),
-            camera.up.tolist(),
-            float(camera.yfov),
-            float(camera.znear),
-            float(camera.zfar),
-        ],
-        "size": [int(size[0]), int(size[1])],
-        "spp": int(spp),
-        "seed": int(seed),
-        "max_depth": int(max_depth),
-        "rr_depth": int(rr_depth),
-        "two_sided": bool(two_sided),
     }
     if any(m.transmission > 0 for m in scene.materials):
         meta["glass"] = GLASS_MODEL
+    return hsh, meta
+
+
+def _scene_arrays(scene: Scene) -> list[np.ndarray]:
+    def arr(a, dtype):
+        return np.ascontiguousarray(np.asarray(a, dtype=dtype))
+
+    out = [
+        arr(scene.vertices, np.float64),
+        arr(scene.patch_corners, np.int64),
+        arr(scene.patch_material, np.int64),
+    ]
+    if len(scene.clip_patch):
+        out += [arr(scene.clip_uv, np.float64), arr(scene.clip_patch, np.int64)]
+    out.append(arr([m.albedo for m in scene.materials] or np.zeros((0, 3)), np.float64))
+    out.append(arr([m.emission for m in scene.materials] or np.zeros((0, 3)), np.float64))
+    if any(m.transmission > 0 for m in scene.materials):
+        out.append(arr([m.transmission for m in scene.materials], np.float64))
+    sky = getattr(scene, "sky", None)
+    if sky is not None:
+        out.append(arr(sky_equirect(sky, 64), np.float32))
+    return out
+
+
+def reference_key(
+    scene: Scene,
+    camera: Camera,
+    size: tuple[int, int],
+    spp: int,
+    seed: int = 0,
+    max_depth: int = -1,
+    rr_depth: int = 16,
+    two_sided: bool = False,
+) -> str:
+    """Hex SHA-256 (first 24 digits) of everything a reference depends on."""
+    hsh, meta = _scene_digest(scene)
+    meta.update(
+        {
+            "camera": [
+                camera.eye.tolist(),
+                camera.target.tolist(),
+                camera.up.tolist(),
+                float(camera.yfov),
+                float(camera.znear),
+                float(camera.zfar),
+            ],
+            "size": [int(size[0]), int(size[1])],
+            "spp": int(spp),
+            "seed": int(seed),
+            "max_depth": int(max_depth),
+            "rr_depth": int(rr_depth),
+            "two_sided": bool(two_sided),
+        }
+    )
     hsh.update(json.dumps(meta, sort_keys=True).encode())
     return hsh.hexdigest()[:24]
+
+
+def _cached(path: Path, shape: tuple, dtype, make, regen: bool | None) -> np.ndarray:
+    """The array in ``path`` when it has ``shape`` and ``dtype`` (and ``regen`` is not true), else
+    ``make()`` written there atomically. regen None: the environment variable ``IAT_REGEN_REFS``."""
+    if regen is None:
+        regen = os.environ.get("IAT_REGEN_REFS", "").strip().lower() in ("1", "true", "yes")
+    if not regen and path.is_file():
+        try:
+            out = np.load(path, allow_pickle=False)
+            if out.shape == shape and out.dtype == dtype:
+                return out
+        except (OSError, ValueError):
+            pass  # damaged cache file: render again
+    out = make()
+    from iat.fsutil import atomic_write
+
+    atomic_write(path, lambda f: np.save(f, out, allow_pickle=False))
+    return out
 
 
 def render_reference_cached(
@@ -453,21 +498,121 @@ def render_reference_cached(
     ``--regen-refs`` option can set it). The file is written atomically
     (temporary file + ``os.replace``). Returns ``(h, w, 3) float32``.
     """
-    if regen is None:
-        regen = os.environ.get("IAT_REGEN_REFS", "").strip().lower() in ("1", "true", "yes")
-    cache_dir = Path(cache_dir)
     key = reference_key(scene, camera, size, spp, seed, max_depth, rr_depth, two_sided)
-    path = cache_dir / f"ref-{key}.npy"
-    w, h = int(size[0]), int(size[1])
-    if not regen and path.is_file():
-        try:
-            img = np.load(path, allow_pickle=False)
-            if img.shape == (h, w, 3) and img.dtype == np.float32:
-                return img
-        except (OSError, ValueError):
-            pass  # damaged cache file: render again
-    img = render_reference(scene, camera, size, spp, seed, max_depth, rr_depth=rr_depth, two_sided=two_sided)
-    from iat.fsutil import atomic_write
+    return _cached(
+        Path(cache_dir) / f"ref-{key}.npy",
+        (int(size[1]), int(size[0]), 3),
+        np.float32,
+        lambda: render_reference(
+            scene, camera, size, spp, seed, max_depth, rr_depth=rr_depth, two_sided=two_sided
+        ),
+        regen,
+    )
 
-    atomic_write(path, lambda f: np.save(f, img, allow_pickle=False))
-    return img
+
+# -- irradiance at points (work-plane sensors) ---------------------------------------------------
+#: radius (m) of the disc each irradiance meter samples its rays from (it is in the scene: it shadows
+#: that little)
+METER_RADIUS = 1e-3
+
+
+def _meter(mi, point: np.ndarray, normal: np.ndarray, index: int) -> dict:
+    """A disc of :data:`METER_RADIUS` at ``point`` facing ``normal`` carrying an ``irradiancemeter``
+    (its sampler's seed is its index: equal dicts would be loaded as one sensor)."""
+    up = [0.0, 0.0, 1.0] if abs(normal[1]) > 0.9 else [0.0, 1.0, 0.0]
+    to_world = mi.ScalarTransform4f().look_at(
+        origin=point.tolist(), target=(point + normal).tolist(), up=up
+    ) @ mi.ScalarTransform4f().scale(METER_RADIUS)
+    film = {"type": "hdrfilm", "width": 1, "height": 1, "pixel_format": "rgb", "rfilter": {"type": "box"}}
+    sensor = {"type": "irradiancemeter", "film": film, "sampler": {"type": "independent", "seed": index}}
+    return {"type": "disk", "to_world": to_world, "sensor": sensor}
+
+
+def _delta_irradiance(mi, msc, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """(3,) irradiance at ``point`` facing ``normal`` from the scene's delta emitters (point, spot and
+    directional lights, which an irradiance meter's rays never meet), each as Mitsuba gives it and
+    tested for shadow by Mitsuba's own rays."""
+    it = mi.Interaction3f()
+    it.p = mi.ScalarPoint3f(point.tolist())
+    it.n = mi.ScalarNormal3f(normal.tolist())
+    out = np.zeros(3)
+    for em in msc.emitters():
+        if not mi.has_flag(em.flags(), mi.EmitterFlags.Delta):
+            continue
+        ds, weight = em.sample_direction(it, mi.ScalarPoint2f(0.5, 0.5))
+        cos = float(np.dot(np.array(ds.d), normal))
+        if cos <= 0:
+            continue
+        ray = it.spawn_ray_to(ds.p) if np.isfinite(ds.dist) else it.spawn_ray(ds.d)
+        if not msc.ray_test(ray):
+            out += cos * np.array(weight, dtype=np.float64)[:3]
+    return out
+
+
+def render_irradiance(
+    scene: Scene,
+    points,
+    normals=(0.0, 1.0, 0.0),
+    spp: int = 4096,
+    seed: int = 0,
+    max_depth: int = -1,
+    *,
+    rr_depth: int = 16,
+    two_sided: bool = False,
+) -> np.ndarray:
+    """(n, 3) float64 irradiance, W/m² per unit colour, on small planes at ``points`` (n, 3) facing
+    ``normals`` ((n, 3) or one (3,); default up) by Mitsuba 3: an ``irradiancemeter`` per point
+    (``spp`` cosine-distributed paths: light from surfaces, area emitters and the sky) plus the
+    delta lights' direct light with Mitsuba's shadow rays. The independent counterpart of
+    :func:`iat.measure.sensors.irradiance_at`. Keep points off the surfaces (a few mm): a meter on a
+    surface sees it from behind half the time."""
+    mi = _import_mitsuba()
+    mitsuba_variant()
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    nrm = np.broadcast_to(np.asarray(normals, dtype=np.float64), pts.shape).copy()
+    nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
+    d = {"type": "scene", **_content(mi, scene, max_depth, rr_depth, two_sided)}
+    for k, (p, n) in enumerate(zip(pts, nrm, strict=True)):
+        d[f"meter_{k}"] = _meter(mi, p, n, k)
+    msc = mi.load_dict(d)
+    sensors = msc.sensors()
+    out = np.zeros((len(pts), 3))
+    for k in range(len(pts)):
+        img = np.array(mi.render(msc, sensor=sensors[k], spp=int(spp), seed=int(seed) * len(pts) + k))
+        out[k] = img.reshape(-1)[:3] + _delta_irradiance(mi, msc, pts[k], nrm[k])
+    return out
+
+
+def render_irradiance_cached(
+    scene: Scene,
+    points,
+    normals=(0.0, 1.0, 0.0),
+    spp: int = 4096,
+    cache_dir: str | Path = ".",
+    *,
+    seed: int = 0,
+    max_depth: int = -1,
+    rr_depth: int = 16,
+    two_sided: bool = False,
+    regen: bool | None = None,
+) -> np.ndarray:
+    """:func:`render_irradiance`, stored in ``cache_dir/irr-<key>.npy`` (the key hashes the scene as
+    :func:`reference_key` does, the points, normals, spp, seed and depth settings)."""
+    pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+    nrm = np.ascontiguousarray(np.broadcast_to(np.asarray(normals, dtype=np.float64), pts.shape))
+    hsh, meta = _scene_digest(scene)
+    hsh.update(pts.tobytes() + nrm.tobytes())
+    meta.update(
+        irradiance=len(pts), spp=int(spp), seed=int(seed), max_depth=int(max_depth), rr_depth=int(rr_depth),
+        two_sided=bool(two_sided), meter_radius=METER_RADIUS,
+    )  # fmt: skip
+    hsh.update(json.dumps(meta, sort_keys=True).encode())
+    return _cached(
+        Path(cache_dir) / f"irr-{hsh.hexdigest()[:24]}.npy",
+        pts.shape,
+        np.float64,
+        lambda: render_irradiance(
+            scene, pts, nrm, spp, seed, max_depth, rr_depth=rr_depth, two_sided=two_sided
+        ),
+        regen,
+    )
