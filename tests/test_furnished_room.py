@@ -183,9 +183,11 @@ def test_lamp_lit_furnished_room_against_mitsuba():
 
 @pytest.mark.slow
 def test_daylit_furnished_room_against_mitsuba():
-    """Work-plane daylight factor of the room with its window, under the CIE overcast sky alone: the
-    room's mean within 2 % (measured -0.3 %), per point 5 % on average (3.3 %) and 20 % at worst (14.5 %,
-    deep in the room, where the reference's own noise reaches 4.4 %), min and uniformity within 8 %."""
+    """Work-plane daylight factor of the room with its window, under the CIE overcast sky alone, read
+    by sensors of 16 384 rays (at ``iat analyse``'s 4096 a sensor's own noise is 2.7 % a point here:
+    few of its rays see the window): the room's mean within 2 % (measured -0.4 %), per point 3 % on
+    average (2.0 %) and 10 % at worst (6.1 %; the reference's own noise is 1.3 % on average, 4.4 % at
+    worst), min and uniformity within 8 % (-3.6 %, -3.2 %: one point each)."""
     pytest.importorskip("mitsuba", reason="mitsuba (Mitsuba 3) not installed: no path-traced reference")
     scene = overcast_scene(furnished_room(window=True))
     f = compare(scene, lambda e: daylight_factor(e, scene.sky), side=128)
@@ -193,7 +195,7 @@ def test_daylit_furnished_room_against_mitsuba():
     assert f["points"] > 60 and 3.0 < f["ref_mean"] < 10.0  # % : a 2.6 m² window in a 20 m² room
     assert f["noise"] < 0.02
     assert abs(f["mean"]) < 0.02
-    assert f["error"] < 0.05 and f["error_max"] < 0.2
+    assert f["error"] < 0.03 and f["error_max"] < 0.1
     assert abs(f["min"]) < 0.08 and abs(f["uniformity"]) < 0.08
 
 
