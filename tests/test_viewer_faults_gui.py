@@ -51,7 +51,9 @@ def test_model_faults_panel_tints_the_cut_walls(tmp_path, monkeypatch, gui_child
         ctx.item_click("//Model faults/Tint faults in the view")
         ctx.item_input_value("//Model faults/Tint", 1.0)
         v = faults_view.of(s)
-        wait_until(ctx, lambda: v.applied is not None and v.applied[0] and v.alpha == 1.0, 30, "the tint")
+        wait_until(
+            ctx, lambda: v.uploaded is s.model.scene and v.applied[0] and v.alpha == 1.0, 30, "the tint"
+        )
         ctx.yield_(3)
         got["tinted"] = _view(ctx, s, tmp_path / "tinted.png")
         got["bits"] = v.bits.copy()

@@ -6,8 +6,9 @@ cut by a crossing element, faces a dropped repeat coincided with) with its colou
 that carry it, the tint's strength, and ``iat info``'s counts of solids, sheets and elements. The
 tint is drawn over the mesh, IAT, split and preview modes (:class:`iat.render.fault_tint.FaultTint`,
 an overlay of the renderer); the patches' faults are found once per scene
-(:func:`iat.geometry.faults.patch_faults`, on the UI thread: 0.7 s for the Madrid house's 66 k
-patches on a loaded machine), when the panel is first drawn or the tint turned on.
+(:func:`iat.geometry.faults.patch_faults`, on a thread of their own: 0.7 s for the Madrid house's
+66 k patches, 2.5 s for the Tekla car wash's 165 k, on a loaded machine), when the panel is first
+drawn or the tint turned on; the panel says so meanwhile.
 
 The panel's choices live in a :class:`FaultsView` per app state (:func:`of`); :func:`frame` (the
 app's per-frame call) hands them to the tint and draws the view again when they changed.
@@ -16,6 +17,7 @@ app's per-frame call) hands them to the tint and draws the view again when they 
 from __future__ import annotations
 
 import weakref
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -34,7 +36,8 @@ class FaultsView:
     """The panel's choices and what the tint holds.
 
     enabled : tint on; shown : bits of the kinds tinted; alpha : the tint's share of a pixel
-    scene, bits : the scene whose patches' faults ``bits`` (P,) uint8 are (None: not found yet)
+    scene, bits : the scene whose patches' faults ``bits`` (P,) uint8 are (None: not found yet);
+      job : their search
     tint : the renderer's overlay once made; uploaded : the scene it holds; applied : the settings
       it was last given (a change draws the view again)
     """
@@ -44,15 +47,22 @@ class FaultsView:
     alpha: float = ALPHA
     scene: Any = None
     bits: np.ndarray | None = None
+    job: Future | None = None
     tint: FaultTint | None = None
     uploaded: Any = None
     applied: tuple | None = None
 
-    def find(self, scene) -> np.ndarray:
-        """The faults of ``scene``'s patches (found once per scene)."""
-        if self.scene is not scene or self.bits is None:
-            self.scene, self.bits = scene, patch_faults(scene)
+    def find(self, scene) -> np.ndarray | None:
+        """The faults of ``scene``'s patches, or None while they are being found (once per scene, on
+        the search thread; its error is raised here)."""
+        if self.scene is not scene:
+            self.scene, self.bits, self.job = scene, None, _SEARCH.submit(patch_faults, scene)
+        if self.bits is None and self.job.done():
+            self.bits = self.job.result()
         return self.bits
+
+
+_SEARCH = ThreadPoolExecutor(max_workers=1, thread_name_prefix="faults")
 
 
 _VIEWS: dict[int, FaultsView] = {}
@@ -76,7 +86,10 @@ def panel(state: AppState) -> None:
         imgui.text_disabled("no record of what the loader found\n(a scene rebuilt from its solution)")
         return
     _, v.enabled = imgui.checkbox("Tint faults in the view", v.enabled)
-    counts = fault_counts(v.find(scene))
+    bits = v.find(scene)
+    if bits is None:
+        imgui.text_disabled("finding the patches the faults lie on...")
+    counts = fault_counts(bits if bits is not None else np.zeros(0, np.uint8))
     for k, name in enumerate(FAULTS):
         c = srgb_encode(np.asarray(COLORS[name], dtype=np.float64))
         imgui.color_button(f"##{name}", ImVec4(*c, 1.0), imgui.ColorEditFlags_.no_tooltip, ImVec2(14, 14))
@@ -85,7 +98,7 @@ def panel(state: AppState) -> None:
         if changed:
             v.shown = v.shown | (1 << k) if on else v.shown & ~(1 << k)
         imgui.same_line()
-        imgui.text_colored(DIM, f"{counts[name]} patches")
+        imgui.text_colored(DIM, f"{counts[name]} patches" if bits is not None else "...")
     changed, a = imgui.slider_float("Tint", float(v.alpha), 0.1, 1.0, "%.2f")
     if changed:
         v.alpha = float(a)
@@ -110,8 +123,8 @@ def frame(app) -> None:
         app.renderer.overlays.append(v.tint)
     if v.tint is None:
         return
-    if on and v.uploaded is not scene:
-        v.tint.set_scene(scene, v.find(scene))
+    if on and v.uploaded is not scene and v.find(scene) is not None:
+        v.tint.set_scene(scene, v.bits)
         v.uploaded = scene
     key = (on, v.shown, v.alpha, id(v.uploaded))
     if key != v.applied:
