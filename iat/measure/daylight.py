@@ -9,7 +9,8 @@ not depend on it), so that its solution holds sky component plus inter-reflectio
 
 **Rooms** (:class:`iat.io.spaces.Room`: an IFC's ``IfcSpace``, a box the user gives, or the model's
 bounds) get a grid of ``spacing`` at ``height`` (0.75 m) over their floor, cells centred (the first
-point half a spacing from the walls), points outside the room's footprint dropped; each point's
+point half a spacing from the walls), points outside the room's footprint or inside furniture (a
+closed solid) dropped; each point's
 illuminance (lux, under the model's own light) and daylight factor, and per room ``mean``, ``min``,
 ``max`` and ``uniformity`` (min / mean).
 """
@@ -27,7 +28,7 @@ from iat.color import LUMINANCE_WEIGHTS
 from iat.io.scene import Scene, Sky
 from iat.io.spaces import Room
 from iat.measure import photometry as ph
-from iat.measure.sensors import SENSOR_SIDE, SensorScene, irradiance_at
+from iat.measure.sensors import SENSOR_SIDE, SensorScene, inside_solids, irradiance_at
 from iat.radiosity.sky import cie_overcast_irradiance
 
 #: the work plane's height over a room's floor, m
@@ -143,11 +144,29 @@ def measure_rooms(
     side: int = SENSOR_SIDE,
 ) -> list[RoomResult]:
     """Each room's grid (:func:`grid_points`) read by upward sensors in ``lit`` = (scene, solution)
-    (lux) and in ``overcast`` = (overcast scene, its solution) (daylight factor %)."""
-    results = [RoomResult(r.name, grid_points(r, spacing, height)) for r in rooms]
+    (lux) and in ``overcast`` = (overcast scene, its solution) (daylight factor %). Grid points inside
+    a closed solid (furniture: :func:`~iat.measure.sensors.inside_solids`) are left out, counted in
+    each room's ``inside_solids`` (unless all of a room's points are: then none is)."""
+    grids = [grid_points(r, spacing, height) for r in rooms]
+    pairs = [("lux", lit), ("df", overcast)]
+    first = next((pair for _, pair in pairs if pair is not None), None)
+    if first is not None and sum(map(len, grids)):
+        sc = SensorScene.build(*first)
+        try:
+            # (a room all of whose points look inside is a room modelled inside out: kept whole)
+            inside = [(k := inside_solids(sc, g)) & ~k.all() for g in grids]
+        finally:
+            sc.close()
+        grids = [g[~k] for g, k in zip(grids, inside, strict=True)]
+        results = [
+            RoomResult(r.name, g, extra={"inside_solids": int(k.sum())})
+            for r, g, k in zip(rooms, grids, inside, strict=True)
+        ]
+    else:
+        results = [RoomResult(r.name, g) for r, g in zip(rooms, grids, strict=True)]
     pts = np.concatenate([r.points for r in results]) if results else np.zeros((0, 3))
     split = np.cumsum([len(r.points) for r in results])[:-1]
-    for which, pair in (("lux", lit), ("df", overcast)):
+    for which, pair in pairs:
         if pair is None or not len(pts):
             continue
         scene, sol = pair

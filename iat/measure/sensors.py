@@ -34,12 +34,14 @@ class SensorScene:
 
     vis : opaque drawn triangles first, then the scene's glass triangles (transmissive)
     corners : (T, 3, 3) float64 the opaque triangles' corners; radiance : (T, 3, 3) their radiance
+    normals : (T, 3) float64 the front of each opaque triangle (its patch's normal)
     """
 
     vis: Visibility
     corners: np.ndarray
     radiance: np.ndarray
     scene: object
+    normals: np.ndarray
 
     @classmethod
     def build(cls, scene, solution, threads: int | None = None) -> SensorScene:
@@ -55,10 +57,24 @@ class SensorScene:
             np.concatenate([np.zeros(len(corners)), gtau]) if len(glass_tris) else None,
             threads=threads,
         )
-        return cls(vis, corners, rad[tri], scene)
+        return cls(vis, corners, rad[tri], scene, scene.patch_normal[drawn.patch[tri[:, 0]]])
 
     def close(self) -> None:
         self.vis.close()
+
+
+def inside_solids(sc: SensorScene, points) -> np.ndarray:
+    """(n,) bool: the ``points`` (n, 3) that lie inside a solid (a cabinet, a wall): four or more of
+    the six rays along the axes meet the back of a face first (faces are one-sided, facing out of
+    solids and into rooms; four, as a cabinet standing on the floor against a wall may be left open
+    on those two sides). A sensor there would read about 0."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    axes = np.concatenate([np.eye(3), -np.eye(3)])
+    o = np.repeat(pts, 6, axis=0)
+    d = np.tile(axes, (len(pts), 1))
+    tri, _ = sc.vis.first_hits(o, d, np.full(len(o), 1e7))
+    back = (tri >= 0) & (np.einsum("nc,nc->n", sc.normals[np.maximum(tri, 0)], d) > 0)
+    return back.reshape(-1, 6).sum(axis=1) >= 4
 
 
 def _direct(sc: SensorScene, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
