@@ -76,10 +76,18 @@ def _load(args, path, max_edge=None):
             max_edge=max_edge,
             progress=bar,
             panels=not getattr(args, "no_panels", False),
-            discontinuity=getattr(args, "discontinuity", False),
+            discontinuity=_discontinuity(args),
             sides=getattr(args, "sides", None) or "auto",
             cut=getattr(args, "cut", None) or "crossings",
         )
+
+
+def _discontinuity(args) -> bool:
+    """``--discontinuity`` / ``--no-discontinuity``, else :class:`~iat.radiosity.SolveOptions`' default."""
+    from iat.radiosity import SolveOptions
+
+    flag = getattr(args, "discontinuity", None)
+    return SolveOptions.discontinuity if flag is None else bool(flag)
 
 
 def _solve_options(args):
@@ -92,8 +100,7 @@ def _solve_options(args):
             kw[name] = v
     if getattr(args, "no_panels", False):
         kw["panels"] = False
-    if getattr(args, "discontinuity", False):
-        kw["discontinuity"] = True
+    kw["discontinuity"] = _discontinuity(args)
     return SolveOptions.preset(getattr(args, "quality", None) or "default", **kw)
 
 
@@ -585,8 +592,10 @@ def build_parser() -> argparse.ArgumentParser:
         )
         sp.add_argument(
             "--discontinuity",
-            action="store_true",
-            help="cut patches along the hard shadows of the model's point, spot and sun lights",
+            action=argparse.BooleanOptionalAction,
+            default=None,
+            help="cut patches along the hard shadows of the model's point, spot and sun lights "
+            "(default: on, new patches at most a tenth of the model's or 256)",
         )
 
     def sides_flag(sp):

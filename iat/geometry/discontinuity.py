@@ -71,10 +71,11 @@ PIECE_LENGTH = 1.0 / 24.0
 #: most cuts per root, and most new roots in all (the receivers with the longest boundary first)
 MAX_CUTS_PER_PATCH = 8
 MAX_NEW_PATCHES = 20000
-#: ... and at most this fraction of the scene's roots (but :data:`MIN_NEW_PATCHES` at least): each
-#: root shoots on its own, so the solve's shots grow with them (the house, uncut 965 roots: all its
-#: cuts +76 % roots, +63 % shots, +37 % CPU time; a quarter: +26 %, +21 %, +7 %; docs/benchmarks.md)
-MAX_NEW_FRACTION = 0.25
+#: ... and at most this fraction of the scene's roots, or :data:`MIN_NEW_PATCHES` if more: each root
+#: shoots on its own, so the solve's shots grow with them (the cave, 2 528 roots: all its cuts +50 %
+#: roots, +43 % shots, +55 % CPU time; 632 new +25 %, +19 %, +28-39 %; 256 new +10 %, +7 %, +8 %;
+#: docs/benchmarks.md, "Discontinuity meshing by default")
+MAX_NEW_FRACTION = 0.1
 MIN_NEW_PATCHES = 256
 
 

@@ -145,10 +145,11 @@ class SolveOptions:
         itself takes the scene as it is.
     panels : bool, default True. Recorded for the loader too (``load_scene(panels=...)``):
         coplanar patches holding triangles become panels (:mod:`iat.geometry.panels`).
-    discontinuity : bool, default False. Recorded for the loader too
+    discontinuity : bool, default True. Recorded for the loader too
         (``load_scene(discontinuity=...)``): roots are cut along the hard shadow boundaries of the
         model's point, spot and sun lights (:mod:`iat.geometry.discontinuity`), so element edges
-        follow the shadows instead of stair-stepping across them.
+        follow the shadows instead of stair-stepping across them (new roots at most a tenth of
+        the model's or 256: ``MAX_NEW_FRACTION``). Solutions recorded without it were not cut.
     seed : int, default 0. Seed of the sample jitter; a solve is deterministic.
     criterion : "interpolation" (default), "variation" or "uniform". What ``tolerance`` bounds:
         "interpolation" splits on the largest gap between a probe and the value the
@@ -181,7 +182,7 @@ class SolveOptions:
     max_shots: int = 20000
     max_edge: float | None = None
     panels: bool = True
-    discontinuity: bool = False
+    discontinuity: bool = True
     seed: int = 0
     criterion: str = "interpolation"
     refine_indirect: bool = True
