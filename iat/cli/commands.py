@@ -76,18 +76,10 @@ def _load(args, path, max_edge=None):
             max_edge=max_edge,
             progress=bar,
             panels=not getattr(args, "no_panels", False),
-            discontinuity=_discontinuity(args),
+            discontinuity=_solve_options(args).discontinuity,
             sides=getattr(args, "sides", None) or "auto",
             cut=getattr(args, "cut", None) or "crossings",
         )
-
-
-def _discontinuity(args) -> bool:
-    """``--discontinuity`` / ``--no-discontinuity``, else :class:`~iat.radiosity.SolveOptions`' default."""
-    from iat.radiosity import SolveOptions
-
-    flag = getattr(args, "discontinuity", None)
-    return SolveOptions.discontinuity if flag is None else bool(flag)
 
 
 def _solve_options(args):
@@ -100,7 +92,8 @@ def _solve_options(args):
             kw[name] = v
     if getattr(args, "no_panels", False):
         kw["panels"] = False
-    kw["discontinuity"] = _discontinuity(args)
+    if getattr(args, "discontinuity", None) is not None:  # --[no-]discontinuity, else the default
+        kw["discontinuity"] = args.discontinuity
     return SolveOptions.preset(getattr(args, "quality", None) or "default", **kw)
 
 
@@ -594,8 +587,7 @@ def build_parser() -> argparse.ArgumentParser:
             "--discontinuity",
             action=argparse.BooleanOptionalAction,
             default=None,
-            help="cut patches along the hard shadows of the model's point, spot and sun lights "
-            "(default: on, new patches at most a tenth of the model's or 256)",
+            help="cut patches along the hard shadows of the model's point, spot and sun lights (default: on)",
         )
 
     def sides_flag(sp):
