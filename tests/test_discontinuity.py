@@ -285,8 +285,8 @@ def test_cut_lift_is_the_solvers_ray_offset():
 
 def test_load_scene_records_and_cuts(tmp_path):
     """``load_scene(discontinuity=True)`` cuts a GLB's roots along its light's shadow; the option
-    travels with SolveOptions' loader keywords, and ``iat solve --discontinuity``'s solution opens
-    on the same cut patches."""
+    travels with SolveOptions' loader keywords, and ``iat solve``'s solution (cut by default since
+    issue 37; ``--no-discontinuity``: not) opens on the same patches."""
     from iat.cli import main
     from iat.io.glb import GlbBuilder
     from iat.io.load import load_scene
@@ -311,10 +311,12 @@ def test_load_scene_records_and_cuts(tmp_path):
     assert plain.n_patches == 3 and cut.n_patches > 10
     assert len(cut.lights) == 1
     out = tmp_path / "blade.npz"
-    assert main(["solve", str(path), "-o", str(out), "--discontinuity", "--max-depth", "3", "--json"]) == 0
-    scene, sol = open_solution(out)
-    assert sol.options["discontinuity"] is True
-    assert scene.n_patches == len(sol.patch_is_quad) == cut.n_patches
+    assert SolveOptions().discontinuity is True
+    for flag, want in (([], cut.n_patches), (["--no-discontinuity"], plain.n_patches)):
+        assert main(["solve", str(path), "-o", str(out), *flag, "--max-depth", "3", "--json"]) == 0
+        scene, sol = open_solution(out)
+        assert sol.options["discontinuity"] is (not flag)
+        assert scene.n_patches == len(sol.patch_is_quad) == want
 
 
 @pytest.mark.parametrize("triangles", [False, True])
