@@ -120,8 +120,6 @@ class Relighter(LatestWorker):
             final_conv = float(self.options.convergence)
             if remesh or not lights_only_changed(self.base_scene, scene):
                 plan = [("solve", final_conv)]
-            elif any(lt.ies is not None for lt in [*self.base_scene.lights, *scene.lights]):
-                plan = [("mesh", final_conv)]  # (resolve's light records hold no IES distribution)
             else:
                 coarse = sorted({min(0.5, final_conv * m) for m in self.schedule}, reverse=True)
                 plan = [("resolve", c) for c in coarse if c > final_conv] + [("resolve", final_conv)]
@@ -133,8 +131,6 @@ class Relighter(LatestWorker):
                 t0 = time.perf_counter()
                 if how == "solve":
                     sol = solve(scene, opts, progress)
-                elif how == "mesh":
-                    sol = solve(scene, opts, progress, mesh=self.base)
                 else:
                     try:
                         sol = resolve(self.base, scene, opts, progress)

@@ -7,6 +7,11 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from iat.io.ies import Photometry
+
+#: the array fields of an IES record
+_IES_ARRAYS = ("vertical", "horizontal", "candela")
+
 
 def sources_record(ctx) -> dict:
     """JSON-able description of the light sources of a solve on ``ctx`` (a
@@ -34,7 +39,9 @@ def sun_record(lt) -> dict:
 
 
 def light_record(lt) -> dict:
-    """JSON-able description of one point / spot light (positions in scene units, cones in radians)."""
+    """JSON-able description of one point / spot light (positions in scene units, cones in radians,
+    its IES distribution's angles in degrees and candela, or None)."""
+    ies = getattr(lt, "ies", None)
     return {
         "kind": lt.kind,
         "position": [float(x) for x in lt.position],
@@ -42,6 +49,15 @@ def light_record(lt) -> dict:
         "radiant_intensity": [float(x) for x in lt.radiant_intensity],
         "inner_cone": float(lt.inner_cone),
         "outer_cone": float(lt.outer_cone),
+        "ies": None
+        if ies is None
+        else {
+            "vertical": np.asarray(ies.vertical, dtype=np.float64).tolist(),
+            "horizontal": np.asarray(ies.horizontal, dtype=np.float64).tolist(),
+            "candela": np.asarray(ies.candela, dtype=np.float64).tolist(),
+            "lumens": float(ies.lumens),
+            "name": str(ies.name),
+        },
     }
 
 
@@ -54,13 +70,19 @@ def light_from_record(d: dict):
         radiant_intensity=np.asarray(d["radiant_intensity"], dtype=np.float64),
         inner_cone=float(d["inner_cone"]),
         outer_cone=float(d["outer_cone"]),
+        ies=None
+        if d.get("ies") is None
+        else Photometry(**{k: np.asarray(v) if k in _IES_ARRAYS else v for k, v in d["ies"].items()}),
     )
 
 
 def light_signature(lt) -> tuple:
-    """Kind, position, direction, cones, and last the intensity of a light (for matching)."""
+    """Kind, position, direction, cones, IES distribution, and last the intensity of a light (for
+    matching)."""
+    ies = getattr(lt, "ies", None)
     return (
         lt.kind,
+        None if ies is None else ies.digest(),
         tuple(np.round(np.asarray(lt.position, dtype=np.float64), 12)),
         tuple(np.round(np.asarray(lt.direction, dtype=np.float64), 12)),
         round(float(lt.inner_cone), 12),
