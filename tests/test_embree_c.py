@@ -13,8 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from iat.geometry import quadtree as qt
 from iat.io.load import load_scene
+from iat.io.scene import Material, Scene
 from iat.radiosity import SolveOptions, embree, solve
+from iat.radiosity.context import Context
+from iat.radiosity.solver import evaluate_direct
 from iat.radiosity.visibility import Visibility
 from tests.support.daylight import daylit_room
 
@@ -169,6 +173,75 @@ def test_kernels_cache_across_processes(tmp_path):
         assert r.returncode == 0, r.stderr[-3000:]
     assert runs[0].stdout.strip() == "hits 0"  # compiled ...
     assert runs[1].stdout.strip() == "hits 2"  # ... then loaded from the cache
+
+
+def pane_scene() -> Scene:
+    """A 4 x 4 m floor under a 2 x 2 m ceiling panel 2 m up, and between them an opaque tile and a
+    glass pane (transmittance 0.6) that cover parts of the floor's view of the panel."""
+
+    def quad(y, x0, x1, z0, z1, up):
+        c = [(x0, y, z0), (x0, y, z1), (x1, y, z1), (x1, y, z0)]
+        return c if up else c[::-1]
+
+    quads = [
+        quad(0.0, -2, 2, -2, 2, True),  # floor (0)
+        quad(2.0, -1, 1, -1, 1, False),  # ceiling panel (1): the shooter
+        quad(1.0, -1.5, 0.0, -0.5, 0.5, True),  # opaque tile (2)
+        quad(1.2, 0.2, 1.6, -1.2, 1.2, True),  # glass (3)
+    ]
+    mats = [Material("white", albedo=[0.6, 0.6, 0.6]), Material("glass", albedo=[0.0] * 3, transmission=0.6)]
+    return Scene(
+        vertices=np.array(quads, float).reshape(-1, 3),
+        patch_corners=np.arange(16).reshape(4, 4),
+        patch_material=np.array([0, 0, 0, 1]),
+        materials=mats,
+    )
+
+
+@pytest.mark.parametrize("field", [False, True])
+@pytest.mark.parametrize("correlated", [False, True])
+def test_traced_gather_is_the_three_steps(field, correlated):
+    """:func:`.traced.gather_traced` (one kernel: samples, Embree, sum) gives the rows, rays and culling
+    counts of ``gather_rays`` + ``Visibility.visible`` + ``gather_finish`` to the bit, through an
+    occluder and glass, with and without a field, on one thread and two."""
+    scene = pane_scene()
+    out = {}
+    for name, threads in (("embreex", 2), ("c", 1), ("c", 2)):
+        with Visibility.of_scene(scene, threads=threads, backend=name) as vis:
+            ctx = Context(scene, SolveOptions(), vis)
+            n = ctx.patches.n
+            g = np.arange(0, n + 1, n // 16)
+            i, j = (a.ravel() for a in np.meshgrid(g, g, indexing="ij"))
+            geo = ctx.patches.geometry(qt.make_key(np.zeros_like(i), i, j, n))
+            fld = mean = None
+            if field:
+                fld = np.random.default_rng(1).random((9, 9, 3))
+                mean = fld.reshape(-1, 3).mean(axis=0)
+            got = ctx.gathers.gathers(1, [(geo, None)], 5, 3, fld, mean, correlated=correlated)[0]
+            out[name, threads] = (*got, ctx.gathers._vis_rays[1], ctx.gathers._vis_seen[1] > 0, vis.rays)
+    ref = out["embreex", 2]
+    assert len(ref[0]) > 200 and 0 < (ref[1] > 0).mean() < 1
+    for key, res in out.items():
+        for a, b in zip(ref, res, strict=True):
+            assert np.array_equal(a, b), key
+
+
+def test_direct_daylight_same_bits(monkeypatch):
+    """The sun's and the sky's rays made and traced in one kernel (:func:`.traced.sun_escape`,
+    :func:`.traced.sky_escape`) give the direct light of the numpy directions and embreex to the
+    bit: house_day (Preetham sky, sun, lamps, glass) at a lattice of points of every patch."""
+    scene = sample("house_day")
+    n = 1 << SolveOptions().max_depth
+    g = np.arange(0, n + 1, n // 4)
+    p, i, j = (a.ravel() for a in np.meshgrid(np.arange(scene.n_patches), g, g, indexing="ij"))
+    inside = scene.patch_is_quad[p] | (i + j <= n)
+    keys = np.unique(qt.make_key(p[inside], i[inside], j[inside], n))
+    monkeypatch.setenv(embree.EMBREE_C_ENV, "0")
+    ref = evaluate_direct(scene, keys)
+    monkeypatch.delenv(embree.EMBREE_C_ENV)
+    got = evaluate_direct(scene, keys)
+    assert (ref > 0).mean() > 0.5
+    assert np.array_equal(ref, got)
 
 
 @pytest.mark.parametrize("make", [lambda: sample("cornell_box"), glazed_room])

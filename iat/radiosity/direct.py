@@ -26,6 +26,7 @@ from iat.radiosity.pointlight import lumped_light
 from iat.radiosity.sampling import disk_to_hemisphere, hash_uniform, luminance_of, pattern_side, rotated_disk
 from iat.radiosity.sky import sky_radiance
 from iat.radiosity.tasks import TaskPool
+from iat.radiosity.traced import sky_escape, sun_escape
 from iat.radiosity.visibility import Visibility
 
 
@@ -185,6 +186,10 @@ class DirectLight:
 
         def block(idx: np.ndarray) -> np.ndarray:  # the fraction of the disc each vertex sees
             rot = hash_uniform(geo.key[idx], int(self.opts.seed) * 7919 + 17, 2)
+            far = 4.0 * self.patches.scale
+            free = sun_escape(self.vis, pat, rot, to_sun, half, t1, t2, geo.origin32()[idx], far)
+            if free is not None:  # made and traced in one kernel (the same directions)
+                return free.mean(axis=1)
             dx, dy = rotated_disk(pat, rot[:, :1], rot[:, 1:2])
             d = to_sun + half * (dx[..., None] * t1 + dy[..., None] * t2)
             d /= np.linalg.norm(d, axis=-1, keepdims=True)
@@ -226,10 +231,14 @@ class DirectLight:
 
         def block(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             rot = hash_uniform(geo.key[idx], salt, 2)
-            dx, dy = rotated_disk(pat, rot[:, :1], rot[:, 1:2])
             t1, t2 = self.patches.tangent[geo.patch[idx], 0], self.patches.tangent[geo.patch[idx], 1]
-            w = disk_to_hemisphere(dx, dy, t1, t2, geo.normal[idx])
-            free = self._escape(geo, idx, w)
+            far = 4.0 * self.patches.scale
+            traced = sky_escape(self.vis, pat, rot, t1, t2, geo.normal[idx], geo.origin32()[idx], far)
+            if traced is not None:  # made and traced in one kernel (the same directions)
+                w, free = traced
+            else:
+                w = disk_to_hemisphere(*rotated_disk(pat, rot[:, :1], rot[:, 1:2]), t1, t2, geo.normal[idx])
+                free = self._escape(geo, idx, w)
             L = sky_radiance(self.sky, w.reshape(-1, 3)).reshape(len(idx), m * m, 3)
             e = np.pi * np.einsum("ks,ksc->kc", free, L) / (m * m)
             y = np.pi * free * luminance_of(L)  # (b, S) per sample

@@ -36,8 +36,12 @@ from typing import NamedTuple
 
 import numpy as np
 from llvmlite import ir
-from numba import njit, prange, types
-from numba.extending import intrinsic
+
+# as iat.radiosity.kernels: numba's OpenMP workers wait passively between parallel loops
+os.environ.setdefault("OMP_WAIT_POLICY", "passive")
+
+from numba import njit, prange, types  # noqa: E402
+from numba.extending import intrinsic  # noqa: E402
 
 #: environment variable: "0" turns the C API path off (embreex traces instead)
 EMBREE_C_ENV = "IAT_EMBREE_C"

@@ -33,6 +33,8 @@ os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
 from numba import get_num_threads, njit, prange, set_num_threads  # noqa: E402
 
+from iat.radiosity import blas  # noqa: E402, F401 (numpy's OpenBLAS on one thread)
+
 _PI = math.pi
 #: receivers per parallel task of the form-factor kernels (one set of scratch arrays each)
 _CHUNK = 256

@@ -1,5 +1,7 @@
 """Gathers that trace their own rays (issue 41): a shot's sample set-up, Embree traversal and sum in
-one ``nogil`` numba call, the rays never materialised as arrays.
+one ``nogil`` numba call, the rays never materialised as arrays; and the sun's and the sky's
+directions of a block of vertices made and traced in one call (:func:`sky_escape`,
+:func:`sun_escape`).
 
 :func:`gather_traced` is :func:`~iat.radiosity.kernels.block_inputs`, then
 :func:`~iat.radiosity.kernels.gather_rays`, :meth:`~iat.radiosity.visibility.Visibility.visible` and
@@ -13,11 +15,22 @@ same float32 rays (:func:`.kernels.sample_ray`), traced by the same Embree calls
 
 from __future__ import annotations
 
+import math
+import time
+
 import numpy as np
 from numba import njit, prange
 
 from iat.radiosity.embree import ray_record, visible1
-from iat.radiosity.kernels import _hash_row, _row_weights, field_terms, finish_row, sample_ray
+from iat.radiosity.kernels import (
+    _concentric,
+    _hash_row,
+    _row_weights,
+    _wrap,
+    field_terms,
+    finish_row,
+    sample_ray,
+)
 
 #: receivers per parallel task (one set of scratch arrays each)
 ROWS = 32
@@ -89,3 +102,92 @@ def gather_traced(occ, isect, scene, glass, glass_tau,
             finish_row(out, i, f[i], wsum, wvis, res0, res1, res2, x[j], has_field, flat, nl, geom, uvc,
                        linear_uv, is_quad, para, field_mean, clamp_lo, clamp_hi)  # fmt: skip
     return out, seen, rays, through.sum()
+
+
+# -- the sun's and the sky's rays ----------------------------------------------------------------
+@njit(cache=True, parallel=True, nogil=True, error_model="numpy")
+def sky_rays(occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, origin32, tfar, w, free):
+    """The sky's directions of b vertices and what of each gets out: pattern pat (S, 2) rotated by
+    rot (b, 2) per vertex, mapped to the disc and lifted to the hemisphere of the frame t1, t2,
+    normal (b, 3) (``sampling.rotated_disk`` then ``sampling.disk_to_hemisphere``, the same
+    arithmetic) into ``w`` (b, S, 3) float64; traced from origin32 (b, 3) float32 as far as tfar
+    (float32) into ``free`` (b, S) (:func:`.embree.visible1`). Returns the rays traced against
+    the glass besides."""
+    b, S = rot.shape[0], pat.shape[0]
+    through = np.zeros(b, dtype=np.int64)
+    for i in prange(b):
+        rec, bits = ray_record()
+        ox, oy, oz = origin32[i, 0], origin32[i, 1], origin32[i, 2]
+        for j in range(S):
+            dx, dy = _concentric(_wrap(pat[j, 0], rot[i, 0]), _wrap(pat[j, 1], rot[i, 1]))
+            dz = math.sqrt(max(1.0 - dx * dx - dy * dy, 0.0))
+            for c in range(3):
+                w[i, j, c] = dx * t1[i, c] + dy * t2[i, c] + dz * normal[i, c]
+            wx, wy, wz = np.float32(w[i, j, 0]), np.float32(w[i, j, 1]), np.float32(w[i, j, 2])
+            v = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, wx, wy, wz, tfar)
+            free[i, j] = v
+            if glass != 0 and v > 0:
+                through[i] += 1
+    return through.sum()
+
+
+@njit(cache=True, parallel=True, nogil=True, error_model="numpy")
+def sun_rays(occ, isect, scene, glass, glass_tau, pat, rot, to_sun, half, t1, t2, origin32, tfar, free):
+    """What of each of S directions to the sun's disc gets out, from b vertices: pattern pat (S, 2)
+    rotated by rot (b, 2) per vertex and mapped to the disc, ``to_sun + half (dx t1 + dy t2)``
+    normalised (to_sun, t1, t2 (3,): the disc's frame; the arithmetic of
+    ``DirectLight.sun_irradiance``), traced from origin32 (b, 3) float32 as far as tfar into
+    ``free`` (b, S). Returns the rays traced against the glass besides."""
+    b, S = rot.shape[0], pat.shape[0]
+    through = np.zeros(b, dtype=np.int64)
+    for i in prange(b):
+        rec, bits = ray_record()
+        ox, oy, oz = origin32[i, 0], origin32[i, 1], origin32[i, 2]
+        for j in range(S):
+            dx, dy = _concentric(_wrap(pat[j, 0], rot[i, 0]), _wrap(pat[j, 1], rot[i, 1]))
+            d0 = to_sun[0] + half * (dx * t1[0] + dy * t2[0])
+            d1 = to_sun[1] + half * (dx * t1[1] + dy * t2[1])
+            d2 = to_sun[2] + half * (dx * t1[2] + dy * t2[2])
+            n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)  # np.linalg.norm's sum, in its order
+            v = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz,
+                         np.float32(d0 / n), np.float32(d1 / n), np.float32(d2 / n), tfar)  # fmt: skip
+            free[i, j] = v
+            if glass != 0 and v > 0:
+                through[i] += 1
+    return through.sum()
+
+
+def sky_escape(vis, pat, rot, t1, t2, normal, origin32, tfar: float):
+    """With the C API (:meth:`Visibility.embree_args`), :func:`sky_rays` of a block of k vertices on
+    the ray threads, counted in ``vis``: ``(w (k, S, 3), free (k, S))``; None with embreex."""
+    args = vis.embree_args()
+    if args is None:
+        return None
+    k, S = len(rot), len(pat)
+    w, free = np.empty((k, S, 3)), np.empty((k, S))
+    t0 = time.perf_counter()
+    with vis.kernel_threads():
+        through = sky_rays(*args, pat, rot, _c(t1), _c(t2), _c(normal), np.ascontiguousarray(origin32),
+                           np.float32(tfar), w, free)  # fmt: skip
+    vis.count(k * S + int(through), time.perf_counter() - t0)
+    return w, free
+
+
+def sun_escape(vis, pat, rot, to_sun, half: float, t1, t2, origin32, tfar: float):
+    """With the C API, :func:`sun_rays` of a block of k vertices on the ray threads, counted in
+    ``vis``: ``free`` (k, S); None with embreex."""
+    args = vis.embree_args()
+    if args is None:
+        return None
+    k, S = len(rot), len(pat)
+    free = np.empty((k, S))
+    t0 = time.perf_counter()
+    with vis.kernel_threads():
+        through = sun_rays(*args, pat, rot, _c(to_sun), float(half), _c(t1), _c(t2),
+                           np.ascontiguousarray(origin32), np.float32(tfar), free)  # fmt: skip
+    vis.count(k * S + int(through), time.perf_counter() - t0)
+    return free
+
+
+def _c(a):
+    return np.ascontiguousarray(a, dtype=np.float64)

@@ -148,7 +148,11 @@ class Visibility:
     def kernel_threads(self) -> Iterator[None]:
         """numba kernels called inside run on :meth:`ray_threads` threads."""
         before = get_num_threads()
-        set_num_threads(self.ray_threads())
+        want = 1 if getattr(self._local, "serial", False) else max(1, min(self.threads, before))
+        if want == before:  # (numba's set_num_threads costs microseconds a call: skipped when it would do nothing)
+            yield
+            return
+        set_num_threads(want)
         try:
             yield
         finally:
