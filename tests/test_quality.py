@@ -19,7 +19,7 @@ REFS = Path(__file__).parent / "refs"
 def test_presets_and_overrides(tmp_path):
     assert SolveOptions.preset() == SolveOptions()
     assert SolveOptions.preset("final", seed=3) == SolveOptions(
-        convergence=0.005, tolerance=0.05, samples=32, seed=3
+        convergence=0.005, tolerance=0.05, samples=32, ambient_rays=1024, seed=3
     )
     with pytest.raises(
         OptionError, match=r"unknown quality 'best' \(choose from draft, default, fine, final\)"
@@ -35,6 +35,10 @@ def test_presets_and_overrides(tmp_path):
     )
     opts = Solution.load(out).options
     assert (opts["max_depth"], opts["samples"]) == (3, QUALITY_PRESETS["draft"]["samples"])
+    assert opts["ambient_rays"] == 64
+    out = tmp_path / "r.npz"
+    assert main(["solve", str(MODEL), "--quality", "draft", "--ambient-rays", "100", "-o", str(out)]) == 0
+    assert Solution.load(out).options["ambient_rays"] == 100
 
 
 def test_error_falls_from_draft_to_final(egl_ctx):
