@@ -25,6 +25,8 @@ def test_presets_and_overrides(tmp_path):
         OptionError, match=r"unknown quality 'best' \(choose from draft, default, fine, final\)"
     ):
         SolveOptions.preset("best")
+    with pytest.raises(OptionError, match=r"^solve option ambient_rays=0: must be between 1 and 4096$"):
+        SolveOptions(ambient_rays=0).validate()
     from iat.cli.commands import build_parser
 
     for name in QUALITY_PRESETS:  # the CLI takes every preset the library has
