@@ -618,6 +618,12 @@ def file_panel(state: AppState) -> None:
     )
     if changed:
         o.tolerance = float(v)
+    changed, v = imgui.slider_int(
+        "Ambient rays", int(o.ambient_rays), 16, 1024, flags=imgui.SliderFlags_.logarithmic
+    )
+    if changed:
+        o.ambient_rays = int(v)
+    _help("rays a vertex of the ambient term (the light still unshot): more is smoother indoors")
     changed, state.model.use_cache = imgui.checkbox("Use solution cache", state.model.use_cache)
     _help("Solved models are kept (by file content and options) so they reopen at once.")
 
