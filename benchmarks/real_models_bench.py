@@ -24,7 +24,8 @@ by the sun on :data:`SUN` at the model's place (IfcSite, else the default place)
 default: this checkout as ``now``): one child process a solve (``PYTHONPATH=DIR``, :data:`CHILD`),
 at most ``--cap`` seconds, one at a time. Per run: load and solve seconds, patches, elements, shots,
 unshot fraction, the largest vertex radiance, a :class:`~iat.errors.SolveError` if one stopped it,
-the child's peak resident memory (``wait4``'s ``ru_maxrss``: also of a child stopped at the cap),
+the solve's CPU seconds (all threads) and the child's (``wait4``: also of a child stopped at the cap),
+its peak resident memory (``wait4``'s ``ru_maxrss``),
 the load average before and after, and for a run stopped at the cap its last progress line. Rows
 go to ``--json`` as each run ends (a run already there is not redone):
 
@@ -266,6 +267,7 @@ print("TREE", iat.__file__, flush=True)
 t0 = time.perf_counter()
 scene = load_scene(path)
 load_s = time.perf_counter() - t0
+print("LOADED", scene.n_patches, flush=True)
 print("LIGHT", apply_daylight(scene, DaylightRequest(sun=sun, sky=sky)), flush=True)
 last = [0.0]
 def progress(fraction, message=""):
@@ -275,15 +277,17 @@ def progress(fraction, message=""):
         print(f"PROGRESS {now:.0f} s {fraction:.3f} {message}", flush=True)
     return True
 out = {"load_s": load_s, "patches": int(scene.n_patches)}
-t1 = time.perf_counter()
+t1, c1 = time.perf_counter(), time.process_time()
 try:
     sol = solve(scene, SolveOptions.preset(quality), progress=progress)
 except Exception as e:  # SolveError (issue 36) or another failure: its one line
     out.update(solve_s=time.perf_counter() - t1, error=f"{type(e).__name__}: {e}")
+    out["solve_cpu_s"] = time.process_time() - c1
 else:
     st, rad = sol.stats, np.asarray(sol.vert_radiance, dtype=np.float64)
     out.update(
         solve_s=time.perf_counter() - t1,
+        solve_cpu_s=time.process_time() - c1,
         elements=int(st["elements"]),
         shots=int(st["shots"]),
         unshot=float(st.get("unshot_fraction", float("nan"))),
@@ -326,6 +330,7 @@ def run_child(tree: Path, model: Path, preset: str, cap: float, log: Path) -> di
     row = {
         "wall_s": round(time.perf_counter() - t0, 1),
         "peak_rss_mib": round(usage.ru_maxrss / 1024, 1),
+        "cpu_s": round(usage.ru_utime + usage.ru_stime, 1),
         "stopped": stopped.is_set(),
         "returncode": p.returncode,
         "last_lines": [ln[:300] for ln in lines[-4:]],
@@ -333,6 +338,8 @@ def run_child(tree: Path, model: Path, preset: str, cap: float, log: Path) -> di
         "tree_file": next((ln[5:] for ln in lines if ln.startswith("TREE ")), None),
     }
     for ln in lines:
+        if ln.startswith("LOADED "):
+            row["patches"] = int(ln.split()[1])
         if ln.startswith("RESULT "):
             row.update(json.loads(ln[7:]))
     return row
@@ -401,7 +408,8 @@ def daylight_markdown(result: dict) -> str:
         if r is None:
             return "not run"
         if r.get("stopped"):
-            return f"> {r['wall_s']:.0f} s (stopped)" if field == "solve_s" else "-"
+            cpu = f", {r['cpu_s']:.0f} CPU" if "cpu_s" in r else ""
+            return f"> {r['wall_s']:.0f} s (stopped{cpu})" if field == "solve_s" else "-"
         if "error" in r:
             return r["error"][:60] if field == "solve_s" else "-"
         v = r.get(field)
@@ -419,7 +427,10 @@ def daylight_markdown(result: dict) -> str:
             " → ".join(f(r) for r in rs)
             for f in (
                 lambda r: "-" if r is None or "patches" not in r else f"{r['patches']:,}",
-                lambda r: cell(r, "solve_s", "{:.0f}"),
+                lambda r: (
+                    cell(r, "solve_s", "{:.0f}")
+                    + (f" ({r['solve_cpu_s']:.0f} CPU)" if r is not None and "solve_cpu_s" in r else "")
+                ),
                 lambda r: cell(r, "elements"),
                 lambda r: cell(r, "shots"),
                 lambda r: cell(r, "max_radiance", "{:.3g}"),
