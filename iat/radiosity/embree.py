@@ -41,6 +41,7 @@ from llvmlite import ir
 os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
 from numba import njit, prange, types  # noqa: E402
+from numba.core import cgutils  # noqa: E402
 from numba.extending import intrinsic  # noqa: E402
 
 #: environment variable: "0" turns the C API path off (embreex traces instead)
@@ -49,6 +50,8 @@ EMBREE_C_ENV = "IAT_EMBREE_C"
 EMBREE_LIB_ENV = "IAT_EMBREE_LIB"
 #: rays per parallel task of the tracing kernels (one ray record each)
 RAY_BLOCK = 2048
+#: workers of a tracing kernel's ``prange`` (:func:`workers`): at least the most threads it runs on
+WORKERS = 256
 
 _INVALID = 0xFFFFFFFF
 _RTC_GEOMETRY_TYPE_TRIANGLE = 0
@@ -226,6 +229,35 @@ def call3(typingctx, fn, a, b, c):
     return sig, codegen
 
 
+@intrinsic
+def fetch_add(typingctx, arr, idx, val):
+    """Atomically ``arr[idx] += val`` (arr an int64 array); returns the value before."""
+    if not (isinstance(arr, types.Array) and arr.dtype == types.int64 and isinstance(idx, types.Integer)):
+        return None
+    sig = types.int64(arr, idx, val)
+
+    def codegen(context, builder, signature, args):
+        aryty = signature.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [args[1]])
+        v = context.cast(builder, args[2], signature.args[2], types.int64)
+        return builder.atomic_rmw("add", ptr, v, "seq_cst")
+
+    return sig, codegen
+
+
+@njit(cache=True, nogil=True)
+def workers():
+    """The workers of a kernel's ``prange`` (``WORKERS``) and the shared counter (1,) int64 they take
+    their tasks from with :func:`fetch_add`, so that tasks go to whichever thread is free: a static
+    split of the range leaves a core idle when the costly tasks bunch, or while another process
+    holds the other core. The range splits into one run of workers a thread; a thread's first
+    worker takes tasks until none is left, the others find none. Each task's result does not
+    depend on who runs it. (The thread count is not asked for: ``numba.get_num_threads`` in a
+    kernel would keep it from numba's cache.)"""
+    return WORKERS, np.zeros(1, dtype=np.int64)
+
+
 @njit(cache=True, nogil=True)
 def ray_record():
     """A 96-byte, 16-byte aligned ``RTCRayHit`` (or ``RTCRay``: its first 48 bytes): (24,) float32
@@ -282,18 +314,24 @@ def visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, dx, dy,
     return 1.0 if p < 0 else glass_tau[p]
 
 
-# -- queries over arrays of rays (prange over blocks of RAY_BLOCK rays) -----------------------
+# -- queries over arrays of rays (blocks of RAY_BLOCK rays, taken by the threads as they come free) --
 @njit(cache=True, parallel=True, nogil=True)
 def trace_occluded(fn, scene, o, d, t, out):
     """``out[i]`` (n,) bool: whether ``rtcOccluded1`` finds a hit on ray i (o, d (n, 3), t (n,)
     float32) before t[i]."""
     n = o.shape[0]
-    for b in prange((n + RAY_BLOCK - 1) // RAY_BLOCK):
-        rec, bits = ray_record()
-        for i in range(b * RAY_BLOCK, min(n, (b + 1) * RAY_BLOCK)):
-            out[i] = occluded1(
-                fn, scene, rec, bits, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i]
-            )
+    nb = (n + RAY_BLOCK - 1) // RAY_BLOCK
+    nw, nxt = workers()
+    for _ in prange(nw):
+        b = fetch_add(nxt, 0, 1)
+        if b < nb:
+            rec, bits = ray_record()
+        while b < nb:
+            for i in range(b * RAY_BLOCK, min(n, (b + 1) * RAY_BLOCK)):
+                out[i] = occluded1(
+                    fn, scene, rec, bits, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i]
+                )
+            b = fetch_add(nxt, 0, 1)
 
 
 @njit(cache=True, parallel=True, nogil=True)
@@ -303,16 +341,21 @@ def trace_visible(occ, isect, scene, glass, glass_tau, o, d, t, out):
     n = o.shape[0]
     nb = (n + RAY_BLOCK - 1) // RAY_BLOCK
     through = np.zeros(nb, dtype=np.int64)
-    for b in prange(nb):
-        rec, bits = ray_record()
-        for i in range(b * RAY_BLOCK, min(n, (b + 1) * RAY_BLOCK)):
-            v = visible1(
-                occ, isect, scene, glass, glass_tau, rec, bits,
-                o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i],
-            )  # fmt: skip
-            out[i] = v
-            if glass != 0 and v > 0:
-                through[b] += 1
+    nw, nxt = workers()
+    for _ in prange(nw):
+        b = fetch_add(nxt, 0, 1)
+        if b < nb:
+            rec, bits = ray_record()
+        while b < nb:
+            for i in range(b * RAY_BLOCK, min(n, (b + 1) * RAY_BLOCK)):
+                v = visible1(
+                    occ, isect, scene, glass, glass_tau, rec, bits,
+                    o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i],
+                )  # fmt: skip
+                out[i] = v
+                if glass != 0 and v > 0:
+                    through[b] += 1
+            b = fetch_add(nxt, 0, 1)
     return through.sum()
 
 
@@ -321,12 +364,20 @@ def trace_first_hits(fn, scene, o, d, t, prim, bary):
     """``prim[i]`` (n,) int64 the triangle ray i meets first before t[i] (-1: none) and ``bary[i]``
     (n, 2) float64 the hit's (u, v) (0 where none), by ``rtcIntersect1``."""
     n = o.shape[0]
-    for b in prange((n + RAY_BLOCK - 1) // RAY_BLOCK):
-        rec, bits = ray_record()
-        for i in range(b * RAY_BLOCK, min(n, (b + 1) * RAY_BLOCK)):
-            p = intersect1(fn, scene, rec, bits, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i])
-            prim[i] = p
-            if p >= 0:
-                bary[i, 0], bary[i, 1] = rec[15], rec[16]
-            else:
-                bary[i, 0], bary[i, 1] = 0.0, 0.0
+    nb = (n + RAY_BLOCK - 1) // RAY_BLOCK
+    nw, nxt = workers()
+    for _ in prange(nw):
+        b = fetch_add(nxt, 0, 1)
+        if b < nb:
+            rec, bits = ray_record()
+        while b < nb:
+            for i in range(b * RAY_BLOCK, min(n, (b + 1) * RAY_BLOCK)):
+                p = intersect1(
+                    fn, scene, rec, bits, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i]
+                )
+                prim[i] = p
+                if p >= 0:
+                    bary[i, 0], bary[i, 1] = rec[15], rec[16]
+                else:
+                    bary[i, 0], bary[i, 1] = 0.0, 0.0
+            b = fetch_add(nxt, 0, 1)

@@ -21,7 +21,7 @@ import time
 import numpy as np
 from numba import njit, prange
 
-from iat.radiosity.embree import ray_record, visible1
+from iat.radiosity.embree import fetch_add, ray_record, visible1, workers
 from iat.radiosity.kernels import (
     _concentric,
     _hash_row,
@@ -57,51 +57,71 @@ def gather_traced(occ, isect, scene, glass, glass_tau,
     rays = np.zeros(b, dtype=np.int64)
     tasks = (b + ROWS - 1) // ROWS
     through = np.zeros(tasks, dtype=np.int64)
-    for task in prange(tasks):
-        lo = task * ROWS
-        m = min(b, lo + ROWS) - lo
-        rot, x, nr = np.empty((m, 4)), np.empty((m, 3)), np.empty((m, 3))
-        t1, t2 = np.empty((m, 3)), np.empty((m, 3))
-        o32 = np.empty((m, 3), dtype=np.float32)
-        sw, su, sv = np.empty(2 * S), np.empty(2 * S), np.empty(2 * S)
-        rec, bits = ray_record()
-        for j in range(m):  # block_inputs' rows
-            r = ii[lo + j]
-            p = patch[r]
-            _hash_row(0 if correlated else key[r], salt, rot, j)
-            for c in range(3):
-                x[j, c] = ff[r, c]
-                nr[j, c] = normal[r, c]
-                t1[j, c] = tangent[p, 0, c]
-                t2[j, c] = tangent[p, 1, c]
-                o32[j, c] = origin32[r, c]
-        for j in range(m):
-            i = lo + j
-            cnt, wsum = _row_weights(j, pat, rot, x, nr, t1, t2, f[i] >= f_direction, n_s, geom, uvc, poly_n,
-                                     poly_o, tol, is_quad, para, linear_uv, area, mask, has_mask, sw, su, sv,
-                                     0)  # fmt: skip
-            ox, oy, oz = o32[j, 0], o32[j, 1], o32[j, 2]
-            wvis = 0.0
-            sv_sum = 0.0
-            res0 = res1 = res2 = 0.0
-            for q in range(cnt):
-                dx, dy, dz, tfar = sample_ray(su[q], sv[q], t32, para, o32[j], half_eps)
-                vis = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, dx, dy, dz, tfar)
-                if glass != 0 and vis > 0:
-                    through[task] += 1
-                wr = sw[q] * vis  # as gather_finish sums them
-                wvis += wr
-                sv_sum += vis
-                if has_field:
-                    v0, v1, v2 = field_terms(flat, nl, su[q], sv[q], wr)
-                    res0 += v0
-                    res1 += v1
-                    res2 += v2
-            rays[i] = cnt
-            seen[i] = sv_sum
-            finish_row(out, i, f[i], wsum, wvis, res0, res1, res2, x[j], has_field, flat, nl, geom, uvc,
-                       linear_uv, is_quad, para, field_mean, clamp_lo, clamp_hi)  # fmt: skip
+    nw, nxt = workers()
+    for _ in prange(nw):
+        task = fetch_add(nxt, 0, 1)
+        if task < tasks:
+            rot, x, nr = np.empty((ROWS, 4)), np.empty((ROWS, 3)), np.empty((ROWS, 3))
+            t1, t2 = np.empty((ROWS, 3)), np.empty((ROWS, 3))
+            o32 = np.empty((ROWS, 3), dtype=np.float32)
+            sw, su, sv = np.empty(2 * S), np.empty(2 * S), np.empty(2 * S)
+            rec, bits = ray_record()
+        while task < tasks:
+            _gather_task(task, b, S, n_s, occ, isect, scene, glass, glass_tau, ii, key, salt, correlated,
+                         ff, normal, patch, tangent, f, f_direction, origin32, pat, geom, uvc, poly_n, poly_o,
+                         tol, is_quad, para, linear_uv, area, mask, has_mask, t32, half_eps, has_field, flat,
+                         nl, field_mean, clamp_lo, clamp_hi, out, seen, rays, through, rot, x, nr, t1, t2,
+                         o32, sw, su, sv, rec, bits)  # fmt: skip
+            task = fetch_add(nxt, 0, 1)
     return out, seen, rays, through.sum()
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _gather_task(task, b, S, n_s, occ, isect, scene, glass, glass_tau, ii, key, salt, correlated, ff,
+                 normal, patch, tangent, f, f_direction, origin32, pat, geom, uvc, poly_n, poly_o, tol,
+                 is_quad, para, linear_uv, area, mask, has_mask, t32, half_eps, has_field, flat, nl,
+                 field_mean, clamp_lo, clamp_hi, out, seen, rays, through, rot, x, nr, t1, t2, o32, sw, su,
+                 sv, rec, bits):  # fmt: skip
+    """Rows ``task * ROWS ...`` of :func:`gather_traced` (the rest: its arguments, outputs and the
+    worker's scratch)."""
+    lo = task * ROWS
+    m = min(b, lo + ROWS) - lo
+    for j in range(m):  # block_inputs' rows
+        r = ii[lo + j]
+        p = patch[r]
+        _hash_row(0 if correlated else key[r], salt, rot, j)
+        for c in range(3):
+            x[j, c] = ff[r, c]
+            nr[j, c] = normal[r, c]
+            t1[j, c] = tangent[p, 0, c]
+            t2[j, c] = tangent[p, 1, c]
+            o32[j, c] = origin32[r, c]
+    for j in range(m):
+        i = lo + j
+        cnt, wsum = _row_weights(j, pat, rot, x, nr, t1, t2, f[i] >= f_direction, n_s, geom, uvc, poly_n,
+                                 poly_o, tol, is_quad, para, linear_uv, area, mask, has_mask, sw, su, sv,
+                                 0)  # fmt: skip
+        ox, oy, oz = o32[j, 0], o32[j, 1], o32[j, 2]
+        wvis = 0.0
+        sv_sum = 0.0
+        res0 = res1 = res2 = 0.0
+        for q in range(cnt):
+            dx, dy, dz, tfar = sample_ray(su[q], sv[q], t32, para, o32[j], half_eps)
+            vis = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, dx, dy, dz, tfar)
+            if glass != 0 and vis > 0:
+                through[task] += 1
+            wr = sw[q] * vis  # as gather_finish sums them
+            wvis += wr
+            sv_sum += vis
+            if has_field:
+                v0, v1, v2 = field_terms(flat, nl, su[q], sv[q], wr)
+                res0 += v0
+                res1 += v1
+                res2 += v2
+        rays[i] = cnt
+        seen[i] = sv_sum
+        finish_row(out, i, f[i], wsum, wvis, res0, res1, res2, x[j], has_field, flat, nl, geom, uvc,
+                   linear_uv, is_quad, para, field_mean, clamp_lo, clamp_hi)  # fmt: skip
 
 
 # -- the sun's and the sky's rays ----------------------------------------------------------------
@@ -115,20 +135,33 @@ def sky_rays(occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, orig
     the glass besides."""
     b, S = rot.shape[0], pat.shape[0]
     through = np.zeros(b, dtype=np.int64)
-    for i in prange(b):
-        rec, bits = ray_record()
-        ox, oy, oz = origin32[i, 0], origin32[i, 1], origin32[i, 2]
-        for j in range(S):
-            dx, dy = _concentric(_wrap(pat[j, 0], rot[i, 0]), _wrap(pat[j, 1], rot[i, 1]))
-            dz = math.sqrt(max(1.0 - dx * dx - dy * dy, 0.0))
-            for c in range(3):
-                w[i, j, c] = dx * t1[i, c] + dy * t2[i, c] + dz * normal[i, c]
-            wx, wy, wz = np.float32(w[i, j, 0]), np.float32(w[i, j, 1]), np.float32(w[i, j, 2])
-            v = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, wx, wy, wz, tfar)
-            free[i, j] = v
-            if glass != 0 and v > 0:
-                through[i] += 1
+    nw, nxt = workers()
+    for _ in prange(nw):
+        i = fetch_add(nxt, 0, 1)
+        if i < b:
+            rec, bits = ray_record()
+        while i < b:
+            _sky_row(i, S, occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, origin32, tfar, w,
+                     free, through, rec, bits)  # fmt: skip
+            i = fetch_add(nxt, 0, 1)
     return through.sum()
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _sky_row(i, S, occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, origin32, tfar, w, free,
+             through, rec, bits):  # fmt: skip
+    """Vertex i of :func:`sky_rays`."""
+    ox, oy, oz = origin32[i, 0], origin32[i, 1], origin32[i, 2]
+    for j in range(S):
+        dx, dy = _concentric(_wrap(pat[j, 0], rot[i, 0]), _wrap(pat[j, 1], rot[i, 1]))
+        dz = math.sqrt(max(1.0 - dx * dx - dy * dy, 0.0))
+        for c in range(3):
+            w[i, j, c] = dx * t1[i, c] + dy * t2[i, c] + dz * normal[i, c]
+        wx, wy, wz = np.float32(w[i, j, 0]), np.float32(w[i, j, 1]), np.float32(w[i, j, 2])
+        v = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, wx, wy, wz, tfar)
+        free[i, j] = v
+        if glass != 0 and v > 0:
+            through[i] += 1
 
 
 @njit(cache=True, parallel=True, nogil=True, error_model="numpy")
@@ -140,21 +173,34 @@ def sun_rays(occ, isect, scene, glass, glass_tau, pat, rot, to_sun, half, t1, t2
     ``free`` (b, S). Returns the rays traced against the glass besides."""
     b, S = rot.shape[0], pat.shape[0]
     through = np.zeros(b, dtype=np.int64)
-    for i in prange(b):
-        rec, bits = ray_record()
-        ox, oy, oz = origin32[i, 0], origin32[i, 1], origin32[i, 2]
-        for j in range(S):
-            dx, dy = _concentric(_wrap(pat[j, 0], rot[i, 0]), _wrap(pat[j, 1], rot[i, 1]))
-            d0 = to_sun[0] + half * (dx * t1[0] + dy * t2[0])
-            d1 = to_sun[1] + half * (dx * t1[1] + dy * t2[1])
-            d2 = to_sun[2] + half * (dx * t1[2] + dy * t2[2])
-            n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)  # np.linalg.norm's sum, in its order
-            v = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz,
-                         np.float32(d0 / n), np.float32(d1 / n), np.float32(d2 / n), tfar)  # fmt: skip
-            free[i, j] = v
-            if glass != 0 and v > 0:
-                through[i] += 1
+    nw, nxt = workers()
+    for _ in prange(nw):
+        i = fetch_add(nxt, 0, 1)
+        if i < b:
+            rec, bits = ray_record()
+        while i < b:
+            _sun_row(i, S, occ, isect, scene, glass, glass_tau, pat, rot, to_sun, half, t1, t2, origin32,
+                     tfar, free, through, rec, bits)  # fmt: skip
+            i = fetch_add(nxt, 0, 1)
     return through.sum()
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _sun_row(i, S, occ, isect, scene, glass, glass_tau, pat, rot, to_sun, half, t1, t2, origin32, tfar, free,
+             through, rec, bits):  # fmt: skip
+    """Vertex i of :func:`sun_rays`."""
+    ox, oy, oz = origin32[i, 0], origin32[i, 1], origin32[i, 2]
+    for j in range(S):
+        dx, dy = _concentric(_wrap(pat[j, 0], rot[i, 0]), _wrap(pat[j, 1], rot[i, 1]))
+        d0 = to_sun[0] + half * (dx * t1[0] + dy * t2[0])
+        d1 = to_sun[1] + half * (dx * t1[1] + dy * t2[1])
+        d2 = to_sun[2] + half * (dx * t1[2] + dy * t2[2])
+        n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)  # np.linalg.norm's sum, in its order
+        v = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz,
+                     np.float32(d0 / n), np.float32(d1 / n), np.float32(d2 / n), tfar)  # fmt: skip
+        free[i, j] = v
+        if glass != 0 and v > 0:
+            through[i] += 1
 
 
 def sky_escape(vis, pat, rot, t1, t2, normal, origin32, tfar: float):
