@@ -571,7 +571,7 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--tolerance", type=float, help="relative radiance change that splits an element")
         sp.add_argument("--max-edge", type=float, dest="max_edge", help="pre-split patches longer than this")
         sp.add_argument("--samples", type=int, help="shooter samples for visibility")
-        sp.add_argument("--ambient-rays", type=int, dest="ambient_rays", help="rays a vertex of the ambient term (256)")
+        sp.add_argument("--ambient-rays", type=int, dest="ambient_rays", help="ambient term's rays a vertex")
         sp.add_argument(
             "--convergence",
             type=float,

@@ -264,7 +264,7 @@ def _inverse_bilinear(px, py, pz, geom, uvc, linear_uv, is_quad):
 
 
 @njit(cache=True, error_model="numpy")
-def _concentric(u, v):
+def concentric_unit(u, v):
     """Shirley-Chiu concentric map of (u, v) in the unit square onto the unit disc."""
     a, b = 2.0 * u - 1.0, 2.0 * v - 1.0
     if abs(a) > abs(b):
@@ -279,7 +279,7 @@ def _concentric(u, v):
 
 
 @njit(cache=True, error_model="numpy")
-def _wrap(p, r):
+def wrap_unit(p, r):
     """``(p + r) % 1.0`` for p, r in [0, 1) (exact: p + r - 1 is, for a sum in [1, 2))."""
     t = p + r
     return t - 1.0 if t >= 1.0 else t
@@ -291,7 +291,7 @@ def _dot3(a, b):
 
 
 @njit(cache=True, error_model="numpy")
-def _row_weights(i, pat, rot, x, nr, t1, t2, near, n_s, geom, uvc, poly_n, poly_o, tol,
+def row_weights(i, pat, rot, x, nr, t1, t2, near, n_s, geom, uvc, poly_n, poly_o, tol,
                  is_quad, para, linear_uv, area, mask, has_mask, sw, su, sv, base):  # fmt: skip
     """The samples of weight > 0 of receiver row i (its S area samples, then its S cosine-direction
     samples when ``near``): their MIS weights sw and lattice parameters su, sv, written from
@@ -301,8 +301,8 @@ def _row_weights(i, pat, rot, x, nr, t1, t2, near, n_s, geom, uvc, poly_n, poly_
     d0n, dd, de0, de1, de2, en0, en1, en2, h = _receiver_scalars(xi, ni, geom)
     q, wsum = base, 0.0
     for j in range(S):  # area samples: the stratified pattern shifted by the row's rotation
-        ua = _wrap(pat[j, 0], rot[i, 0])
-        va = _wrap(pat[j, 1], rot[i, 1])
+        ua = wrap_unit(pat[j, 0], rot[i, 0])
+        va = wrap_unit(pat[j, 1], rot[i, 1])
         if not is_quad:  # area-uniform square -> triangle warp
             sq = math.sqrt(ua)
             ua, va = sq * (1 - va), sq * va
@@ -327,7 +327,7 @@ def _row_weights(i, pat, rot, x, nr, t1, t2, near, n_s, geom, uvc, poly_n, poly_
     xb = rx * geom[6, 0] + ry * geom[6, 1] + rz * geom[6, 2]
     k = poly_n.shape[0]
     for j in range(S):
-        dx, dy = _concentric(_wrap(pat[j, 0], rot[i, 2]), _wrap(pat[j, 1], rot[i, 3]))
+        dx, dy = concentric_unit(wrap_unit(pat[j, 0], rot[i, 2]), wrap_unit(pat[j, 1], rot[i, 3]))
         dz = math.sqrt(max(1.0 - dx * dx - dy * dy, 0.0))
         den = dx * t1n + dy * t2n + dz * nn  # < 0: towards the front of the shooter
         ok = den < -1e-12
@@ -392,7 +392,7 @@ def gather_rays(pat, rot, x, nr, t1, t2, near, origin32, geom, uvc, poly_n, poly
     cnt = np.zeros(b, dtype=np.int64)
     wsum = np.zeros(b)
     for i in prange(b):
-        cnt[i], wsum[i] = _row_weights(i, pat, rot, x, nr, t1, t2, near[i], n_s, geom, uvc, poly_n,
+        cnt[i], wsum[i] = row_weights(i, pat, rot, x, nr, t1, t2, near[i], n_s, geom, uvc, poly_n,
                                        poly_o, tol, is_quad, para, linear_uv, area, mask, has_mask,
                                        sw, su, sv, i * 2 * S)  # fmt: skip
     off = np.zeros(b + 1, dtype=np.int64)
@@ -520,7 +520,7 @@ _MIX2 = np.uint64(0x94D049BB133111EB)
 
 
 @njit(cache=True, error_model="numpy")
-def _hash_row(key, salt, out, i):
+def hash_row(key, salt, out, i):
     """``out[i, :]``: ``out.shape[1]`` splitmix64 hashes of (key, salt) as uniform numbers in [0, 1)."""
     z = np.uint64(key) * _GOLDEN
     z ^= salt
@@ -537,7 +537,7 @@ def hash_keys(keys, salt, k):
     """(n, k) float64 in [0, 1): k splitmix64 hashes of each of keys (n,) int64 with salt (uint64)."""
     out = np.empty((keys.shape[0], k))
     for i in range(keys.shape[0]):
-        _hash_row(keys[i], salt, out, i)
+        hash_row(keys[i], salt, out, i)
     return out
 
 
@@ -561,7 +561,7 @@ def block_inputs(ii, key, salt, correlated, ff, normal, patch, tangent, f, f_dir
         r = ii[i]
         p = patch[r]
         rp[i] = p
-        _hash_row(0 if correlated else key[r], salt, rot, i)
+        hash_row(0 if correlated else key[r], salt, rot, i)
         for c in range(3):
             x[i, c] = ff[r, c]
             nr[i, c] = normal[r, c]

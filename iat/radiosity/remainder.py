@@ -1,20 +1,20 @@
 """The ambient term (stage D of :mod:`iat.radiosity.solver`): what the light still unshot at
 convergence adds over all its later bounces, by a final gather of it.
 
-Every vertex casts ``ambient_rays`` (:class:`~iat.radiosity.options.SolveOptions`) cosine-distributed rays (one stratified pattern for all, so
-the result varies smoothly) and takes, where each first meets a front face, the unshot radiance
-there (the patch's field on its ``AMBIENT_GRID`` x ``AMBIENT_GRID`` lattice, times its shot gain):
-their mean times the vertex's albedo is the remainder's first bounce ``R1``, at the resolution of
-the unshot light (a sunlit patch of floor lights what faces it, not its whole room). The same rays,
-traced again, read ``R1`` where they land for the second bounce ``R2`` (a patch's light is uneven:
-the Cornell box's walls are one patch each), except on panel cells (clipped patches), which give
-their patch mean: their lattice square reaches past their surface, and their vertex field read
-there put the sunlit IFC house's interior at 0.84 of Mitsuba instead of 0.92. The bounces after
-are solved on the patches: the rays, averaged over each patch, give a sampled patch-to-patch
-form-factor matrix ``F = M F_v`` (P, P); the later reflected radiance ``B`` (P, 3) solves
-``B = rho F (R2 + B)`` (``R2`` as patch means), and each vertex adds ``rho F_v (R2 + B)``. Rays
-that leave the scene or meet a back face bring nothing, so an open scene's remainder escapes as
-it would.
+Every vertex casts ``ambient_rays`` (:class:`~iat.radiosity.options.SolveOptions`) cosine-
+distributed rays (one stratified pattern for all, so the result varies smoothly) and takes, where
+each first meets a front face, the unshot radiance there (the patch's field on its ``AMBIENT_GRID``
+x ``AMBIENT_GRID`` lattice, times its shot gain): their mean times the vertex's albedo is the
+remainder's first bounce ``R1``, at the resolution of the unshot light (a sunlit patch of floor
+lights what faces it, not its whole room). The same rays, traced again, read ``R1`` where they land
+for the second bounce ``R2`` (a patch's light is uneven: the Cornell box's walls are one patch
+each), except on panel cells (clipped patches), which give their patch mean: their lattice square
+reaches past their surface, and their vertex field read there put the sunlit IFC house's interior at
+0.84 of Mitsuba instead of 0.92. The bounces after are solved on the patches: the rays, averaged
+over each patch, give a sampled patch-to-patch form-factor matrix ``F = M F_v`` (P, P); the later
+reflected radiance ``B`` (P, 3) solves ``B = rho F (R2 + B)`` (``R2`` as patch means), and each
+vertex adds ``rho F_v (R2 + B)``. Rays that leave the scene or meet a back face bring nothing, so an
+open scene's remainder escapes as it would.
 """
 
 from __future__ import annotations

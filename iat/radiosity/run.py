@@ -484,7 +484,13 @@ class SolveRun:
         if opts.ambient and opts.max_shots > 0 and len(keys) and not self.progress.cancelled:
             try:
                 amb = ambient_term(
-                    ctx, self.mesh, self.vis, self.scene, self.rad.unshot, self.rad.gain, opts.ambient_rays,
+                    ctx,
+                    self.mesh,
+                    self.vis,
+                    self.scene,
+                    self.rad.unshot,
+                    self.rad.gain,
+                    opts.ambient_rays,
                     self.check,
                 )
             except SolveCancelled:

@@ -12,7 +12,6 @@ from iat.geometry import quadtree as qt
 from iat.radiosity.bundles import ShooterArrays
 from iat.radiosity.kernels import hash_keys, leaf_fields
 
-
 #: a coarse grid point is the tent-weighted mean of this many fine points per cell side
 COARSE_SUB = 4
 #: patches whose fine fields are read at once
@@ -202,7 +201,9 @@ class Lattice:
             leaves = self.order[self.starts[a] : self.starts[b]]
             f = self._fields(leaves, b - a, a, self.n // fine, values)
             w = np.where(self.forest.patch_is_quad[a:b, None, None], quad[None], tri[None])
-            out[a:b] = _tent_down(f * w[..., None], tent, r) / np.maximum(_tent_down(w[..., None], tent, r), 1e-300)
+            out[a:b] = _tent_down(f * w[..., None], tent, r) / np.maximum(
+                _tent_down(w[..., None], tent, r), 1e-300
+            )
         return out
 
     def _fields(self, leaves: np.ndarray, count: int, first: int, step: int, values: np.ndarray):

@@ -5,7 +5,7 @@ directions of a block of vertices made and traced in one call (:func:`sky_escape
 
 :func:`gather_traced` is :func:`~iat.radiosity.kernels.block_inputs`, then
 :func:`~iat.radiosity.kernels.gather_rays`, :meth:`~iat.radiosity.visibility.Visibility.visible` and
-:func:`~iat.radiosity.kernels.gather_finish` row by row: the same samples (:func:`._row_weights`), the
+:func:`~iat.radiosity.kernels.gather_finish` row by row: the same samples (:func:`.row_weights`), the
 same float32 rays (:func:`.kernels.sample_ray`), traced by the same Embree calls
 (:func:`.embree.visible1`), summed in the same order (:func:`.kernels.field_terms`,
 :func:`.kernels.finish_row`), so its rows are those of the three-step path to the bit
@@ -23,13 +23,13 @@ from numba import njit, prange
 
 from iat.radiosity.embree import fetch_add, ray_record, visible1, workers
 from iat.radiosity.kernels import (
-    _concentric,
-    _hash_row,
-    _row_weights,
-    _wrap,
+    concentric_unit,
     field_terms,
     finish_row,
+    hash_row,
+    row_weights,
     sample_ray,
+    wrap_unit,
 )
 
 #: receivers per parallel task (one set of scratch arrays each)
@@ -89,7 +89,7 @@ def _gather_task(task, b, S, n_s, occ, isect, scene, glass, glass_tau, ii, key, 
     for j in range(m):  # block_inputs' rows
         r = ii[lo + j]
         p = patch[r]
-        _hash_row(0 if correlated else key[r], salt, rot, j)
+        hash_row(0 if correlated else key[r], salt, rot, j)
         for c in range(3):
             x[j, c] = ff[r, c]
             nr[j, c] = normal[r, c]
@@ -98,7 +98,7 @@ def _gather_task(task, b, S, n_s, occ, isect, scene, glass, glass_tau, ii, key, 
             o32[j, c] = origin32[r, c]
     for j in range(m):
         i = lo + j
-        cnt, wsum = _row_weights(j, pat, rot, x, nr, t1, t2, f[i] >= f_direction, n_s, geom, uvc, poly_n,
+        cnt, wsum = row_weights(j, pat, rot, x, nr, t1, t2, f[i] >= f_direction, n_s, geom, uvc, poly_n,
                                  poly_o, tol, is_quad, para, linear_uv, area, mask, has_mask, sw, su, sv,
                                  0)  # fmt: skip
         ox, oy, oz = o32[j, 0], o32[j, 1], o32[j, 2]
@@ -153,7 +153,7 @@ def _sky_row(i, S, occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal
     """Vertex i of :func:`sky_rays`."""
     ox, oy, oz = origin32[i, 0], origin32[i, 1], origin32[i, 2]
     for j in range(S):
-        dx, dy = _concentric(_wrap(pat[j, 0], rot[i, 0]), _wrap(pat[j, 1], rot[i, 1]))
+        dx, dy = concentric_unit(wrap_unit(pat[j, 0], rot[i, 0]), wrap_unit(pat[j, 1], rot[i, 1]))
         dz = math.sqrt(max(1.0 - dx * dx - dy * dy, 0.0))
         for c in range(3):
             w[i, j, c] = dx * t1[i, c] + dy * t2[i, c] + dz * normal[i, c]
@@ -191,7 +191,7 @@ def _sun_row(i, S, occ, isect, scene, glass, glass_tau, pat, rot, to_sun, half, 
     """Vertex i of :func:`sun_rays`."""
     ox, oy, oz = origin32[i, 0], origin32[i, 1], origin32[i, 2]
     for j in range(S):
-        dx, dy = _concentric(_wrap(pat[j, 0], rot[i, 0]), _wrap(pat[j, 1], rot[i, 1]))
+        dx, dy = concentric_unit(wrap_unit(pat[j, 0], rot[i, 0]), wrap_unit(pat[j, 1], rot[i, 1]))
         d0 = to_sun[0] + half * (dx * t1[0] + dy * t2[0])
         d1 = to_sun[1] + half * (dx * t1[1] + dy * t2[1])
         d2 = to_sun[2] + half * (dx * t1[2] + dy * t2[2])

@@ -149,7 +149,7 @@ class Visibility:
         """numba kernels called inside run on :meth:`ray_threads` threads."""
         before = get_num_threads()
         want = 1 if getattr(self._local, "serial", False) else max(1, min(self.threads, before))
-        if want == before:  # (numba's set_num_threads costs microseconds a call: skipped when it would do nothing)
+        if want == before:  # (numba's set_num_threads costs microseconds a call: skipped if a no-op)
             yield
             return
         set_num_threads(want)
