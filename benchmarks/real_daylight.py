@@ -343,6 +343,7 @@ def generated(cases, presets, renderer) -> list:
 
 
 def house(presets, renderer) -> list:
+    from iat.geometry.discontinuity import cut_new_lights
     from iat.io.load import load_scene
     from iat.lighting.daylight_default import apply_daylight
 
@@ -350,6 +351,7 @@ def house(presets, renderer) -> list:
     scene = load_scene(HOUSE)
     load_s = time.perf_counter() - t0
     line = apply_daylight(scene, today=trd.TODAY)
+    scene = cut_new_lights(scene)  # its sun's shadows, as iat solve cuts them
     print(f"madrid: loaded in {load_s:.1f} s, {scene.n_patches} patches; {line}", flush=True)
     as_built = load_scene(HOUSE, sides="front")
     apply_daylight(as_built, today=trd.TODAY)

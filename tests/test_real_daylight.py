@@ -187,9 +187,12 @@ def write_case(name: str, folder: Path) -> Path:
 
 
 def load_case(path: Path, sides: str = "both"):
-    """The case's scene as loaded (``sides``), with the default daylight of :data:`TODAY`."""
+    """The case's scene as loaded (``sides``), with the default daylight of :data:`TODAY`; as the
+    solve at the defaults takes it (``sides`` other than ``"front"``), its sun's shadows cut
+    (:func:`iat.geometry.discontinuity.cut_new_lights`, as ``iat solve`` does)."""
     import warnings
 
+    from iat.geometry.discontinuity import cut_new_lights
     from iat.io.load import load_scene
     from iat.lighting.daylight_default import apply_daylight
 
@@ -197,7 +200,7 @@ def load_case(path: Path, sides: str = "both"):
         warnings.simplefilter("ignore")  # the dropped repeated faces are counted in scene.sides
         scene = load_scene(path, sides=sides)
     apply_daylight(scene, today=TODAY)
-    return scene
+    return scene if sides == "front" else cut_new_lights(scene)
 
 
 # -- the measure -------------------------------------------------------------------------------------

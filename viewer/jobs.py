@@ -191,6 +191,7 @@ class OpenJob(_Job):
         return text if isinstance(e, IATError) or self.path in text else f"{self.path}: {text}"
 
     def _work(self) -> Opened:
+        from iat.geometry.discontinuity import cut_new_lights
         from iat.io.load import load_scene
         from iat.lighting.daylight_default import apply_daylight
         from iat.radiosity import solve
@@ -213,6 +214,8 @@ class OpenJob(_Job):
             self.load_started = time.perf_counter()
             scene = load_scene(p, progress=self.load_progress, **self.options.load_kwargs())
             self.daylight_line = apply_daylight(scene, self.daylight) or ""  # a model without lights
+            if self.options.discontinuity:  # a sun the daylight added: its shadows cut as the file's
+                scene = cut_new_lights(scene)
             self.scene = scene  # the model, before its solve: the viewer shows it unlit meanwhile
             solution = None
             cpath = solution_cache_path(p, self.options) if self.use_cache else None

@@ -78,7 +78,7 @@ def _load(args, path, max_edge=None):
             panels=not getattr(args, "no_panels", False),
             discontinuity=_solve_options(args).discontinuity,
             sides=getattr(args, "sides", None) or "auto",
-            cut=getattr(args, "cut", None) or "crossings",
+            cut=getattr(args, "cut", None) or "auto",
         )
 
 
@@ -122,9 +122,12 @@ def _open(args, what: str):
         check_solution_flags(args)
         with _progress_bar(args, f"load {name}", close_when_done=True) as load_bar:
             return open_solution(args.input, load_progress=load_bar)
+    from iat.geometry.discontinuity import cut_new_lights
+
     opts = _solve_options(args)
     scene = _load(args, args.input, max_edge=opts.max_edge)
     apply_to(args, scene)
+    scene = cut_new_lights(scene) if opts.discontinuity else scene  # the sun --sun or the IFC's site gave
     with _progress_bar(args, f"solve {name}") as bar:
         return scene, solve(scene, opts, progress=bar)
 
@@ -217,6 +220,7 @@ def _solve_states_on_engine(args, opts) -> int:
 
 
 def cmd_solve(args) -> int:
+    from iat.geometry.discontinuity import cut_new_lights
     from iat.radiosity import solve
 
     opts = _solve_options(args)
@@ -243,6 +247,7 @@ def cmd_solve(args) -> int:
             )
         _emit(args, {"states": written, "vertices": int(len(sset.first.vert_key))})
         return 0
+    scene = cut_new_lights(scene) if opts.discontinuity else scene  # the sun --sun or the IFC's site gave
     with _progress_bar(args, f"solve {Path(args.input).name}") as bar:
         sol = solve(scene, opts, progress=bar)
     sol.model_path = str(Path(args.input).resolve())
@@ -601,9 +606,10 @@ def build_parser() -> argparse.ArgumentParser:
         )
         sp.add_argument(
             "--cut",
-            choices=["crossings", "all", "none"],  # iat.geometry.pierce.CUTS (not imported: start-up)
-            default="crossings",
-            help="cut faces along other objects crossing them (all: and resting on them; none: not)",
+            choices=["auto", "crossings", "all", "none"],  # iat.geometry.pierce.CUTS (not imported: start-up)
+            default="auto",
+            help="cut faces along other objects crossing them (all: and resting on them; none: not; "
+            "auto: all for IFC and --sides both, else crossings)",
         )
 
     def set_flags(sp):

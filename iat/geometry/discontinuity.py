@@ -39,6 +39,7 @@ must be the same when a solution's model is loaded again).
 from __future__ import annotations
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 from embreex import rtcore_scene as rtcs
@@ -46,6 +47,7 @@ from embreex.mesh_construction import TriangleMesh
 
 from iat.geometry import polycut
 from iat.geometry.mesh import QUAD_SKEW_TOL, compact_vertices, weld_vertices
+from iat.geometry.sides import twin_index
 
 #: the cut follows the shadow seen this far above the receiver, fraction of the scene diagonal (the
 #: solver's ray offset, ``iat.radiosity.options.RAY_EPS``; tests check they agree)
@@ -296,18 +298,26 @@ def split_discontinuities(scene, lights=None):
     :class:`iat.io.scene.Scene` (``dataclasses.replace``: the same lights, cameras, sky and path), or
     ``scene`` itself when nothing is cut.
     """
-    lights = [lt for lt in (scene.lights if lights is None else lights) if np.any(lt.radiant_intensity > 0)]
-    lights = [lt for lt in lights if lt.kind in ("point", "spot", "directional")]
+    lights = [lt for lt in (scene.lights if lights is None else lights) if casts_cut_shadows(lt)]
+    if not lights:
+        return scene
+    done = [*scene.shadow_cuts, [shadow_key(lt) for lt in lights]]
     opaque = scene.patch_transmission <= 0
     tri, tri_patch = scene.world_triangles(), scene.world_triangle_patch()
     solid = opaque[tri_patch]
     tri, tri_patch = tri[solid], tri_patch[solid]
     receivers = opaque & ~scene.patch_clipped
-    if not lights or len(tri) == 0:
-        return scene
+    if len(tri) == 0:
+        return dataclasses.replace(scene, shadow_cuts=done)
     rays = RayCaster(tri)
     found = [shadow_segments(scene, lt, rays, tri, tri_patch, receivers) for lt in lights]
+    # a patch and its coincident twin (a sheet's two faces) are cut as one: the lower index cuts with
+    # the segments of both, the twin takes the same pieces wound the other way (iat.geometry.sides)
+    twin = twin_index(scene.corner_positions, scene.patch_is_quad)[0]
+    paired = (twin >= 0) & (twin[np.maximum(twin, 0)] == np.arange(scene.n_patches))
+    twin = np.where(paired, twin, -1)
     seg_patch = np.concatenate([f[0] for f in found])
+    seg_patch = np.where(twin[seg_patch] >= 0, np.minimum(seg_patch, twin[seg_patch]), seg_patch)
     seg = np.stack([np.concatenate([f[1] for f in found]), np.concatenate([f[2] for f in found])], axis=1)
     corners3 = scene.corner_positions
     normal, is_quad = scene.patch_normal, scene.patch_is_quad
@@ -341,8 +351,11 @@ def split_discontinuities(scene, lights=None):
         pts2 = np.concatenate(pts)
         children[int(p)] = (origin + pts2 @ axes, roots, pts2)
         new_roots += len(roots) - 1
+        if twin[p] >= 0:  # same first corner, the rest reversed (as add_back_faces winds a twin)
+            children[int(twin[p])] = (children[int(p)][0], [[r[0], *r[:0:-1]] for r in roots], None)
+            new_roots += len(roots) - 1
     if not children:
-        return scene
+        return dataclasses.replace(scene, shadow_cuts=done)
     # children in place of their parent
     V = [scene.vertices]
     corners, material, puv, new_index = [], [], [], np.empty(scene.n_patches, np.int64)
@@ -358,6 +371,7 @@ def split_discontinuities(scene, lights=None):
             continue
         world, roots, pts2 = children[p]
         origin, axes = polycut.plane_frame(corners3[p], normal[p])
+        pts2 = (world - origin) @ axes.T if pts2 is None else pts2  # a twin's: in its own frame
         uv = _lattice_uv(corners2[p] @ axes.T, bool(is_quad[p]), pts2)
         duv = _detail_uv(scene.patch_uv[p], bool(is_quad[p]), uv)
         for r in roots:
@@ -377,4 +391,50 @@ def split_discontinuities(scene, lights=None):
         patch_material=np.concatenate(material),
         patch_uv=np.concatenate(puv),
         clip_patch=new_index[scene.clip_patch],
+        shadow_cuts=done,
     )
+
+
+def casts_cut_shadows(light) -> bool:
+    """Whether :func:`split_discontinuities` follows ``light``'s shadows: a point, spot or directional
+    light that emits."""
+    return light.kind in ("point", "spot", "directional") and bool(np.any(light.radiant_intensity > 0))
+
+
+def shadow_key(light) -> tuple:
+    """What fixes a light's hard shadow lines, JSON-able: ``(kind, x, y, z, dx, dy, dz, outer_cone)``
+    (position and direction in world units, the cone in radians)."""
+    return (
+        str(light.kind),
+        *(float(x) for x in light.position),
+        *(float(x) for x in light.direction),
+        float(light.outer_cone),
+    )
+
+
+def cut_new_lights(scene):
+    """``scene`` cut (:func:`split_discontinuities`) along the shadows of its lights that no earlier
+    cut followed (``Scene.shadow_cuts``): a sun or lamp added after loading (``iat solve --sun``, the
+    default daylight of an IFC). Returns ``scene`` itself when there is none."""
+    seen = {tuple(k) for group in scene.shadow_cuts for k in group}
+    new = [lt for lt in scene.lights if casts_cut_shadows(lt) and shadow_key(lt) not in seen]
+    return split_discontinuities(scene, new) if new else scene
+
+
+def replay_cuts(scene, cuts):
+    """``scene`` cut again as ``cuts`` (a solution's ``stats["shadow_cuts"]``: ``Scene.shadow_cuts``
+    of the scene it was solved on, each a list of :func:`shadow_key`) says, in order: the same roots
+    as then, from the model loaded without discontinuity meshing."""
+    for group in cuts:
+        lights = [
+            SimpleNamespace(
+                kind=k[0],
+                position=np.array(k[1:4], np.float64),
+                direction=np.array(k[4:7], np.float64),
+                outer_cone=float(k[7]),
+                radiant_intensity=np.ones(3),
+            )
+            for k in group
+        ]
+        scene = split_discontinuities(scene, lights)
+    return scene

@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from iat.errors import LoadError, SolutionFileError
+from iat.geometry.discontinuity import replay_cuts
 from iat.io.load import load_scene
 from iat.io.scene import Scene
 
@@ -23,7 +24,9 @@ def open_solution(path: str | Path, options=None, progress=None, load_progress=N
     """(scene, solution) from a solution file or a model file.
 
     A solution's model is reloaded from ``solution.model_path`` (for materials
-    and detail textures), with the suns and the sky the solve had
+    and detail textures), its roots cut along the shadows the solved scene was cut along
+    (``stats["shadow_cuts"]``, :func:`iat.geometry.discontinuity.replay_cuts`), with the suns and
+    the sky the solve had
     (:func:`restore_daylight`: ``iat solve --sun/--sky`` puts them in no file); when
     that file is gone the scene is rebuilt from the solution's own patches, without
     detail textures.
@@ -40,8 +43,16 @@ def open_solution(path: str | Path, options=None, progress=None, load_progress=N
         if model is not None and not model.is_absolute():
             model = (path.parent / model).resolve() if not model.exists() else model
         if model is not None and model.exists():
-            kw = SolveOptions.recorded_load_kwargs(sol.options)
-            scene = load_scene(model, progress=load_progress, **kw)
+            stats = sol.stats if isinstance(sol.stats, dict) else {}
+            # the loader's choices as recorded; before they were, its cut was "crossings"
+            kw = {**SolveOptions.recorded_load_kwargs(sol.options), **stats.get("load", {"cut": "crossings"})}
+            cuts = stats.get("shadow_cuts")
+            if cuts is None:  # solved before the cuts were recorded: as the options said
+                scene = load_scene(model, progress=load_progress, **kw)
+            else:  # the shadows the solved scene was cut along, its suns and lamps added later too
+                scene = replay_cuts(
+                    load_scene(model, progress=load_progress, **{**kw, "discontinuity": False}), cuts
+                )
             if scene.n_patches != len(sol.patch_is_quad):
                 raise SolutionFileError(
                     f"solution has {len(sol.patch_is_quad)} patches but {model} has {scene.n_patches};"

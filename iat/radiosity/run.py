@@ -545,11 +545,20 @@ class SolveRun:
             "culled_pairs": float(ctx.gathers.culled_fraction()),
             "mode": mode,
             "sources": sources_record(ctx),
+            "shadow_cuts": [[list(k) for k in group] for group in self.scene.shadow_cuts],
+            "load": loader_choices(self.scene),
             "cancelled": bool(self.progress.cancelled),
             "options": opts.to_dict(),
             **(extra or {}),
         }
         return sol
+
+
+def loader_choices(scene) -> dict:
+    """The loader's ``sides`` and ``cut`` choices that made ``scene`` (``load_scene(**...)`` loads its
+    model the same again; empty for a scene built in memory)."""
+    found = {"sides": getattr(scene.sides, "mode", None), "cut": getattr(scene.pierce, "mode", None)}
+    return {k: v for k, v in found.items() if v is not None}
 
 
 class TotalLight:

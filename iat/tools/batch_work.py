@@ -23,11 +23,14 @@ def load_model(model: str, load_kwargs: dict, daylight=None):
     with warnings_caught() as caught:
         scene = load_scene(model, **load_kwargs)
     if daylight is not None:
+        from iat.geometry.discontinuity import cut_new_lights
         from iat.lighting.daylight_default import apply_daylight
 
         line = apply_daylight(scene, daylight)
         if line:
             caught.append(line)
+        if load_kwargs.get("discontinuity"):  # a sun the daylight added: its shadows cut as the file's
+            scene = cut_new_lights(scene)
     return scene, caught
 
 
