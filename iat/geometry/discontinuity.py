@@ -32,8 +32,13 @@ For each point or spot light (a sun: parallel projection along its direction):
 Panel cells covered only in part (clip triangles) are not cut: their clip triangles are in the
 cell's lattice and a piece would need its own; they keep stair-stepped shadows. Glass neither
 occludes nor receives. Area emitters' soft shadows and a spot's cone boundary are not followed.
-Only the scene's own lights count (``iat solve --sun`` adds its sun after loading, and the split
-must be the same when a solution's model is loaded again).
+A sheet's two faces (coincident twins, :func:`iat.geometry.sides.twin_index`) are cut as one, so
+they stay twins.
+
+The loader cuts along the file's lights; a sun added after loading (the default daylight, ``iat
+solve --sun``) is cut along by :func:`cut_new_lights`. ``Scene.shadow_cuts`` lists what each cut
+followed (:func:`shadow_key`); a solution records it, and :func:`replay_cuts` cuts its model, loaded
+again, the same way. Lights moved after the solve (the viewer's sun panel) keep the roots as cut.
 """
 
 from __future__ import annotations
