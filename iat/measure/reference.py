@@ -434,24 +434,27 @@ def reference_key(
     two_sided: bool = False,
 ) -> str:
     """Hex SHA-256 (first 24 digits) of everything a reference depends on."""
+    cam = [camera.eye.tolist(), camera.target.tolist(), camera.up.tolist()]
+    cam += [float(camera.yfov), float(camera.znear), float(camera.zfar)]
+    view = {"camera": cam, "size": [int(size[0]), int(size[1])]}
+    return _render_key(scene, spp, seed, max_depth, rr_depth, two_sided, view)
+
+
+def _render_key(
+    scene: Scene, spp, seed, max_depth, rr_depth, two_sided, extra: dict, data: bytes = b""
+) -> str:
+    """Hex SHA-256 (first 24 digits) of a render's inputs: the scene (:func:`_scene_digest`), then
+    ``data`` (raw bytes, e.g. sensor points), then the JSON (sorted keys) of the scene's description,
+    the render settings and the ``extra`` fields."""
     hsh, meta = _scene_digest(scene)
+    hsh.update(data)
+    meta.update(extra)
     meta.update(
-        {
-            "camera": [
-                camera.eye.tolist(),
-                camera.target.tolist(),
-                camera.up.tolist(),
-                float(camera.yfov),
-                float(camera.znear),
-                float(camera.zfar),
-            ],
-            "size": [int(size[0]), int(size[1])],
-            "spp": int(spp),
-            "seed": int(seed),
-            "max_depth": int(max_depth),
-            "rr_depth": int(rr_depth),
-            "two_sided": bool(two_sided),
-        }
+        spp=int(spp),
+        seed=int(seed),
+        max_depth=int(max_depth),
+        rr_depth=int(rr_depth),
+        two_sided=bool(two_sided),
     )
     hsh.update(json.dumps(meta, sort_keys=True).encode())
     return hsh.hexdigest()[:24]
@@ -600,15 +603,10 @@ def render_irradiance_cached(
     :func:`reference_key` does, the points, normals, spp, seed and depth settings)."""
     pts = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
     nrm = np.ascontiguousarray(np.broadcast_to(np.asarray(normals, dtype=np.float64), pts.shape))
-    hsh, meta = _scene_digest(scene)
-    hsh.update(pts.tobytes() + nrm.tobytes())
-    meta.update(
-        irradiance=len(pts), spp=int(spp), seed=int(seed), max_depth=int(max_depth), rr_depth=int(rr_depth),
-        two_sided=bool(two_sided), meter_radius=METER_RADIUS,
-    )  # fmt: skip
-    hsh.update(json.dumps(meta, sort_keys=True).encode())
+    meters = {"irradiance": len(pts), "meter_radius": METER_RADIUS}
+    key = _render_key(scene, spp, seed, max_depth, rr_depth, two_sided, meters, pts.tobytes() + nrm.tobytes())
     return _cached(
-        Path(cache_dir) / f"irr-{hsh.hexdigest()[:24]}.npy",
+        Path(cache_dir) / f"irr-{key}.npy",
         pts.shape,
         np.float64,
         lambda: render_irradiance(
