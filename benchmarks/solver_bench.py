@@ -294,32 +294,9 @@ def run_adaptive_surface(depths=(1, 2, 3, 4, 5, 6), ref_depth=7, tolerances=ADAP
 def random_rays(scene, n: int, seed: int = 0):
     """n rays from random points on the patches (area-weighted), off the surface, in cosine
     directions, tfar the scene diagonal: the solver's mix of shadow and hemisphere rays."""
-    rng = np.random.default_rng(seed)
-    area = scene.patch_area
-    p = rng.choice(len(area), size=n, p=area / area.sum())
-    c = scene.corner_positions[p]
-    u, v = rng.random(n), rng.random(n)
-    quad = scene.patch_is_quad[p]
-    tri_u = np.where(u + v > 1, 1 - u, u)
-    tri_v = np.where(u + v > 1, 1 - v, v)
-    pos_q = (
-        c[:, 0] * ((1 - u) * (1 - v))[:, None]
-        + c[:, 1] * (u * (1 - v))[:, None]
-        + c[:, 2] * (u * v)[:, None]
-        + c[:, 3] * ((1 - u) * v)[:, None]
-    )
-    pos_t = c[:, 0] + (c[:, 1] - c[:, 0]) * tri_u[:, None] + (c[:, 2] - c[:, 0]) * tri_v[:, None]
-    pos = np.where(quad[:, None], pos_q, pos_t)
-    nrm = scene.patch_normal[p]
-    lo, hi = scene.bounds
-    diag = float(np.linalg.norm(hi - lo))
-    origin = pos + 1e-4 * diag * nrm
-    r, phi = np.sqrt(rng.random(n)), 2 * np.pi * rng.random(n)
-    helper = np.where(np.abs(nrm[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    t1 = np.cross(nrm, helper)
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    t2 = np.cross(nrm, t1)
-    d = (r * np.cos(phi))[:, None] * t1 + (r * np.sin(phi))[:, None] * t2 + np.sqrt(1 - r * r)[:, None] * nrm
+    from tests.support.rays import surface_rays
+
+    origin, d, diag = surface_rays(scene, n, np.random.default_rng(seed))
     return origin, d, np.full(n, diag)
 
 

@@ -21,6 +21,7 @@ from iat.radiosity.context import Context
 from iat.radiosity.solver import evaluate_direct
 from iat.radiosity.visibility import Visibility
 from tests.support.daylight import daylit_room
+from tests.support.rays import surface_rays
 
 ROOT = Path(__file__).resolve().parent.parent
 pytestmark = pytest.mark.skipif(not embree.available(), reason="libembree4 not found")
@@ -32,35 +33,11 @@ def scene_rays(scene, n: int, seed: int = 0):
     and (b) towards the corners of random patches (the edges and vertices where the triangle tests
     must agree), stopping just short of them."""
     rng = np.random.default_rng(seed)
-    area = scene.patch_area
-    p = rng.choice(len(area), size=n, p=area / area.sum())
-    c = scene.corner_positions[p]
-    u, v = rng.random(n), rng.random(n)
-    tu, tv = np.where(u + v > 1, 1 - u, u), np.where(u + v > 1, 1 - v, v)
-    quad = scene.patch_is_quad[p][:, None]
-    pos_q = (
-        c[:, 0] * ((1 - u) * (1 - v))[:, None]
-        + c[:, 1] * (u * (1 - v))[:, None]
-        + c[:, 2] * (u * v)[:, None]
-        + c[:, 3] * ((1 - u) * v)[:, None]
-    )
-    pos = np.where(
-        quad, pos_q, c[:, 0] + (c[:, 1] - c[:, 0]) * tu[:, None] + (c[:, 2] - c[:, 0]) * tv[:, None]
-    )
-    nrm = scene.patch_normal[p]
-    lo, hi = scene.bounds
-    diag = float(np.linalg.norm(hi - lo))
-    o = pos + 1e-4 * diag * nrm
-    r, phi = np.sqrt(rng.random(n)), 2 * np.pi * rng.random(n)
-    helper = np.where(np.abs(nrm[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    t1 = np.cross(nrm, helper)
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    t2 = np.cross(nrm, t1)
-    d = (r * np.cos(phi))[:, None] * t1 + (r * np.sin(phi))[:, None] * t2 + np.sqrt(1 - r * r)[:, None] * nrm
+    o, d, diag = surface_rays(scene, n, rng)
     t = np.full(n, diag)
     t[: n // 3] *= rng.random(n // 3)
     half = n // 2  # the second half aims at patch corners
-    q = rng.integers(0, len(area), n - half)
+    q = rng.integers(0, scene.n_patches, n - half)
     target = scene.corner_positions[q, rng.integers(0, 3, n - half)]
     to = target - o[half:]
     dist = np.linalg.norm(to, axis=1)
