@@ -31,7 +31,7 @@ import math
 import os
 import platform
 import time
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -316,23 +316,45 @@ def _rebake_policy(policy):
     return replace(policy, threshold=int(policy.threshold) + 1)
 
 
+@dataclass(frozen=True)
+class BenchSettings:
+    """What :func:`run_bench` measures and how (its keyword arguments).
+
+    frames : frames drawn per round over the camera path (interpolated to that many poses)
+    size, tiny_size : (w, h) of the fill-bound and of the triangle-bound measurement (tiny_size None:
+    none); solve_options : :class:`iat.radiosity.SolveOptions` (None: :func:`bench_solve_options`);
+    policy : BakePolicy (None: the default policy); cache_dir : the solution cache;
+    error_frames : path frames compared mesh vs IAT, at ``error_size`` (None: ``size``; at a tiny
+    size the mip-mapped IAT image is filtered where the mesh aliases, so the comparison says little
+    there); repeats : timed rounds of the frames (the best counts); with_flip : the FLIP error too.
+    """
+
+    frames: int = 60
+    size: tuple[int, int] = (640, 480)
+    tiny_size: tuple[int, int] | None = TINY_SIZE
+    solve_options: object = None
+    policy: object = None
+    cache_dir: str | Path = DEFAULT_CACHE
+    error_frames: int = 8
+    repeats: int = 2
+    with_flip: bool = True
+    error_size: tuple[int, int] | None = None
+
+    def resolved(self) -> BenchSettings:
+        """These settings with the default solve options and policy where they are None."""
+        from iat.bake.policy import BakePolicy
+
+        solve_options = bench_solve_options() if self.solve_options is None else self.solve_options
+        return replace(
+            self, solve_options=solve_options, policy=BakePolicy() if self.policy is None else self.policy
+        )
+
+
 def bench_model(
-    model: str | Path,
-    frames: int = 60,
-    size: tuple[int, int] = (640, 480),
-    tiny_size: tuple[int, int] | None = TINY_SIZE,
-    solve_options=None,
-    policy=None,
-    cache_dir: str | Path = DEFAULT_CACHE,
-    error_frames: int = 8,
-    repeats: int = 2,
-    with_flip: bool = True,
-    error_size: tuple[int, int] | None = None,
-    progress: Progress | None = None,
+    model: str | Path, settings: BenchSettings | None = None, progress: Progress | None = None
 ) -> dict:
     """One model's row of the benchmark (see :func:`run_bench` for the fields)."""
     from iat.bake.baker import Baker
-    from iat.bake.policy import BakePolicy
     from iat.render.renderer import Renderer
 
     def step(frac: float, msg: str) -> None:
@@ -340,8 +362,8 @@ def bench_model(
             progress(frac, msg)
 
     model = resolve_model(model)
-    policy = BakePolicy() if policy is None else policy
-    solve_options = bench_solve_options() if solve_options is None else solve_options
+    cfg = (settings or BenchSettings()).resolved()
+    policy, size, tiny_size = cfg.policy, cfg.size, cfg.tiny_size
 
     def solve_progress(f, m):
         if progress is not None:
@@ -349,7 +371,7 @@ def bench_model(
         return True
 
     step(0.0, "load + solve")
-    scene, sol, sinfo = cached_solve(model, solve_options, cache_dir, progress=solve_progress)
+    scene, sol, sinfo = cached_solve(model, cfg.solve_options, cfg.cache_dir, progress=solve_progress)
     step(0.3, "bake")
     baker = Baker(sol, scene)
     t0 = time.perf_counter()
@@ -372,7 +394,7 @@ def bench_model(
 
     step(0.4, "upload")
     poses = path_poses(scene)
-    cams = interpolate_path(poses, frames)
+    cams = interpolate_path(poses, cfg.frames)
     r = Renderer()
     try:
         gl_renderer = str(r.ctx.info.get("GL_RENDERER", ""))
@@ -393,15 +415,15 @@ def bench_model(
             counts[m] = (int(st["triangles"]), int(st["draw_calls"]))
 
         step(0.45, f"frames {size[0]}x{size[1]}")
-        rates = {_size_key(size): frame_rates(r, cams, size, repeats=repeats)}
+        rates = {_size_key(size): frame_rates(r, cams, size, repeats=cfg.repeats)}
         if tiny_size is not None and tuple(tiny_size) != tuple(size):
             step(0.65, f"frames {tiny_size[0]}x{tiny_size[1]}")
-            rates[_size_key(tiny_size)] = frame_rates(r, cams, tiny_size, repeats=repeats)
+            rates[_size_key(tiny_size)] = frame_rates(r, cams, tiny_size, repeats=cfg.repeats)
         step(0.75, "image error")
-        esize = tuple(size) if error_size is None else tuple(error_size)
+        esize = tuple(size) if cfg.error_size is None else tuple(cfg.error_size)
         if err_baked is not baked:
             r.set_baked(err_baked)
-        err = image_errors(r, pick(cams, error_frames), esize, with_flip=with_flip)
+        err = image_errors(r, pick(cams, cfg.error_frames), esize, with_flip=cfg.with_flip)
         err["detail_textures_off"] = err_baked is not baked
     finally:
         r.release()
@@ -504,28 +526,10 @@ def _loadavg():
         return None
 
 
-def run_bench(
-    models=(),
-    frames: int = 60,
-    size: tuple[int, int] = (640, 480),
-    tiny_size: tuple[int, int] | None = TINY_SIZE,
-    solve_options=None,
-    policy=None,
-    cache_dir: str | Path = DEFAULT_CACHE,
-    error_frames: int = 8,
-    repeats: int = 2,
-    with_flip: bool = True,
-    error_size: tuple[int, int] | None = None,
-    progress: Progress | None = None,
-) -> dict:
+def run_bench(models=(), progress: Progress | None = None, **settings) -> dict:
     """The benchmark of ``models`` (names or paths; empty: every sample model that exists).
 
-    frames : frames drawn per round over the camera path (interpolated to that many poses)
-    size, tiny_size : (w, h) of the fill-bound and of the triangle-bound measurement
-    solve_options : :class:`iat.radiosity.SolveOptions` (None: :func:`bench_solve_options`);
-    policy : BakePolicy (None: the default policy); error_frames : path frames compared mesh vs IAT, at
-    ``error_size`` (None: ``size``; at a tiny size the mip-mapped IAT image is filtered
-    where the mesh aliases, so the comparison says little there).
+    settings : the fields of :class:`BenchSettings`.
     progress : ``progress(fraction, message)`` over the whole run.
 
     Returns ``{"schema", "settings", "machine", "models": [row, ...], "skipped", "report_figure3"}``;
@@ -535,10 +539,7 @@ def run_bench(
     rebake_s, load_s: {scene, upload_mesh, upload_iat}, policy, report`` (the report's
     Figure 3 numbers for the matching model, or None).
     """
-    from iat.bake.policy import BakePolicy
-
-    solve_options = bench_solve_options() if solve_options is None else solve_options
-    policy = BakePolicy() if policy is None else policy
+    cfg = BenchSettings(**settings).resolved()
     skipped: list[str] = []
     if models:
         paths = [resolve_model(m) for m in models]
@@ -555,36 +556,23 @@ def run_bench(
                 return progress((k + f) / n, f"{Path(p).stem}: {m}")
             return True
 
-        rows.append(
-            bench_model(
-                p,
-                frames=frames,
-                size=size,
-                tiny_size=tiny_size,
-                solve_options=solve_options,
-                policy=policy,
-                cache_dir=cache_dir,
-                error_frames=error_frames,
-                repeats=repeats,
-                with_flip=with_flip,
-                error_size=error_size,
-                progress=sub,
-            )
-        )
+        rows.append(bench_model(p, cfg, progress=sub))
     gl = rows[0]["gl_renderer"] if rows else ""
     return jsonable(
         {
             "schema": SCHEMA_VERSION,
             "settings": {
-                "frames": int(frames),
-                "size": [int(size[0]), int(size[1])],
-                "tiny_size": None if tiny_size is None else [int(tiny_size[0]), int(tiny_size[1])],
-                "error_frames": int(error_frames),
-                "error_size": list(size if error_size is None else error_size),
-                "repeats": int(repeats),
-                "solve_options": asdict(solve_options),
-                "policy": policy_dict(policy),
-                "cache_dir": str(cache_dir),
+                "frames": int(cfg.frames),
+                "size": [int(cfg.size[0]), int(cfg.size[1])],
+                "tiny_size": None
+                if cfg.tiny_size is None
+                else [int(cfg.tiny_size[0]), int(cfg.tiny_size[1])],
+                "error_frames": int(cfg.error_frames),
+                "error_size": list(cfg.size if cfg.error_size is None else cfg.error_size),
+                "repeats": int(cfg.repeats),
+                "solve_options": asdict(cfg.solve_options),
+                "policy": policy_dict(cfg.policy),
+                "cache_dir": str(cfg.cache_dir),
             },
             "machine": {**machine_info(gl), "load_average_start": load_start},
             "models": rows,
