@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -126,26 +126,47 @@ def _psnr(images, refs, exposures) -> float:
     return psnr_from(float(np.mean(v)))
 
 
+@dataclass(frozen=True)
+class ChartSettings:
+    """What :func:`run_chart` sweeps and measures (its keyword arguments).
+
+    size, frames : (w, h) and frames of the camera path timed; thresholds, scales, methods : the bake
+    policies (thresholds None: :func:`default_thresholds` of the solve's depth); tolerances : the
+    solves (:func:`sweep_tolerances`); tolerance_methods : the methods baked for all but the
+    tightest; solve_options : :class:`iat.radiosity.SolveOptions` (None:
+    :func:`~iat.tools.bench.bench_solve_options`); cache_dir : the solution cache (references in its
+    ``refs``); error_frames : path frames of the image errors; reference_spp : samples per pixel
+    of the Mitsuba reference (None: no reference) of the ``reference_models``.
+    """
+
+    size: tuple[int, int] = (160, 120)
+    frames: int = 10
+    thresholds: tuple | None = DEFAULT_THRESHOLDS
+    scales: tuple = DEFAULT_SCALES
+    methods: tuple = DEFAULT_METHODS
+    tolerances: tuple = DEFAULT_TOLERANCES
+    solve_options: object = None
+    cache_dir: str | Path = DEFAULT_CACHE
+    error_frames: int = 3
+    reference_spp: int | None = 64
+    reference_models: tuple = REFERENCE_MODELS
+    tolerance_methods: tuple = DEFAULT_TOLERANCE_METHODS
+
+    def resolved(self) -> ChartSettings:
+        """These settings with the default solve options and thresholds where they are None."""
+        base = bench_solve_options() if self.solve_options is None else self.solve_options
+        thresholds = default_thresholds(base.max_depth) if self.thresholds is None else self.thresholds
+        return replace(self, solve_options=base, thresholds=thresholds)
+
+
 def chart_model(
-    model: str | Path,
-    size: tuple[int, int] = (160, 120),
-    frames: int = 10,
-    thresholds=DEFAULT_THRESHOLDS,
-    scales=DEFAULT_SCALES,
-    methods=DEFAULT_METHODS,
-    tolerances=DEFAULT_TOLERANCES,
-    solve_options=None,
-    cache_dir: str | Path = DEFAULT_CACHE,
-    error_frames: int = 3,
-    reference_spp: int | None = 64,
-    tolerance_methods=DEFAULT_TOLERANCE_METHODS,
-    progress: Progress | None = None,
+    model: str | Path, settings: ChartSettings | None = None, progress: Progress | None = None
 ) -> dict:
     """One model's sweep: ``{"model", "file", "points": [...], "finest", "reference", "pareto"}``.
 
     The tightest tolerance gets ``thresholds x scales x methods``, the others
-    ``thresholds x scales x tolerance_methods``; every solution also gives a mesh point.
-    reference_spp : samples per pixel of the Mitsuba reference (None: no reference).
+    ``thresholds x scales x tolerance_methods``; every solution also gives a mesh point. A reference
+    is rendered at ``settings.reference_spp`` (None: none) whatever the ``reference_models``.
     """
     from iat.bake.baker import Baker
     from iat.bake.policy import BakePolicy
@@ -158,12 +179,11 @@ def chart_model(
 
     model = resolve_model(model)
     limit_flip_threads()
-    base = bench_solve_options() if solve_options is None else solve_options
-    tols = sweep_tolerances(tolerances, base)
-    if thresholds is None:
-        thresholds = default_thresholds(base.max_depth)
-    full = [(int(t), float(s), str(m)) for t in thresholds for s in scales for m in methods]
-    lean = [(int(t), float(s), str(m)) for t in thresholds for s in scales for m in tolerance_methods]
+    cfg = (settings or ChartSettings()).resolved()
+    base, thresholds, scales, cache_dir = cfg.solve_options, cfg.thresholds, cfg.scales, cfg.cache_dir
+    tols = sweep_tolerances(cfg.tolerances, base)
+    full = [(int(t), float(s), str(m)) for t in thresholds for s in scales for m in cfg.methods]
+    lean = [(int(t), float(s), str(m)) for t in thresholds for s in scales for m in cfg.tolerance_methods]
     n_steps = len(full) + (len(tols) - 1) * len(lean) + len(tols) + 2
     done = 0
 
@@ -175,9 +195,9 @@ def chart_model(
         sols.append((tol, scene, sol, info))
         done += 1
     scene = sols[0][1]
-    cams = interpolate_path(path_poses(scene), frames)
-    ecams = pick(cams, error_frames)
-    w, h = int(size[0]), int(size[1])
+    cams = interpolate_path(path_poses(scene), cfg.frames)
+    ecams = pick(cams, cfg.error_frames)
+    w, h = int(cfg.size[0]), int(cfg.size[1])
 
     points: list[dict] = []
     r = Renderer()
@@ -201,9 +221,9 @@ def chart_model(
             exps = [auto_exposure(im) for im in finest_imgs]
             mexps = [auto_exposure(im) for im in mesh0_imgs]
             ref_imgs, ref_info = None, None
-            if reference_spp:
+            if cfg.reference_spp:
                 step(done / n_steps, "path-traced reference")
-                ref_imgs, ref_info = _references(scene, ecams, (w, h), int(reference_spp), cache_dir)
+                ref_imgs, ref_info = _references(scene, ecams, (w, h), int(cfg.reference_spp), cache_dir)
             rexps = [auto_exposure(im) for im in ref_imgs] if ref_imgs is not None else None
             done += 1
 
@@ -323,21 +343,10 @@ def _references(scene, cams, size, spp: int, cache_dir) -> tuple[list | None, di
 def run_chart(
     models=(),
     out: str | Path = "chart.png",
-    size: tuple[int, int] = (160, 120),
-    frames: int = 10,
-    thresholds=DEFAULT_THRESHOLDS,
-    scales=DEFAULT_SCALES,
-    methods=DEFAULT_METHODS,
-    tolerances=DEFAULT_TOLERANCES,
-    solve_options=None,
-    cache_dir: str | Path = DEFAULT_CACHE,
-    error_frames: int = 3,
-    reference_spp: int | None = 64,
-    reference_models=REFERENCE_MODELS,
-    tolerance_methods=DEFAULT_TOLERANCE_METHODS,
     progress: Progress | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
+    **settings,
 ) -> dict:
     """Sweep every model, write ``out`` (PNG, one row of panels per model) and ``out`` with ``.json``.
 
@@ -345,14 +354,15 @@ def run_chart(
       (:func:`iat.tools.batch.presolve`) on that many local workers or on that cluster; the
       measuring (frame times above all) stays in this process, one model after another.
 
-    models : names or paths (empty: the sample models that exist). Returns the JSON dict:
+    models : names or paths (empty: the sample models that exist); settings : the fields of
+    :class:`ChartSettings`. Returns the JSON dict:
     ``{"settings", "machine", "models": [{"model", "points": [{kind, tolerance, threshold,
     scale, method, texture_mb, gpu_mb, triangles, draw_calls, frame_ms, bake_s, solve_s,
     flip_vs_finest, psnr_vs_finest, psnr_vs_mesh, flip_vs_reference}], "pareto":
     {"<error>/<cost>": [point indices]}, ...}], "png", "json"}``.
     """
-
-    base = bench_solve_options() if solve_options is None else solve_options
+    cfg = ChartSettings(**settings).resolved()
+    base, cache_dir = cfg.solve_options, cfg.cache_dir
     skipped: list[str] = []
     if models:
         paths = [resolve_model(m) for m in models]
@@ -362,7 +372,9 @@ def run_chart(
     if workers is not None or scheduler:
         from iat.tools.batch import presolve, print_errors
 
-        pairs = [(p, replace(base, tolerance=t)) for p in paths for t in sweep_tolerances(tolerances, base)]
+        pairs = [
+            (p, replace(base, tolerance=t)) for p in paths for t in sweep_tolerances(cfg.tolerances, base)
+        ]
         report = presolve(pairs, cache_dir, workers=workers, scheduler=scheduler, progress=progress)
         if report is not None and report.failed:
             print_errors(report, prog="iat chart")
@@ -376,38 +388,22 @@ def run_chart(
                 return progress((k + f) / n, f"{Path(p).stem}: {m}")
             return True
 
-        spp = reference_spp if Path(p).stem in set(reference_models or ()) else None
-        rows.append(
-            chart_model(
-                p,
-                size=size,
-                frames=frames,
-                thresholds=thresholds,
-                scales=scales,
-                methods=methods,
-                tolerances=tolerances,
-                solve_options=base,
-                cache_dir=cache_dir,
-                error_frames=error_frames,
-                reference_spp=spp,
-                tolerance_methods=tolerance_methods,
-                progress=sub,
-            )
-        )
+        spp = cfg.reference_spp if Path(p).stem in set(cfg.reference_models or ()) else None
+        rows.append(chart_model(p, replace(cfg, reference_spp=spp), progress=sub))
     result = jsonable(
         {
             "settings": {
-                "size": [int(size[0]), int(size[1])],
-                "frames": int(frames),
-                "error_frames": int(error_frames),
-                "thresholds": list(default_thresholds(base.max_depth) if thresholds is None else thresholds),
-                "scales": list(scales),
-                "methods": list(methods),
-                "tolerances": list(tolerances),
-                "tolerance_methods": list(tolerance_methods),
+                "size": [int(cfg.size[0]), int(cfg.size[1])],
+                "frames": int(cfg.frames),
+                "error_frames": int(cfg.error_frames),
+                "thresholds": list(cfg.thresholds),
+                "scales": list(cfg.scales),
+                "methods": list(cfg.methods),
+                "tolerances": list(cfg.tolerances),
+                "tolerance_methods": list(cfg.tolerance_methods),
                 "solve_options": asdict(base),
-                "reference_spp": reference_spp,
-                "reference_models": list(reference_models or ()),
+                "reference_spp": cfg.reference_spp,
+                "reference_models": list(cfg.reference_models or ()),
             },
             "machine": machine_info(rows[0]["gl_renderer"] if rows else ""),
             "models": rows,
