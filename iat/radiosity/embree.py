@@ -314,70 +314,85 @@ def visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, dx, dy,
     return 1.0 if p < 0 else glass_tau[p]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def take_tasks(nxt, n_tasks, task, scratch, scratch_args, args):
+    """One worker of a kernel's ``prange`` (:func:`workers`): takes tasks k < n_tasks from the shared
+    counter nxt (:func:`fetch_add`) until none is left and runs ``task(k, s, *args)``; makes its
+    scratch ``s = scratch(*scratch_args)`` (e.g. :func:`ray_record`) once, with its first task.
+    Inlined, with task and scratch global functions: a function passed on as a value would keep the
+    kernel from numba's cache; args, a flat tuple built in the ``prange`` body."""
+    k = fetch_add(nxt, 0, 1)
+    if k < n_tasks:
+        s = scratch(*scratch_args)
+        while k < n_tasks:
+            task(k, s, *args)
+            k = fetch_add(nxt, 0, 1)
+
+
 # -- queries over arrays of rays (blocks of RAY_BLOCK rays, taken by the threads as they come free) --
+@njit(cache=True, nogil=True)
+def ray_blocks(n):
+    """How many blocks of RAY_BLOCK rays n rays make."""
+    return (n + RAY_BLOCK - 1) // RAY_BLOCK
+
+
 @njit(cache=True, parallel=True, nogil=True)
 def trace_occluded(fn, scene, o, d, t, out):
     """``out[i]`` (n,) bool: whether ``rtcOccluded1`` finds a hit on ray i (o, d (n, 3), t (n,)
     float32) before t[i]."""
-    n = o.shape[0]
-    nb = (n + RAY_BLOCK - 1) // RAY_BLOCK
     nw, nxt = workers()
     for _ in prange(nw):
-        b = fetch_add(nxt, 0, 1)
-        if b < nb:
-            rec, bits = ray_record()
-        while b < nb:
-            for i in range(b * RAY_BLOCK, min(n, (b + 1) * RAY_BLOCK)):
-                out[i] = occluded1(
-                    fn, scene, rec, bits, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i]
-                )
-            b = fetch_add(nxt, 0, 1)
+        take_tasks(nxt, ray_blocks(o.shape[0]), _occluded_block, ray_record, (), (fn, scene, o, d, t, out))
+
+
+@njit(cache=True, nogil=True)
+def _occluded_block(b, s, fn, scene, o, d, t, out):
+    rec, bits = s
+    for i in range(b * RAY_BLOCK, min(o.shape[0], (b + 1) * RAY_BLOCK)):
+        out[i] = occluded1(fn, scene, rec, bits, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i])
 
 
 @njit(cache=True, parallel=True, nogil=True)
 def trace_visible(occ, isect, scene, glass, glass_tau, o, d, t, out):
     """``out[i]`` (n,) float64: :func:`visible1` of ray i. Returns how many rays were traced against
     the glass (those that nothing opaque stops, when there is glass)."""
-    n = o.shape[0]
-    nb = (n + RAY_BLOCK - 1) // RAY_BLOCK
+    nb = ray_blocks(o.shape[0])
     through = np.zeros(nb, dtype=np.int64)
     nw, nxt = workers()
     for _ in prange(nw):
-        b = fetch_add(nxt, 0, 1)
-        if b < nb:
-            rec, bits = ray_record()
-        while b < nb:
-            for i in range(b * RAY_BLOCK, min(n, (b + 1) * RAY_BLOCK)):
-                v = visible1(
-                    occ, isect, scene, glass, glass_tau, rec, bits,
-                    o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i],
-                )  # fmt: skip
-                out[i] = v
-                if glass != 0 and v > 0:
-                    through[b] += 1
-            b = fetch_add(nxt, 0, 1)
+        take_tasks(nxt, nb, _visible_block, ray_record, (),
+                   (occ, isect, scene, glass, glass_tau, o, d, t, out, through))  # fmt: skip
     return through.sum()
+
+
+@njit(cache=True, nogil=True)
+def _visible_block(b, s, occ, isect, scene, glass, glass_tau, o, d, t, out, through):
+    rec, bits = s
+    for i in range(b * RAY_BLOCK, min(o.shape[0], (b + 1) * RAY_BLOCK)):
+        v = visible1(occ, isect, scene, glass, glass_tau, rec, bits,
+                     o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i])  # fmt: skip
+        out[i] = v
+        if glass != 0 and v > 0:
+            through[b] += 1
 
 
 @njit(cache=True, parallel=True, nogil=True)
 def trace_first_hits(fn, scene, o, d, t, prim, bary):
     """``prim[i]`` (n,) int64 the triangle ray i meets first before t[i] (-1: none) and ``bary[i]``
     (n, 2) float64 the hit's (u, v) (0 where none), by ``rtcIntersect1``."""
-    n = o.shape[0]
-    nb = (n + RAY_BLOCK - 1) // RAY_BLOCK
     nw, nxt = workers()
     for _ in prange(nw):
-        b = fetch_add(nxt, 0, 1)
-        if b < nb:
-            rec, bits = ray_record()
-        while b < nb:
-            for i in range(b * RAY_BLOCK, min(n, (b + 1) * RAY_BLOCK)):
-                p = intersect1(
-                    fn, scene, rec, bits, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i]
-                )
-                prim[i] = p
-                if p >= 0:
-                    bary[i, 0], bary[i, 1] = rec[15], rec[16]
-                else:
-                    bary[i, 0], bary[i, 1] = 0.0, 0.0
-            b = fetch_add(nxt, 0, 1)
+        take_tasks(nxt, ray_blocks(o.shape[0]), _first_hit_block, ray_record, (),
+                   (fn, scene, o, d, t, prim, bary))  # fmt: skip
+
+
+@njit(cache=True, nogil=True)
+def _first_hit_block(b, s, fn, scene, o, d, t, prim, bary):
+    rec, bits = s
+    for i in range(b * RAY_BLOCK, min(o.shape[0], (b + 1) * RAY_BLOCK)):
+        p = intersect1(fn, scene, rec, bits, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i])
+        prim[i] = p
+        if p >= 0:
+            bary[i, 0], bary[i, 1] = rec[15], rec[16]
+        else:
+            bary[i, 0], bary[i, 1] = 0.0, 0.0

@@ -21,7 +21,7 @@ import time
 import numpy as np
 from numba import njit, prange
 
-from iat.radiosity.embree import fetch_add, ray_record, visible1, workers
+from iat.radiosity.embree import fetch_add, ray_record, take_tasks, visible1, workers
 from iat.radiosity.kernels import (
     concentric_unit,
     field_terms,
@@ -59,31 +59,33 @@ def gather_traced(occ, isect, scene, glass, glass_tau,
     through = np.zeros(tasks, dtype=np.int64)
     nw, nxt = workers()
     for _ in prange(nw):
-        task = fetch_add(nxt, 0, 1)
-        if task < tasks:
-            rot, x, nr = np.empty((ROWS, 4)), np.empty((ROWS, 3)), np.empty((ROWS, 3))
-            t1, t2 = np.empty((ROWS, 3)), np.empty((ROWS, 3))
-            o32 = np.empty((ROWS, 3), dtype=np.float32)
-            sw, su, sv = np.empty(2 * S), np.empty(2 * S), np.empty(2 * S)
-            rec, bits = ray_record()
-        while task < tasks:
-            _gather_task(task, b, S, n_s, occ, isect, scene, glass, glass_tau, ii, key, salt, correlated,
-                         ff, normal, patch, tangent, f, f_direction, origin32, pat, geom, uvc, poly_n, poly_o,
-                         tol, is_quad, para, linear_uv, area, mask, has_mask, t32, half_eps, has_field, flat,
-                         nl, field_mean, clamp_lo, clamp_hi, out, seen, rays, through, rot, x, nr, t1, t2,
-                         o32, sw, su, sv, rec, bits)  # fmt: skip
-            task = fetch_add(nxt, 0, 1)
+        take_tasks(nxt, tasks, _gather_task, _gather_scratch, (S,),
+                   (b, S, n_s, occ, isect, scene, glass, glass_tau, ii, key, salt, correlated, ff, normal,
+                    patch, tangent, f, f_direction, origin32, pat, geom, uvc, poly_n, poly_o, tol, is_quad,
+                    para, linear_uv, area, mask, has_mask, t32, half_eps, has_field, flat, nl, field_mean,
+                    clamp_lo, clamp_hi, out, seen, rays, through))  # fmt: skip
     return out, seen, rays, through.sum()
 
 
+@njit(cache=True, nogil=True)
+def _gather_scratch(S):
+    """A worker's scratch of :func:`_gather_task` for a pattern of S samples."""
+    rot, x, nr = np.empty((ROWS, 4)), np.empty((ROWS, 3)), np.empty((ROWS, 3))
+    t1, t2 = np.empty((ROWS, 3)), np.empty((ROWS, 3))
+    o32 = np.empty((ROWS, 3), dtype=np.float32)
+    sw, su, sv = np.empty(2 * S), np.empty(2 * S), np.empty(2 * S)
+    rec, bits = ray_record()
+    return rot, x, nr, t1, t2, o32, sw, su, sv, rec, bits
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
-def _gather_task(task, b, S, n_s, occ, isect, scene, glass, glass_tau, ii, key, salt, correlated, ff,
-                 normal, patch, tangent, f, f_direction, origin32, pat, geom, uvc, poly_n, poly_o, tol,
+def _gather_task(task, scratch, b, S, n_s, occ, isect, scene, glass, glass_tau, ii, key, salt, correlated,
+                 ff, normal, patch, tangent, f, f_direction, origin32, pat, geom, uvc, poly_n, poly_o, tol,
                  is_quad, para, linear_uv, area, mask, has_mask, t32, half_eps, has_field, flat, nl,
-                 field_mean, clamp_lo, clamp_hi, out, seen, rays, through, rot, x, nr, t1, t2, o32, sw, su,
-                 sv, rec, bits):  # fmt: skip
-    """Rows ``task * ROWS ...`` of :func:`gather_traced` (the rest: its arguments, outputs and the
-    worker's scratch)."""
+                 field_mean, clamp_lo, clamp_hi, out, seen, rays, through):  # fmt: skip
+    """Rows ``task * ROWS ...`` of :func:`gather_traced` (scratch: :func:`_gather_scratch`'s; the
+    rest: its arguments and outputs)."""
+    rot, x, nr, t1, t2, o32, sw, su, sv, rec, bits = scratch
     lo = task * ROWS
     m = min(b, lo + ROWS) - lo
     for j in range(m):  # block_inputs' rows
@@ -133,35 +135,17 @@ def sky_rays(occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, orig
     arithmetic) into ``w`` (b, S, 3) float64; traced from origin32 (b, 3) float32 as far as tfar
     (float32) into ``free`` (b, S) (:func:`.embree.visible1`). Returns the rays traced against
     the glass besides."""
-    b, S = rot.shape[0], pat.shape[0]
-    through = np.zeros(b, dtype=np.int64)
-    nw, nxt = workers()
-    for _ in prange(nw):
-        i = fetch_add(nxt, 0, 1)
-        if i < b:
-            rec, bits = ray_record()
-        while i < b:
-            _sky_row(i, S, occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, origin32, tfar, w,
-                     free, through, rec, bits)  # fmt: skip
-            i = fetch_add(nxt, 0, 1)
-    return through.sum()
+    return _escape(_sky_direction, (t1, t2, normal, w), occ, isect, scene, glass, glass_tau, pat, rot,
+                   origin32, tfar, free)  # fmt: skip
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _sky_row(i, S, occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, origin32, tfar, w, free,
-             through, rec, bits):  # fmt: skip
-    """Vertex i of :func:`sky_rays`."""
-    ox, oy, oz = origin32[i, 0], origin32[i, 1], origin32[i, 2]
-    for j in range(S):
-        dx, dy = concentric_unit(wrap_unit(pat[j, 0], rot[i, 0]), wrap_unit(pat[j, 1], rot[i, 1]))
-        dz = math.sqrt(max(1.0 - dx * dx - dy * dy, 0.0))
-        for c in range(3):
-            w[i, j, c] = dx * t1[i, c] + dy * t2[i, c] + dz * normal[i, c]
-        wx, wy, wz = np.float32(w[i, j, 0]), np.float32(w[i, j, 1]), np.float32(w[i, j, 2])
-        v = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, wx, wy, wz, tfar)
-        free[i, j] = v
-        if glass != 0 and v > 0:
-            through[i] += 1
+def _sky_direction(i, j, dx, dy, t1, t2, normal, w):
+    """Direction j of vertex i of :func:`sky_rays` (float32) from its disc point dx, dy, kept in w."""
+    dz = math.sqrt(max(1.0 - dx * dx - dy * dy, 0.0))
+    for c in range(3):
+        w[i, j, c] = dx * t1[i, c] + dy * t2[i, c] + dz * normal[i, c]
+    return np.float32(w[i, j, 0]), np.float32(w[i, j, 1]), np.float32(w[i, j, 2])
 
 
 @njit(cache=True, parallel=True, nogil=True, error_model="numpy")
@@ -171,7 +155,28 @@ def sun_rays(occ, isect, scene, glass, glass_tau, pat, rot, to_sun, half, t1, t2
     normalised (to_sun, t1, t2 (3,): the disc's frame; the arithmetic of
     ``DirectLight.sun_irradiance``), traced from origin32 (b, 3) float32 as far as tfar into
     ``free`` (b, S). Returns the rays traced against the glass besides."""
-    b, S = rot.shape[0], pat.shape[0]
+    return _escape(_sun_direction, (to_sun, half, t1, t2), occ, isect, scene, glass, glass_tau, pat, rot,
+                   origin32, tfar, free)  # fmt: skip
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _sun_direction(i, j, dx, dy, to_sun, half, t1, t2):
+    """Direction j of vertex i of :func:`sun_rays` (float32) from its disc point dx, dy."""
+    d0 = to_sun[0] + half * (dx * t1[0] + dy * t2[0])
+    d1 = to_sun[1] + half * (dx * t1[1] + dy * t2[1])
+    d2 = to_sun[2] + half * (dx * t1[2] + dy * t2[2])
+    n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)  # np.linalg.norm's sum, in its order
+    return np.float32(d0 / n), np.float32(d1 / n), np.float32(d2 / n)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _escape(direction, dir_args, occ, isect, scene, glass, glass_tau, pat, rot, origin32, tfar, free):
+    """:func:`sky_rays` and :func:`sun_rays`: direction j of vertex i is ``direction(i, j, dx, dy,
+    *dir_args)`` (float32) from the rotated pattern's disc point dx, dy. The workers take vertices
+    from the shared counter as :func:`.embree.take_tasks` does, but run the row here: inlined into
+    the kernel, direction stays a global function (passed on to a task as a value, it would keep
+    the kernel from numba's cache), and the ``prange`` is the kernel's."""
+    b = rot.shape[0]
     through = np.zeros(b, dtype=np.int64)
     nw, nxt = workers()
     for _ in prange(nw):
@@ -179,28 +184,16 @@ def sun_rays(occ, isect, scene, glass, glass_tau, pat, rot, to_sun, half, t1, t2
         if i < b:
             rec, bits = ray_record()
         while i < b:
-            _sun_row(i, S, occ, isect, scene, glass, glass_tau, pat, rot, to_sun, half, t1, t2, origin32,
-                     tfar, free, through, rec, bits)  # fmt: skip
+            ox, oy, oz = origin32[i, 0], origin32[i, 1], origin32[i, 2]
+            for j in range(pat.shape[0]):
+                dx, dy = concentric_unit(wrap_unit(pat[j, 0], rot[i, 0]), wrap_unit(pat[j, 1], rot[i, 1]))
+                wx, wy, wz = direction(i, j, dx, dy, *dir_args)
+                v = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, wx, wy, wz, tfar)
+                free[i, j] = v
+                if glass != 0 and v > 0:
+                    through[i] += 1
             i = fetch_add(nxt, 0, 1)
     return through.sum()
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def _sun_row(i, S, occ, isect, scene, glass, glass_tau, pat, rot, to_sun, half, t1, t2, origin32, tfar, free,
-             through, rec, bits):  # fmt: skip
-    """Vertex i of :func:`sun_rays`."""
-    ox, oy, oz = origin32[i, 0], origin32[i, 1], origin32[i, 2]
-    for j in range(S):
-        dx, dy = concentric_unit(wrap_unit(pat[j, 0], rot[i, 0]), wrap_unit(pat[j, 1], rot[i, 1]))
-        d0 = to_sun[0] + half * (dx * t1[0] + dy * t2[0])
-        d1 = to_sun[1] + half * (dx * t1[1] + dy * t2[1])
-        d2 = to_sun[2] + half * (dx * t1[2] + dy * t2[2])
-        n = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)  # np.linalg.norm's sum, in its order
-        v = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz,
-                     np.float32(d0 / n), np.float32(d1 / n), np.float32(d2 / n), tfar)  # fmt: skip
-        free[i, j] = v
-        if glass != 0 and v > 0:
-            through[i] += 1
 
 
 def sky_escape(vis, pat, rot, t1, t2, normal, origin32, tfar: float):
