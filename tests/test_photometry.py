@@ -9,10 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from iat.io.scene import Light, Material, Scene, Sky
+from iat.io.scene import Light, Material, Sky
 from iat.measure import photometry as ph
 from iat.measure.sensors import irradiance_at
 from iat.radiosity import SolveOptions, solve
+from tests.support.quads import box_quads, scene_of
 
 
 # -- scenes built in code ------------------------------------------------------------------------
@@ -29,44 +30,12 @@ def grid_quads(x0, x1, z0, z1, y, nx, nz, up=True):
     return out
 
 
-def box_quads(lo, hi, k):
-    """The inward faces of an axis-aligned box, each split into k x k quads: [(axis, side, quad)]."""
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    centre = (lo + hi) / 2
-    out = []
-    for axis in range(3):
-        a, b = [x for x in range(3) if x != axis]
-        ga, gb = np.linspace(lo[a], hi[a], k + 1), np.linspace(lo[b], hi[b], k + 1)
-        for side in (lo[axis], hi[axis]):
-            for i in range(k):
-                for j in range(k):
-                    q = np.zeros((4, 3))
-                    q[:, axis] = side
-                    q[:, a] = ga[[i, i + 1, i + 1, i]]
-                    q[:, b] = gb[[j, j, j + 1, j + 1]]
-                    if np.cross(q[2] - q[0], q[3] - q[1]) @ (centre - q.mean(axis=0)) < 0:
-                        q = q[[0, 3, 2, 1]]
-                    out.append((axis, side, q))
-    return out
-
-
-def scene_of(polys, mats, materials, lights=(), sky=None) -> Scene:
-    verts, corners = [], []
-    for q in polys:
-        idx = list(range(len(verts), len(verts) + len(q)))
-        verts.extend(q)
-        corners.append(idx + [-1] * (4 - len(q)))
-    return Scene(
-        np.array(verts, float), np.array(corners), np.array(mats), materials, lights=list(lights), sky=sky
-    )
-
-
 def roof_opening_room(sky: Sky, height=3.0):
     """A 4 x height x 4 m room whose roof has a 2 x 2 m opening in its centre (x, z in [1, 3]); the
     floor (4 x 4 quads) has albedo 0.5, walls and roof are black: the floor gets the sky component
     only (no inter-reflection reaches it)."""
     polys, mats = [], []
-    for axis, side, q in box_quads([0, 0, 0], [4, height, 4], 4):
+    for axis, side, _, _, q in box_quads([0, 0, 0], [4, height, 4], 4):
         if axis == 1 and side == height:
             continue
         polys.append(q)
