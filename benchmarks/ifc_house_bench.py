@@ -131,45 +131,40 @@ def run_child(args: list[str], timeout: float | None) -> dict:
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
-def _error_row(out: list[str], name: str, f: dict) -> bool:
-    """Append a failed step's row to ``out``; True if it failed."""
-    if "error" in f:
-        out.append(f"| {name} | {f['error']} |" + " |" * 8)
-    return "error" in f
+def _table(head: str, rows: dict, row) -> list[str]:
+    """A Markdown table: the header ``head`` (``| a | b | ... |``), then ``row(name, f)`` for each step,
+    or for a failed one its error."""
+    cols = head.count("|") - 1
+    out = [head, "|" + "---|" * cols]
+    for name, f in rows.items():
+        out.append(f"| {name} | {f['error']} |" + " |" * (cols - 2) if "error" in f else row(name, f))
+    return out
 
 
 def fmt_load(rows: dict) -> list[str]:
-    out = [
+    return _table(
         "| load | patches | quads | clipped cells (clip triangles) | panels found | slivers "
         "| world triangles | load s | tracemalloc peak MiB | max RSS MiB (after imports) |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for name, f in rows.items():
-        if _error_row(out, name, f):
-            continue
-        out.append(
+        rows,
+        lambda name, f: (
             f"| {name} | {f['patches']:,} | {f['quads']:,} | {f['clipped']:,} ({f['clip_triangles']:,}) "
             f"| {f['panels']:,} | {f['slivers']:,} | {f['world_triangles']:,} | {f['load_s']:.1f} "
             f"| {f['trace_peak_mib']:.0f} | {f['max_rss_mib']:.0f} ({f['base_rss_mib']:.0f}) |"
-        )
-    return out
+        ),
+    )
 
 
 def fmt_solve(rows: dict) -> list[str]:
-    out = [
+    return _table(
         "| solve | lights | max_depth | solve s | elements | vertices | shots | rays | unshot | "
         "max RSS MiB (before solve) |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for name, f in rows.items():
-        if _error_row(out, name, f):
-            continue
-        out.append(
+        rows,
+        lambda name, f: (
             f"| {name} | {f['lights']} | {f['max_depth']} | {f['solve_s']:.1f} | {f['elements']:,} "
             f"| {f['vertices']:,} | {f['shots']:,} | {f['rays'] / 1e6:.1f} M | {f['unshot']:.3f} "
             f"| {f['max_rss_mib']:.0f} ({f['base_rss_mib']:.0f}) |"
-        )
-    return out
+        ),
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
