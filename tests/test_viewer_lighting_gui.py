@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import run_gui, wait_until
+from tests.support import gui
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -55,9 +56,8 @@ def make_model(path: Path) -> Path:
 def test_viewer_lighting_end_to_end(tmp_path, monkeypatch, gui_child):
     if gui_child():  # ran alone in a child process (see tests/conftest.py)
         return
-    from imgui_bundle import ImVec2, imgui
+    from imgui_bundle import ImVec2
     from imgui_bundle.immapp import testing
-    from PIL import Image
 
     from iat.bake.baked import BakedSet
     from iat.io.load import load_scene
@@ -76,25 +76,11 @@ def test_viewer_lighting_end_to_end(tmp_path, monkeypatch, gui_child):
     got: dict = {}
     images: dict[str, np.ndarray] = {}
 
-    def settle(ctx, frames=3):
-        wait_until(
-            ctx,
-            lambda: (
-                not (
-                    s.jobs.rebaking or s.jobs.opening or s.lighting.relighting or s.lighting.solving_day_cycle
-                )
-                and app.pending_relit is None
-            ),
-            120,
-            "the background work",
-        )
-        ctx.yield_(frames)
+    def settle(ctx):
+        gui.settle(ctx, app, 120)
 
     def shot(ctx, name: str) -> np.ndarray:
-        s.messages.last_screenshot = ""
-        ctx.key_press(imgui.Key.f12)
-        wait_until(ctx, lambda: s.messages.last_screenshot, 10, f"the {name} screenshot")
-        images[name] = np.asarray(Image.open(s.messages.last_screenshot).convert("RGB")).astype(np.float64)
+        images[name] = gui.screenshot(ctx, app, name)
         testing.capture(ctx, str(tmp_path / f"window-{name}.png"))
         return images[name]
 

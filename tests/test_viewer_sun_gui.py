@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import run_gui, wait_until
+from tests.support import gui
 from tests.support.site_ifc import HALL_WALL, LAT, LON, NORTH_DEG, ROOF, SKYLIGHT, TZ_HOURS, expected_to_sun
 
 DATE = "2026-06-21"
@@ -57,9 +58,7 @@ def test_sun_and_sky_panel(tmp_path, monkeypatch, gui_child):
     if gui_child():
         return
     pytest.importorskip("ifcopenshell")
-    from imgui_bundle import imgui
     from imgui_bundle.immapp import testing
-    from PIL import Image
 
     from iat.camera import Camera
     from iat.lighting.daylight_default import DaylightRequest
@@ -95,25 +94,11 @@ def test_sun_and_sky_panel(tmp_path, monkeypatch, gui_child):
         when = day_times(DATE, [hour], TZ_HOURS)[0]
         return solar_position(LAT, LON, when), expected_to_sun(LAT, LON, when, NORTH_DEG)
 
-    def settle(ctx, frames_=3):
-        wait_until(
-            ctx,
-            lambda: (
-                not (
-                    s.jobs.rebaking or s.jobs.opening or s.lighting.relighting or s.lighting.solving_day_cycle
-                )
-                and app.pending_relit is None
-            ),
-            300,
-            "the background work",
-        )
-        ctx.yield_(frames_)
+    def settle(ctx):
+        gui.settle(ctx, app, 300)
 
     def shot(ctx, name: str) -> np.ndarray:
-        s.messages.last_screenshot = ""
-        ctx.key_press(imgui.Key.f12)
-        wait_until(ctx, lambda: s.messages.last_screenshot, 10, f"the {name} screenshot")
-        return np.asarray(Image.open(s.messages.last_screenshot).convert("RGB")).astype(np.float64) / 255.0
+        return gui.screenshot(ctx, app, name) / 255.0
 
     def marker(hour_label: str):
         m = sun_sky.sun_marker(s)
