@@ -153,8 +153,7 @@ def _rooms(args, scene):
 
 
 def cmd_analyse(args, load, solve_options, bar, emit) -> int:
-    from iat.cli.daylight import apply_to
-    from iat.geometry.discontinuity import cut_new_lights
+    from iat.cli.daylight import apply_to, cut_after_daylight
     from iat.measure.daylight import measure_rooms, overcast_scene, report, report_csv
     from iat.radiosity import solve
     from iat.radiosity.inputs import is_solution_path
@@ -179,7 +178,7 @@ def cmd_analyse(args, load, solve_options, bar, emit) -> int:
             overcast = (oc, solve(oc, opts, progress=b))
     if args.only != "daylight-factor":
         line = apply_to(args, scene)
-        scene = cut_new_lights(scene) if opts.discontinuity else scene  # a sun added: its shadows cut
+        scene = cut_after_daylight(scene, opts)
         with bar(args, f"solve {name}") as b:
             lit = (scene, solve(scene, opts, progress=b))
     else:

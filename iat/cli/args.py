@@ -48,3 +48,22 @@ def join_negative_values(argv: list[str]) -> list[str]:
             out.append(tok)
             i += 1
     return out
+
+
+def add_sides_flags(sp) -> None:
+    """``--sides`` and ``--cut`` (the loader's ``sides`` and ``cut``) on a subcommand's parser."""
+    sp.add_argument(
+        "--sides",
+        choices=["auto", "both", "front"],
+        default="auto",
+        help="auto: IFC's inside-out solids turned outward and its open sheets given a back face "
+        "(other formats: glTF doubleSided materials only); both: every format so; "
+        "front: faces as the file has them (all count them)",
+    )
+    sp.add_argument(
+        "--cut",
+        choices=["auto", "crossings", "all", "none"],  # iat.geometry.pierce.CUTS (not imported: start-up)
+        default="auto",
+        help="cut faces along other objects crossing them (all: and resting on them; none: not; "
+        "auto: all for IFC and --sides both, else crossings)",
+    )

@@ -19,8 +19,14 @@ from pathlib import Path
 import numpy as np
 
 from iat.cli.analysis import add_analyse_parser, add_false_color_flags, open_overcast, render_false_color
-from iat.cli.args import join_negative_values, parse_size, parse_vec
-from iat.cli.daylight import add_daylight_flags, apply_to, check_solution_flags, daylight_request
+from iat.cli.args import add_sides_flags, join_negative_values, parse_size, parse_vec
+from iat.cli.daylight import (
+    add_daylight_flags,
+    apply_to,
+    check_solution_flags,
+    cut_after_daylight,
+    daylight_request,
+)
 from iat.cli.faults import add_faults_flag, render_view
 from iat.cli.warning_lines import WarningLines, warning_printer
 from iat.errors import IATError, IATWarning, OptionError
@@ -122,12 +128,10 @@ def _open(args, what: str):
         check_solution_flags(args)
         with _progress_bar(args, f"load {name}", close_when_done=True) as load_bar:
             return open_solution(args.input, load_progress=load_bar)
-    from iat.geometry.discontinuity import cut_new_lights
-
     opts = _solve_options(args)
     scene = _load(args, args.input, max_edge=opts.max_edge)
     apply_to(args, scene)
-    scene = cut_new_lights(scene) if opts.discontinuity else scene  # the sun --sun or the IFC's site gave
+    scene = cut_after_daylight(scene, opts)
     with _progress_bar(args, f"solve {name}") as bar:
         return scene, solve(scene, opts, progress=bar)
 
@@ -220,7 +224,6 @@ def _solve_states_on_engine(args, opts) -> int:
 
 
 def cmd_solve(args) -> int:
-    from iat.geometry.discontinuity import cut_new_lights
     from iat.radiosity import solve
 
     opts = _solve_options(args)
@@ -247,7 +250,7 @@ def cmd_solve(args) -> int:
             )
         _emit(args, {"states": written, "vertices": int(len(sset.first.vert_key))})
         return 0
-    scene = cut_new_lights(scene) if opts.discontinuity else scene  # the sun --sun or the IFC's site gave
+    scene = cut_after_daylight(scene, opts)
     with _progress_bar(args, f"solve {Path(args.input).name}") as bar:
         sol = solve(scene, opts, progress=bar)
     sol.model_path = str(Path(args.input).resolve())
@@ -595,23 +598,6 @@ def build_parser() -> argparse.ArgumentParser:
             help="cut patches along the hard shadows of the model's point, spot and sun lights (default: on)",
         )
 
-    def sides_flag(sp):
-        sp.add_argument(
-            "--sides",
-            choices=["auto", "both", "front"],
-            default="auto",
-            help="auto: IFC's inside-out solids turned outward and its open sheets given a back face "
-            "(other formats: glTF doubleSided materials only); both: every format so; "
-            "front: faces as the file has them (all count them)",
-        )
-        sp.add_argument(
-            "--cut",
-            choices=["auto", "crossings", "all", "none"],  # iat.geometry.pierce.CUTS (not imported: start-up)
-            default="auto",
-            help="cut faces along other objects crossing them (all: and resting on them; none: not; "
-            "auto: all for IFC and --sides both, else crossings)",
-        )
-
     def set_flags(sp):
         sp.add_argument(
             "--set",
@@ -644,7 +630,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("info", help="counts: triangles, patches, materials, lights, cameras")
     s.add_argument("input", metavar="MODEL")
     s.add_argument("--no-panels", action="store_true", dest="no_panels", help="count without panels")
-    sides_flag(s)
+    add_sides_flags(s)
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_info)
 
@@ -653,7 +639,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_daylight_flags(s, study=True)
     s.add_argument("-o", "--output", required=True, metavar="SOL.npz")
     solve_flags(s)
-    sides_flag(s)
+    add_sides_flags(s)
     s.add_argument(
         "--states",
         action="store_true",
@@ -763,7 +749,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--modes", default="mesh,iat", help="modes --play measures, comma-separated")
     s.add_argument("--json", action="store_true", help="--play statistics as JSON")
     s.set_defaults(func=cmd_view)
-    add_analyse_parser(sub, solve_flags, sides_flag, _load, _solve_options, _progress_bar, _emit)
+    add_analyse_parser(sub, solve_flags, add_sides_flags, _load, _solve_options, _progress_bar, _emit)
     return p
 
 

@@ -76,6 +76,15 @@ def apply_to(args, scene) -> str | None:
     return line
 
 
+def cut_after_daylight(scene, opts):
+    """``scene`` cut along the hard shadows of the sun :func:`apply_to` gave it
+    (:func:`iat.geometry.discontinuity.cut_new_lights`) when ``opts`` (SolveOptions) mesh
+    discontinuities, as the loader cuts along the file's own lights; else ``scene``."""
+    from iat.geometry.discontinuity import cut_new_lights
+
+    return cut_new_lights(scene) if opts.discontinuity else scene
+
+
 def check_solution_flags(args) -> None:
     """``--sun``/``--sky`` name a model's light: a solution keeps the light it was solved under."""
     from iat.errors import OptionError

@@ -364,6 +364,8 @@ def split_discontinuities(scene, lights=None):
     # children in place of their parent
     V = [scene.vertices]
     corners, material, puv, new_index = [], [], [], np.empty(scene.n_patches, np.int64)
+    old_family = np.arange(scene.n_patches) if scene.patch_family is None else scene.patch_family
+    family = []
     n_v, n_p = len(scene.vertices), 0
     corners2 = np.stack([(corners3[:, i] - corners3[:, 0]) for i in range(4)], axis=1)
     for p in range(scene.n_patches):
@@ -372,6 +374,7 @@ def split_discontinuities(scene, lights=None):
             corners.append(scene.patch_corners[p][None])
             material.append(scene.patch_material[p : p + 1])
             puv.append(scene.patch_uv[p][None])
+            family.append(old_family[p : p + 1])
             n_p += 1
             continue
         world, roots, pts2 = children[p]
@@ -384,6 +387,7 @@ def split_discontinuities(scene, lights=None):
             corners.append(np.where(np.arange(4) < len(r), n_v + c, -1)[None])
             puv.append(duv[c][None])
         material.append(np.full(len(roots), scene.patch_material[p]))
+        family.append(np.full(len(roots), old_family[p]))
         V.append(world)
         n_v += len(world)
         n_p += len(roots)
@@ -396,6 +400,7 @@ def split_discontinuities(scene, lights=None):
         patch_material=np.concatenate(material),
         patch_uv=np.concatenate(puv),
         clip_patch=new_index[scene.clip_patch],
+        patch_family=np.concatenate(family).astype(np.int64),
         shadow_cuts=done,
     )
 

@@ -189,6 +189,9 @@ class Scene:
     faults : the faces the loader found faulty (:class:`~iat.geometry.faults.FaultFaces`: inside-out
       solids turned, open sheets given a back, faces cut by a crossing, repeats dropped; which patches
       carry them: :func:`iat.geometry.faults.patch_faults`), or None for a scene built in memory
+    patch_family : (p,) int64 a label shared by the roots one root was cut into along shadows
+      (:mod:`iat.geometry.discontinuity`: its pieces shoot together, as the root would), or None
+      when no root was cut
     shadow_cuts : the lights whose hard shadows the roots were cut along, one list of
       :func:`iat.geometry.discontinuity.shadow_key` per cut, in order (a solution records them, so
       that its model reloaded is cut the same: :func:`iat.geometry.discontinuity.replay_cuts`)
@@ -209,6 +212,7 @@ class Scene:
     sides: SideReport | None = None
     pierce: PierceReport | None = None
     faults: FaultFaces | None = None
+    patch_family: np.ndarray | None = None
     shadow_cuts: list[list[tuple]] = field(default_factory=list)
 
     def __post_init__(self):

@@ -142,6 +142,7 @@ class Patches:
     n: int  # lattice cells a side at ``max_depth``
     twin: np.ndarray  # (P,) int64 the coincident patch facing the other way (a sheet's back), -1: none
     twin_swap: np.ndarray  # (P,) bool: the twin's lattice (u, v) is this patch's (v, u)
+    family: np.ndarray | None  # (P,) int64 the root a shadow cut made it from (shoots with its kin), or None
     _coverage: dict = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
@@ -196,6 +197,7 @@ class Patches:
             n=1 << opts.max_depth,
             twin=twin,
             twin_swap=twin_swap,
+            family=scene.patch_family,
         )
 
     @property
