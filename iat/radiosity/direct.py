@@ -15,6 +15,7 @@ from iat.radiosity.gathers import Gathers
 from iat.radiosity.options import (
     DIRECT_SAMPLE_FACTOR,
     GATHER_BLOCK,
+    PENUMBRA_EDGE,
     SKY_NOISE,
     SKY_PASSES,
     SKY_SAMPLES,
@@ -42,6 +43,9 @@ class DirectLight:
         self.lights = [lt for lt in scene.lights if lt.kind in ("point", "spot")]
         self.suns = [lt for lt in scene.lights if lt.kind == "directional" and np.any(lt.radiant_intensity)]
         self.sky = getattr(scene, "sky", None)
+        #: sorted keys of the vertices evaluated so far that lie in an emitting patch's penumbra
+        #: (:meth:`direct`; :func:`iat.radiosity.meshing.split_test` refines their elements further)
+        self.penumbra = np.zeros(0, dtype=np.int64)
 
     def light_kernel(self, light, geo: ReceiverGeometry) -> tuple[np.ndarray, np.ndarray]:
         """(n,) ``cos * att * vis / r^2`` at the vertices of ``geo`` for a point or spot light (the
@@ -141,10 +145,16 @@ class DirectLight:
             return out
         geo = self.patches.geometry(keys) if geo is None else geo
         incoming = np.zeros((len(keys), 3))  # radiance-weighted: rho * incoming = reflected
+        seen, free = np.zeros(len(keys)), np.zeros(len(keys))  # luminance from the emitters, unoccluded
         for e in self.patches.emitters:
             side = self.emitter_side(self.patches.emitter_share[e])
-            incoming += self.emitter_gather(e, geo, side)[:, None] * self.patches.emission[e]
+            g, f = self.gathers.gather_unoccluded(int(e), geo, side)
+            incoming += g[:, None] * self.patches.emission[e]
+            y = abs(float(luminance_of(self.patches.emission[e])))
+            seen += y * g
+            free += y * f
             check()
+        self.add_penumbra(keys, seen, free)
         for light in self.lights:
             incoming += self.light_irradiance(light, geo) / np.pi
             check()
@@ -153,6 +163,15 @@ class DirectLight:
         if self.sky is not None:
             incoming += self.sky_irradiance(geo, check) / np.pi
         return self.patches.albedo[geo.patch] * incoming
+
+    def add_penumbra(self, keys: np.ndarray, seen: np.ndarray, free: np.ndarray) -> None:
+        """Add to :attr:`penumbra` the vertex keys (n,) whose light from the emitting patches
+        ``seen`` (n,) is between ``PENUMBRA_EDGE`` and 1 - ``PENUMBRA_EDGE`` of what they would get
+        unoccluded, ``free`` (n,) (luminance)."""
+        frac = seen / np.where(free > 0, free, 1.0)
+        part = (free > 0) & (frac > PENUMBRA_EDGE) & (frac < 1.0 - PENUMBRA_EDGE)
+        if part.any():
+            self.penumbra = qt.sorted_unique(np.concatenate([self.penumbra, keys[part]]))
 
     def _escape(self, geo: ReceiverGeometry, idx: np.ndarray, dirs: np.ndarray) -> np.ndarray:
         """(k, S) float: what of the rays from vertices ``idx`` (k,) along ``dirs`` (k, S, 3) leaves

@@ -280,13 +280,15 @@ class Gathers:
         *,
         correlated: bool = False,
         cull: bool = False,
-    ) -> list[tuple[np.ndarray, np.ndarray]]:
+        with_ff: bool = False,
+    ) -> list[tuple]:
         """:meth:`gather` from s to several receiver sets at once: ``parts`` is a list of ``(geo,
         patches)`` on disjoint patches (a shot's mesh vertices and its coarse grids), and their
         blocks of receivers run together on the threads. Per part ``(idx, val)``: the indices into
         ``geo`` of its receivers (k,) (distinct) and their values (k,) or (k, 3), the rows of what one
         :meth:`gather` per part in order returns that can be nonzero (so that a shot costs its
-        receivers, not the mesh); each part's culling sees only its own patches."""
+        receivers, not the mesh); each part's culling sees only its own patches. ``with_ff``: per part
+        ``(idx, val, f)``, with the receivers' analytic form factors (k,)."""
         pat = self.pattern(s, m, shot)
         salt = np.uint64(((int(self.opts.seed) * 1_000_003 + int(s)) * 1_000_003 + int(shot)) & _MASK64)
         has_field = field is not None
@@ -317,7 +319,18 @@ class Gathers:
                     self._vis_seen[s] += seen_p[k]
                 else:
                     self._vis_rays[s], self._vis_seen[s] = rays_p[k], seen_p[k]
+        if with_ff:
+            return [(idx, out, f) for (_, idx, f), out in zip(sets, outs, strict=True)]
         return [(idx, out) for (_, idx, _), out in zip(sets, outs, strict=True)]
+
+    def gather_unoccluded(self, s: int, geo: ReceiverGeometry, m: int) -> tuple[np.ndarray, np.ndarray]:
+        """(n,) ``F * vis`` from a uniform shooter s to the vertices of ``geo``, as :meth:`gather`
+        (per-vertex patterns, shot 0, m x m samples), and (n,) their analytic ``F``: what each would
+        get unoccluded (their ratio is its visible fraction)."""
+        idx, val, f = self.gathers(s, [(geo, None)], m, with_ff=True)[0]
+        out, ff = np.zeros(len(geo.key)), np.zeros(len(geo.key))
+        out[idx], ff[idx] = val, f
+        return out, ff
 
     def _traced(self, shot: _Shot, k: int, embree_args: tuple):
         """Set k of a gather in one :func:`~iat.radiosity.traced.gather_traced` call on the ray

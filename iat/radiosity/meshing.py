@@ -10,7 +10,7 @@ from scipy import sparse
 from iat.errors import SolveError
 from iat.geometry import quadtree as qt
 from iat.radiosity.context import Context
-from iat.radiosity.options import ABS_FLOOR, BIG_LEVELS, BIG_TOLERANCE, GAIN_LIMIT
+from iat.radiosity.options import ABS_FLOOR, BIG_LEVELS, BIG_TOLERANCE, GAIN_LIMIT, PENUMBRA_TOLERANCE
 from iat.radiosity.patches import Patches
 from iat.radiosity.progress import SolveCancelled
 from iat.radiosity.sampling import luminance_of
@@ -240,6 +240,11 @@ def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, re
                 )
                 score = np.where(pvalid, np.abs(vy[:, 4:] - interp), 0.0).max(axis=1)
             tol = np.full(sub.n_leaves, opts.tolerance)
+            if len(ctx.light.penumbra):  # an emitter's penumbra: its real structure, finer
+                pen = (
+                    qt.lookup(ctx.light.penumbra, np.concatenate([qt.leaf_corner_keys(sub), pk], axis=1)) >= 0
+                )
+                tol[(pen & vm).any(axis=1)] *= PENUMBRA_TOLERANCE
             if big is not None:  # an element larger than max_size must interpolate more closely
                 tol[big] *= BIG_TOLERANCE
             split = score > tol * (mean + eps_abs)
