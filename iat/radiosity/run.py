@@ -21,6 +21,7 @@ from iat.radiosity.meshing import (
     probe_shot_gain,
     split_test,
 )
+from iat.radiosity.openness import kept_fraction
 from iat.radiosity.options import (
     ABS_FLOOR,
     COARSE_EPS,
@@ -45,14 +46,6 @@ from iat.radiosity.solution import Solution
 from iat.radiosity.sources import sources_record
 from iat.radiosity.state import CoarseGrid, Mesh, Radiance, Refine, Shoot
 from iat.radiosity.visibility import Visibility
-
-#: fewest samples a side of a shot's gather (at most its ``m_hi``). One pattern serves all of a shot's
-#: receivers, so a shot from one point throws its light from there to the whole scene; measured
-#: against a received power that an open scene's sunlit outside dominates, a room's own shots (its
-#: ceiling's, its walls') are faint and were made from one point: with more shots (fine, final) their
-#: errors added up instead of averaging (the window-lit room at convergence 0.0005: 12-15 % error,
-#: bias +9 / -4 / +9 % by seed; 3.7 % at 4 x 4; house_day +10-13 % solve time, the Cornell box none)
-SHOT_MIN_SIDE = 4
 
 
 class SolveRun:
@@ -85,6 +78,10 @@ class SolveRun:
         # from its sources in the direct pass (the emitted power until then; in an open scene
         # most of that escapes, and the rest would look converged before any bounce)
         self.power_ref = self.power0
+        # (P,) the share of each patch's light that stays in the scene (iat.radiosity.openness), and
+        # the received power so weighted: what a shot's share of the light is measured against
+        self.kept = kept_fraction(ctx.patches, vis, opts.seed)
+        self.power_kept = self.power0
         self.u_start = 1e-300  # the unshot power when the plan began (progress is on a log scale)
         self.mesh: Mesh | None = None
         self.coarse: list[CoarseGrid] | None = None  # made at the first mesh (they depend on none)
@@ -144,7 +141,7 @@ class SolveRun:
         offset = self.light_correction()
         pg.step("meshing: power each patch shoots")
         self.rad = Radiance(reflected, reflected + offset, offset, self.shot_gain(self.direct_cache, offset))
-        self.power_ref = self.received_power()
+        self.power_ref, self.power_kept = self.received_power(), self.received_power(self.kept)
         self.timings["meshing_s"] = time.perf_counter() - t0
 
     def take_mesh(self, sol: Solution) -> None:
@@ -171,19 +168,21 @@ class SolveRun:
             reflected = np.zeros((len(self.keys), 3))
         offset = self.light_correction()
         self.rad = Radiance(reflected, reflected + offset, offset, self.rad.gain)
-        self.power_ref = self.received_power()
+        self.power_ref, self.power_kept = self.received_power(), self.received_power(self.kept)
         self.timings["meshing_s"] = time.perf_counter() - t0
 
-    def received_power(self) -> float:
+    def received_power(self, weight: np.ndarray | None = None) -> float:
         """Luminance power the surfaces received in the direct pass: their reflected direct light
         (with the point lights' element correction) over their albedo; surfaces of albedo 0 reflect
-        nothing and do not count. In a closed scene this is the emitted power."""
+        nothing and do not count. In a closed scene this is the emitted power. ``weight`` (P,): each
+        patch's share counted (``kept``: what stays in the scene)."""
         if not len(self.keys):
             return 0.0
         rho = self.ctx.patches.albedo
         mean = self.mesh.M @ np.abs(self.rad.reflected + self.rad.offset)
         incident = np.where(rho > 1e-6, mean / np.maximum(rho, 1e-6), 0.0)
-        return float(np.pi * (luminance_of(incident) * self.ctx.patches.area).sum())
+        area = self.ctx.patches.area if weight is None else self.ctx.patches.area * weight
+        return float(np.pi * (luminance_of(incident) * area).sum())
 
     def light_correction(self, forest=None, keys=None, geo=None, lights=None, signs=None) -> np.ndarray:
         """(V, 3) :meth:`DirectLight.light_correction` on the current mesh (or the given one): added
@@ -323,11 +322,15 @@ class SolveRun:
     def samples_by_power(self, m_hi: int, power: float, field: np.ndarray) -> int:
         """Samples per side of a gather of a shooter's ``field`` ((N+1, N+1, 3) lattice radiance)
         of luminance ``power``: ``m_hi`` x sqrt(power / (``SHOT_FULL_SHARE`` x the received
-        power)), :data:`SHOT_MIN_SIDE` to ``m_hi`` (a faint shot's noise matters less), times
-        :func:`peak_factor` (a concentrated field, a sunlit patch on a floor, needs its points to
-        land in it)."""
-        share = power / max(SHOT_FULL_SHARE * self.power_ref, 1e-300)
-        m = max(min(SHOT_MIN_SIDE, m_hi), min(m_hi, round(m_hi * math.sqrt(share))))
+        power that stays in the scene, ``power_kept``)), 1 to ``m_hi`` (a faint shot's noise matters
+        less), times :func:`peak_factor` (a concentrated field, a sunlit patch on a floor, needs its
+        points to land in it). One pattern serves all of a shot's receivers, so a shot from one
+        point throws its light from there to the whole scene: measured against all the received
+        power, which an open scene's sunlit outside dominates, a room's own shots were faint, made
+        from one point, and their errors added up with more shots instead of averaging (the
+        window-lit room at convergence 0.0005: 12-15 % error, bias +9 / -4 / +9 % by seed)."""
+        share = power / max(SHOT_FULL_SHARE * self.power_kept, 1e-300)
+        m = max(1, min(m_hi, round(m_hi * math.sqrt(share))))
         return round(m * peak_factor(field, PEAK_RATIO, PEAK_SAMPLE_LIMIT))
 
     def shot_group(self, power: np.ndarray, left: int) -> list[int]:
