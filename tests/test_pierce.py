@@ -294,7 +294,7 @@ def test_a_slab_ending_on_the_walls_faces_is_cut_with_contacts(tmp_path):
 def test_bad_cut_option_is_an_option_error(room):
     from iat.errors import OptionError
 
-    with pytest.raises(OptionError, match="cut must be one of auto, crossings, all, none"):
+    with pytest.raises(OptionError, match="cut must be one of crossings, all, none"):
         load_scene(room, cut="some")
 
 
@@ -308,8 +308,7 @@ def test_madrid_house_faces_cut():
         warnings.simplefilter("ignore")
         scene = load_scene(MADRID)
     rep = scene.pierce
-    # the window elements (stone) pass through the plastered wall they sit in: its faces are cut; an
-    # IFC's default cut (auto) also cuts along contacts (crossings alone: 10 objects, 132 faces cut
-    # into 1 316 pieces)
-    assert rep.mode == "all"
-    assert (rep.pairs, rep.objects, rep.faces_cut, rep.pieces, rep.joined_regions) == (154, 45, 401, 3539, 0)
+    # the window elements (stone) pass through the plastered wall they sit in: its faces are cut
+    # (cut="all" also along contacts: 45 objects, 401 faces cut into 3 539 pieces)
+    assert rep.mode == "crossings"
+    assert (rep.pairs, rep.objects, rep.faces_cut, rep.pieces, rep.joined_regions) == (154, 10, 132, 1316, 0)

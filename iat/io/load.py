@@ -343,7 +343,7 @@ def load_scene(
     panels: bool = True,
     discontinuity: bool = False,
     sides: str = "auto",
-    cut: bool | str = "auto",
+    cut: bool | str = "crossings",
 ) -> Scene:
     """Load a model file (glTF/GLB, OBJ+MTL, PLY, STL, OFF) into a :class:`Scene`.
 
@@ -365,13 +365,12 @@ def load_scene(
       sheets get a back face (its own patch); elsewhere only faces of glTF ``doubleSided``
       materials get one. ``"both"``: every format as IFC. ``"front"``: the faces as the file has
       them. :data:`iat.geometry.sides.SIDES`; what was found is ``Scene.sides``.
-    cut : ``"crossings"`` (True): cut the faces that other objects pierce along the
+    cut : ``"crossings"`` (default, True): cut the faces that other objects pierce along the
       crossings, so that no patch or panel cell spans both sides of another surface
       (:func:`iat.geometry.pierce.cut_pierced`; a wall through a ceiling is lit above it and dark
       below it); ``"all"``: also along the faces of other objects that rest on them (a slab ending on
-      a wall's face, a wall on a slab); ``"none"`` (False) keeps them whole; ``"auto"`` (default):
-      ``"all"`` for IFC and under ``sides="both"``, else ``"crossings"``. Either way what was found
-      is ``Scene.pierce`` (``Scene.pierce.mode``: the choice made).
+      a wall's face, a wall on a slab); ``"none"`` (False) keeps them whole. Either way what was
+      found is ``Scene.pierce`` (``Scene.pierce.mode``: the choice).
     progress : ``progress(fraction, message) -> bool``, called at the start of each
       stage (parse, weld, quad merge, pre-split) and with 1.0 at the end, fractions
       non-decreasing; returning False raises :class:`iat.errors.Cancelled`.
@@ -395,8 +394,6 @@ def load_scene(
     if not path.is_file():
         raise LoadError("not a regular file", path)
     ext = path.suffix.lower()
-    if cut == "auto":  # building elements rest on each other: IFC, and files read as IFC
-        cut = "all" if ext == ".ifc" or sides == "both" else "crossings"
     if ext not in SUPPORTED_EXTENSIONS:
         supported = ", ".join(SUPPORTED_EXTENSIONS)
         raise LoadError(f"unsupported file type '{path.suffix or '(none)'}' (supported: {supported})", path)
