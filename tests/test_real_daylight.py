@@ -331,9 +331,12 @@ def test_within_the_issue_bounds_at_the_defaults(case, egl_ctx, tmp_path_factory
     assert f["rel_error"] <= BOUND_DEFAULT, f
 
 
-#: cases whose error rose from draft to default to fine when last measured (none: draft 5.0-13 %,
-#: default 2.4-50 %, fine 2.5-32 %; no ground's 2.40 -> 2.48 % is within RISE_SLACK)
-KNOWN_RISING: dict[str, str] = {}
+#: cases whose error rose from draft to default to fine when last measured (draft 5.3-13 %, default
+#: 2.3-6.2 %, fine 1.9-5.7 %, the leaking slab aside)
+KNOWN_RISING: dict[str, str] = {
+    "slab_ends_on_wall": "measured draft 44.7 %, default 49.8 %, fine 32.3 %: the leak (KNOWN_SHORT) "
+    "is more light the finer the mesh carries it",
+}
 #: cases above 5 % at fine when last measured
 KNOWN_SHORT_FINE: dict[str, str] = {
     "near_white": "measured 5.7 % at fine (default 6.2 %): the room of albedo 0.97 reads 5 % darker than "
