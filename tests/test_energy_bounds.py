@@ -10,7 +10,7 @@ from iat.errors import IATWarning, SolveError
 from iat.io.load import load_scene
 from iat.io.scene import Material
 from iat.radiosity import SolveOptions, solve
-from tests.test_radiosity import box_quads, scene_of
+from tests.support.quads import box_quads, scene_of
 
 
 def _furnace_obj(tmp_path, albedo: float, copies: int):

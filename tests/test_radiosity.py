@@ -14,40 +14,10 @@ from iat.io.scene import Light, Material, Scene
 from iat.radiosity import Solution, SolveOptions, resolve, solve
 from iat.radiosity.meshing import averaging_matrix
 from iat.radiosity.solver import evaluate_direct
+from tests.support.quads import box_quads, scene_of
 
 
 # -- scenes built in memory ------------------------------------------------------------
-def box_quads(lo, hi, k, inward):
-    """Faces of an axis-aligned box split into k x k quads: [(axis, side, i, j, (4, 3) corners)]."""
-    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    centre = (lo + hi) / 2
-    out = []
-    for axis in range(3):
-        a, b = [x for x in range(3) if x != axis]
-        ga, gb = np.linspace(lo[a], hi[a], k + 1), np.linspace(lo[b], hi[b], k + 1)
-        for side in (lo[axis], hi[axis]):
-            for i in range(k):
-                for j in range(k):
-                    q = np.zeros((4, 3))
-                    q[:, axis] = side
-                    q[:, a] = ga[[i, i + 1, i + 1, i]]
-                    q[:, b] = gb[[j, j, j + 1, j + 1]]
-                    normal = np.cross(q[2] - q[0], q[3] - q[1])
-                    if (normal @ (centre - q.mean(axis=0)) > 0) != inward:
-                        q = q[[0, 3, 2, 1]]
-                    out.append((axis, side, i, j, q))
-    return out
-
-
-def scene_of(polys, material_ids, materials, lights=()):
-    verts, corners = [], []
-    for q in polys:
-        idx = list(range(len(verts), len(verts) + len(q)))
-        verts.extend(q)
-        corners.append(idx + [-1] * (4 - len(q)))
-    return Scene(np.array(verts), np.array(corners), np.array(material_ids), materials, lights=list(lights))
-
-
 def furnace_box(albedo, emission=1.0, k=2):
     """A closed unit box, 6 k x k inward quads, all emitting and reflecting."""
     quads = [q for *_, q in box_quads([0, 0, 0], [1, 1, 1], k, True)]
