@@ -269,6 +269,13 @@ scene = load_scene(path)
 load_s = time.perf_counter() - t0
 print("LOADED", scene.n_patches, flush=True)
 print("LIGHT", apply_daylight(scene, DaylightRequest(sun=sun, sky=sky)), flush=True)
+try:  # the sun's shadows cut as iat solve cuts them (trees from before that: not)
+    from iat.geometry.discontinuity import cut_new_lights
+except ImportError:
+    pass
+else:
+    scene = cut_new_lights(scene)
+    print("CUT", scene.n_patches, flush=True)
 last = [0.0]
 def progress(fraction, message=""):
     now = time.perf_counter() - t0
