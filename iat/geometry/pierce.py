@@ -573,7 +573,10 @@ def cut_pierced(
     face, by = np.concatenate([pp.a, pp.b, pp.c]), np.concatenate([pp.b, pp.a, pp.d])
     chord = np.concatenate([pp.span[:, 0], pp.span[:, 1], pp.contact_span[:, 0]])
     overlap = np.concatenate([pp.span[:, 2], pp.span[:, 2], pp.contact_span[:, 2]])
-    report = PierceReport(cut=cut, pairs=len(pp.a), contacts=len(pp.c), objects=len(np.unique(objects[face])))
+    mode = ("all" if contacts else "crossings") if cut else "none"
+    report = PierceReport(
+        cut=cut, mode=mode, pairs=len(pp.a), contacts=len(pp.c), objects=len(np.unique(objects[face]))
+    )
     face, by = _long_crossings(F, V, face, by, chord, overlap, tol)
     group = np.unique(np.stack([objects, material], axis=1), axis=0, return_inverse=True)[1].reshape(-1)
     face, by = _spread(V, F, group, face, by, tol)

@@ -456,7 +456,6 @@ def load_scene(
     # faces other objects pierce are cut along the crossings; (material, side of the cuts) pairs
     # stand in for the materials until the patches are made (iat.geometry.pierce)
     pierced = cut_pierced(V, F, M, UV, objects, cut=cut != "none", contacts=cut == "all")
-    pierced.report.mode = cut
     faults = fault_faces(V, F, turned, side.back, pierced.parent, repeats)
     V, F, UV, M, code_material = pierced.vertices, pierced.faces, pierced.face_uv, pierced.code, pierced.codes
     report(_STAGES["weld"], "merging quads")

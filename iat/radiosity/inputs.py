@@ -44,8 +44,7 @@ def open_solution(path: str | Path, options=None, progress=None, load_progress=N
             model = (path.parent / model).resolve() if not model.exists() else model
         if model is not None and model.exists():
             stats = sol.stats if isinstance(sol.stats, dict) else {}
-            # the loader's choices as recorded; before they were, its cut was "crossings"
-            kw = {**SolveOptions.recorded_load_kwargs(sol.options), **stats.get("load", {"cut": "crossings"})}
+            kw = {**SolveOptions.recorded_load_kwargs(sol.options), **stats.get("load", {})}  # sides, cut
             cuts = stats.get("shadow_cuts")
             if cuts is None:  # solved before the cuts were recorded: as the options said
                 scene = load_scene(model, progress=load_progress, **kw)
