@@ -541,6 +541,20 @@ def hash_keys(keys, salt, k):
     return out
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def row_inputs(j, r, p, key, salt, ff, normal, tangent, origin32, rot, x, nr, t1, t2, o32):
+    """Row ``j`` of a gather's per-receiver inputs for receiver ``r`` of patch ``p``: its pattern
+    rotation (:func:`hash_row` of ``key`` with ``salt``), point, normal, its patch's tangents and its
+    float32 origin (the arrays as :func:`block_inputs` returns them)."""
+    hash_row(key, salt, rot, j)
+    for c in range(3):
+        x[j, c] = ff[r, c]
+        nr[j, c] = normal[r, c]
+        t1[j, c] = tangent[p, 0, c]
+        t2[j, c] = tangent[p, 1, c]
+        o32[j, c] = origin32[r, c]
+
+
 @njit(cache=True, parallel=True, nogil=True, error_model="numpy")
 def block_inputs(ii, key, salt, correlated, ff, normal, patch, tangent, f, f_direction, origin32):
     """The per-receiver inputs of :func:`gather_rays` for the rows ``ii`` (b,) of a receiver set:
@@ -561,13 +575,8 @@ def block_inputs(ii, key, salt, correlated, ff, normal, patch, tangent, f, f_dir
         r = ii[i]
         p = patch[r]
         rp[i] = p
-        hash_row(0 if correlated else key[r], salt, rot, i)
-        for c in range(3):
-            x[i, c] = ff[r, c]
-            nr[i, c] = normal[r, c]
-            t1[i, c] = tangent[p, 0, c]
-            t2[i, c] = tangent[p, 1, c]
-            o32[i, c] = origin32[r, c]
+        k = 0 if correlated else key[r]
+        row_inputs(i, r, p, k, salt, ff, normal, tangent, origin32, rot, x, nr, t1, t2, o32)
         near[i] = f[i] >= f_direction
     return rot, x, nr, t1, t2, near, o32, rp
 

@@ -26,7 +26,7 @@ from iat.radiosity.kernels import (
     concentric_unit,
     field_terms,
     finish_row,
-    hash_row,
+    row_inputs,
     row_weights,
     sample_ray,
     wrap_unit,
@@ -90,14 +90,8 @@ def _gather_task(task, scratch, b, S, n_s, occ, isect, scene, glass, glass_tau, 
     m = min(b, lo + ROWS) - lo
     for j in range(m):  # block_inputs' rows
         r = ii[lo + j]
-        p = patch[r]
-        hash_row(0 if correlated else key[r], salt, rot, j)
-        for c in range(3):
-            x[j, c] = ff[r, c]
-            nr[j, c] = normal[r, c]
-            t1[j, c] = tangent[p, 0, c]
-            t2[j, c] = tangent[p, 1, c]
-            o32[j, c] = origin32[r, c]
+        k = 0 if correlated else key[r]
+        row_inputs(j, r, patch[r], k, salt, ff, normal, tangent, origin32, rot, x, nr, t1, t2, o32)
     for j in range(m):
         i = lo + j
         cnt, wsum = row_weights(j, pat, rot, x, nr, t1, t2, f[i] >= f_direction, n_s, geom, uvc, poly_n,
