@@ -26,7 +26,7 @@ ground of albedo 0.2. The faults:
 - ``near_white``: walls, floor and ceiling of albedo 0.97;
 - ``no_ground``: the tidy room with no ground around it (black below the horizon);
 - ``slab_ends_on_wall``: as ``wall_through_slab`` but the roof ends on the walls' inner faces (a
-  contact, which the loader's default cut along crossings leaves alone).
+  contact: the loader's default cut takes contacts too for a model taken as built, ``sides="both"``).
 
 Loaded as ``iat solve`` does at the defaults, the sun the default daylight adds is cut along too
 (:func:`load_case`).
@@ -287,11 +287,7 @@ def solve_and_bake(scene, quality: str):
 # -- the tests ---------------------------------------------------------------------------------------
 #: cases whose figures at the defaults were outside the issue's bounds when last measured
 #: (docs/benchmarks.md, "Real and generated buildings by daylight against Mitsuba")
-KNOWN_SHORT: dict[str, str] = {
-    "slab_ends_on_wall": "measured 49.8 % (bias +25 %): a roof that ends on the walls' faces is a contact, "
-    "not a crossing, so the default cut leaves the walls whole and their sunlit tops leak under the ceiling "
-    "(--cut all: 3.9 %; not the default, docs/architecture.md 'Crossings')",
-}
+KNOWN_SHORT: dict[str, str] = {}
 
 _FIGURES: dict[tuple[str, str], dict] = {}
 
@@ -333,15 +329,11 @@ def test_within_the_issue_bounds_at_the_defaults(case, egl_ctx, tmp_path_factory
 
 #: cases whose error rose from draft to default to fine when last measured (draft 5.3-13 %, default
 #: 2.3-6.2 %, fine 1.9-5.7 %, the leaking slab aside)
-KNOWN_RISING: dict[str, str] = {
-    "slab_ends_on_wall": "measured draft 44.7 %, default 49.8 %, fine 32.3 %: the leak (KNOWN_SHORT) "
-    "is more light the finer the mesh carries it",
-}
+KNOWN_RISING: dict[str, str] = {}
 #: cases above 5 % at fine when last measured
 KNOWN_SHORT_FINE: dict[str, str] = {
     "near_white": "measured 5.7 % at fine (default 6.2 %): the room of albedo 0.97 reads 5 % darker than "
     "Mitsuba everywhere (3 % with its sun not cut); the many-bounce deficit is not found",
-    "slab_ends_on_wall": "measured 32.3 % at fine (see KNOWN_SHORT)",
 }
 #: how much an error may rise from one preset to the next and still count as not rising (the
 #: reference's noise on the blocks is ~1.5 %, but common to all presets: the solves differ far less)

@@ -62,7 +62,8 @@ def add_sides_flags(sp) -> None:
     )
     sp.add_argument(
         "--cut",
-        choices=["crossings", "all", "none"],  # iat.geometry.pierce.CUTS (not imported: start-up)
-        default="crossings",
-        help="cut faces along other objects crossing them (all: and resting on them; none: not)",
+        choices=["auto", "crossings", "all", "none"],  # iat.geometry.pierce.CUTS (not imported: start-up)
+        default="auto",
+        help="cut faces along other objects crossing them (all: and resting on them; none: not; "
+        "auto: all for IFC and --sides both, crossings for the rest)",
     )

@@ -84,7 +84,7 @@ def _load(args, path, max_edge=None):
             panels=not getattr(args, "no_panels", False),
             discontinuity=_solve_options(args).discontinuity,
             sides=getattr(args, "sides", None) or "auto",
-            cut=getattr(args, "cut", None) or "crossings",
+            cut=getattr(args, "cut", None) or "auto",
         )
 
 

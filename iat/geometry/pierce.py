@@ -40,12 +40,13 @@ from scipy.sparse.csgraph import connected_components
 
 from iat.geometry.mesh import degenerate_faces, weld_vertices
 
-#: the loader's choices (``load_scene(cut=...)``, ``--cut``): ``crossings`` (default; ``True``): faces cut
+#: the loader's choices (``load_scene(cut=...)``, ``--cut``): ``crossings`` (``True``): faces cut
 #: where faces of other objects cross them;
 #: ``all``: also where a face of another object rests on them (a slab ending on a wall's face, a wall
 #: standing on a slab, a box on a floor: contacts); ``none`` (``False``): nothing cut (the crossings
-#: are still counted)
-CUTS = ("crossings", "all", "none")
+#: are still counted); ``auto`` (default): ``all`` for a model taken as built (IFC, or ``sides="both"``),
+#: ``crossings`` for the rest
+CUTS = ("auto", "crossings", "all", "none")
 #: faces pierce each other when each has corners beyond this fraction of the scene diagonal on both
 #: sides of the other's plane and their crossing overlaps by more than that (0.1 mm in a 10 m house)
 PIERCE_TOL = 1e-5
@@ -62,7 +63,7 @@ class PierceReport:
     """What :func:`cut_pierced` found and did (``iat info``).
 
     cut : whether the loader cut (``load_scene(cut=...)``); the counts are found either way
-    mode : the loader's choice (:data:`CUTS`: crossings, all or none)
+    mode : what the loader cut (crossings, all or none: :data:`CUTS`, ``auto`` resolved)
     pairs : pairs of triangles of different objects that pierce each other
     contacts : triangles that rest on a triangle of another object (counted with ``contacts``)
     objects : objects (IFC elements, glTF primitives, OBJ groups) with a face in such a pair

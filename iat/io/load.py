@@ -343,7 +343,7 @@ def load_scene(
     panels: bool = True,
     discontinuity: bool = False,
     sides: str = "auto",
-    cut: bool | str = "crossings",
+    cut: bool | str = "auto",
 ) -> Scene:
     """Load a model file (glTF/GLB, OBJ+MTL, PLY, STL, OFF) into a :class:`Scene`.
 
@@ -365,12 +365,14 @@ def load_scene(
       sheets get a back face (its own patch); elsewhere only faces of glTF ``doubleSided``
       materials get one. ``"both"``: every format as IFC. ``"front"``: the faces as the file has
       them. :data:`iat.geometry.sides.SIDES`; what was found is ``Scene.sides``.
-    cut : ``"crossings"`` (default, True): cut the faces that other objects pierce along the
+    cut : ``"crossings"`` (True): cut the faces that other objects pierce along the
       crossings, so that no patch or panel cell spans both sides of another surface
       (:func:`iat.geometry.pierce.cut_pierced`; a wall through a ceiling is lit above it and dark
       below it); ``"all"``: also along the faces of other objects that rest on them (a slab ending on
-      a wall's face, a wall on a slab); ``"none"`` (False) keeps them whole. Either way what was
-      found is ``Scene.pierce`` (``Scene.pierce.mode``: the choice).
+      a wall's face, a wall on a slab); ``"none"`` (False) keeps them whole; ``"auto"`` (default):
+      ``"all"`` for IFC and with ``sides="both"`` (a model taken as built, whose elements rest on
+      each other), else ``"crossings"``. Either way what was found is ``Scene.pierce``
+      (``Scene.pierce.mode``: what was cut).
     progress : ``progress(fraction, message) -> bool``, called at the start of each
       stage (parse, weld, quad merge, pre-split) and with 1.0 at the end, fractions
       non-decreasing; returning False raises :class:`iat.errors.Cancelled`.
@@ -455,6 +457,8 @@ def load_scene(
     M = np.where(side.back, M + n_mat, M)
     # faces other objects pierce are cut along the crossings; (material, side of the cuts) pairs
     # stand in for the materials until the patches are made (iat.geometry.pierce)
+    if cut == "auto":  # a model taken as built: its elements rest on each other
+        cut = "all" if ext == ".ifc" or sides == "both" else "crossings"
     pierced = cut_pierced(V, F, M, UV, objects, cut=cut != "none", contacts=cut == "all")
     faults = fault_faces(V, F, turned, side.back, pierced.parent, repeats)
     V, F, UV, M, code_material = pierced.vertices, pierced.faces, pierced.face_uv, pierced.code, pierced.codes

@@ -44,7 +44,9 @@ def open_solution(path: str | Path, options=None, progress=None, load_progress=N
             model = (path.parent / model).resolve() if not model.exists() else model
         if model is not None and model.exists():
             stats = sol.stats if isinstance(sol.stats, dict) else {}
-            kw = {**SolveOptions.recorded_load_kwargs(sol.options), **stats.get("load", {})}  # sides, cut
+            # sides, cut (a solution without the record was cut along the crossings, then the default)
+            kw = SolveOptions.recorded_load_kwargs(sol.options)
+            kw = {"cut": "crossings", **kw, **stats.get("load", {})}
             cuts = stats.get("shadow_cuts")
             if cuts is None:  # solved before the cuts were recorded: as the options said
                 scene = load_scene(model, progress=load_progress, **kw)

@@ -139,10 +139,28 @@ def coarse_weights(keys: np.ndarray, coarse: np.ndarray, is_quad: np.ndarray, le
     return sparse.csr_matrix((w[ok], (rows[ok], cols[ok])), shape=(len(keys), len(coarse)))
 
 
-def averaging_matrix(forest: qt.Forest, keys: np.ndarray, corners: np.ndarray, area: np.ndarray):
-    """(P, V) scipy.sparse CSR: row p averages vertex values over patch p (area-weighted leaf means)."""
+def averaging_matrix(
+    forest: qt.Forest,
+    keys: np.ndarray,
+    corners: np.ndarray,
+    area: np.ndarray,
+    leaf_coverage: np.ndarray | None = None,
+):
+    """(P, V) scipy.sparse CSR: row p averages vertex values over patch p (area-weighted leaf means).
+
+    leaf_coverage : (L,) the fraction of each leaf on its patch's surface
+      (:meth:`~iat.radiosity.patches.Patches.leaf_coverage`), or None (all 1). A panel cell's
+      leaves then weigh by their covered area and its row still sums to 1: weighed by their
+      lattice area over the covered area ``area``, its row summed to the cell's lattice area over
+      its covered area, and its light counted that much too bright wherever a patch's mean was read
+      (what it shoots, the ambient term's later bounces)."""
     idx = qt.lookup(keys, qt.leaf_corner_keys(forest))
     la = qt.leaf_area(forest, corners)
+    if leaf_coverage is not None:
+        la = la * leaf_coverage
+        P = len(area)
+        partial = np.bincount(forest.leaf_patch, weights=leaf_coverage < 1.0, minlength=P) > 0
+        area = np.where(partial, np.bincount(forest.leaf_patch, weights=la, minlength=P), area)
     wl = la / np.maximum(area[forest.leaf_patch], 1e-300)
     q = forest.leaf_is_quad
     wc = np.where(q, 0.25, 1.0 / 3.0)[:, None] * wl[:, None] * np.ones((1, 4))

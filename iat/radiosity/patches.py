@@ -255,7 +255,12 @@ class Patches:
     def leaf_has_surface(self, forest: qt.Forest) -> np.ndarray:
         """(L,) bool: False for leaves of panel cells that cover none of the cell's surface (at
         the finest lattice's cell centres): they are not split."""
-        out = np.ones(forest.n_leaves, dtype=bool)
+        return self.leaf_coverage(forest) > 0
+
+    def leaf_coverage(self, forest: qt.Forest) -> np.ndarray:
+        """(L,) float64 the fraction of each leaf's lattice cells whose centres lie on its patch's
+        surface: 1 on patches that are not panel cells."""
+        out = np.ones(forest.n_leaves)
         lp = np.asarray(forest.leaf_patch, dtype=np.int64)
         for p in np.unique(lp[self.clipped[lp]]):
             sat = np.zeros((self.n + 1, self.n + 1))
@@ -265,5 +270,5 @@ class Patches:
             i0 = np.asarray(forest.leaf_i[sel], dtype=np.int64)
             j0 = np.asarray(forest.leaf_j[sel], dtype=np.int64)
             i1, j1 = i0 + size, j0 + size
-            out[sel] = (sat[j1, i1] - sat[j0, i1] - sat[j1, i0] + sat[j0, i0]) > 0
+            out[sel] = (sat[j1, i1] - sat[j0, i1] - sat[j1, i0] + sat[j0, i0]) / (size * size)
         return out

@@ -63,7 +63,13 @@ class Mesh:
         return cls(
             forest=forest,
             keys=keys,
-            M=averaging_matrix(forest, keys, patches.corners, patches.area),
+            M=averaging_matrix(
+                forest,
+                keys,
+                patches.corners,
+                patches.area,
+                patches.leaf_coverage(forest) if patches.clipped.any() else None,
+            ),
             lattice=Lattice(forest, keys),
             start=start,
             geo=patches.geometry(keys, cached=True),
