@@ -61,7 +61,7 @@ def test_a_solution_reopens_on_the_roots_it_was_solved_on(room, tmp_path):
     out = tmp_path / "room.npz"
     assert main(["solve", str(room), "--sides", "both", "--quality", "draft", "-o", str(out)]) == 0
     sol = Solution.load(out)
-    assert sol.stats["load"] == {"sides": "both", "cut": "crossings"}
+    assert sol.stats["load"] == {"sides": "both", "cut": "all"}  # (cut auto: contacts too under --sides both)
     assert len(sol.stats["shadow_cuts"]) == 1 and sol.stats["shadow_cuts"][0][0][0] == "directional"
     scene, again = open_solution(out)
     plain = _load(room, sides="both")

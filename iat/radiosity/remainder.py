@@ -8,9 +8,8 @@ x ``AMBIENT_GRID`` lattice, times its shot gain): their mean times the vertex's 
 remainder's first bounce ``R1``, at the resolution of the unshot light (a sunlit patch of floor
 lights what faces it, not its whole room). The same rays, traced again, read ``R1`` where they land
 for the second bounce ``R2`` (a patch's light is uneven: the Cornell box's walls are one patch
-each), except on panel cells (clipped patches), which give their patch mean: their lattice square
-reaches past their surface, and their vertex field read there put the sunlit IFC house's interior at
-0.84 of Mitsuba instead of 0.92. The bounces after are solved on the patches: the rays, averaged
+each), except on panel cells (clipped patches), which give their patch mean over their surface
+(their lattice square reaches past it). The bounces after are solved on the patches: the rays, averaged
 over each patch, give a sampled patch-to-patch form-factor matrix ``F = M F_v`` (P, P); the later
 reflected radiance ``B`` (P, 3) solves ``B = rho F (R2 + B)`` (``R2`` as patch means), and each
 vertex adds ``rho F_v (R2 + B)``. Rays that leave the scene or meet a back face bring nothing, so an
