@@ -333,7 +333,8 @@ KNOWN_RISING: dict[str, str] = {}
 #: cases above 5 % at fine when last measured
 KNOWN_SHORT_FINE: dict[str, str] = {
     "near_white": "measured 5.7 % at fine (default 6.2 %): the room of albedo 0.97 reads 5 % darker than "
-    "Mitsuba everywhere (3 % with its sun not cut); the many-bounce deficit is not found",
+    "Mitsuba everywhere; a 0.4 % difference per bounce in what the mesh receives, x 14 over the bounces "
+    "(docs/benchmarks.md, 'Panel cells by their covered area': the near-white room's deficit)",
 }
 #: how much an error may rise from one preset to the next and still count as not rising (the
 #: reference's noise on the blocks is ~1.5 %, but common to all presets: the solves differ far less)
