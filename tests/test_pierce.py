@@ -291,6 +291,23 @@ def test_a_slab_ending_on_the_walls_faces_is_cut_with_contacts(tmp_path):
     assert cut["below"] <= 1e-9 * cut["above"]
 
 
+def test_auto_cuts_contacts_of_a_model_taken_as_built(tmp_path, capsys):
+    """``cut="auto"`` (the default) is ``all`` under ``sides="both"`` (and for IFC) and ``crossings``
+    for the rest, and ``iat info`` says which it did."""
+    import json
+
+    from iat.cli.commands import main
+
+    path = write_room(tmp_path / "bounded.obj", slab_into_walls=False)
+    assert load_scene(path).pierce.mode == "crossings"
+    built = load_scene(path, sides="both")
+    assert built.pierce.mode == "all" and built.pierce.faces_cut > 0
+    assert built.n_patches == load_scene(path, sides="both", cut="all").n_patches
+    for sides, mode in (("auto", "crossings"), ("both", "all")):
+        assert main(["info", str(path), "--sides", sides, "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["cut"] == mode
+
+
 def test_bad_cut_option_is_an_option_error(room):
     from iat.errors import OptionError
 
