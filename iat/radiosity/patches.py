@@ -262,10 +262,14 @@ class Patches:
         surface: 1 on patches that are not panel cells."""
         out = np.ones(forest.n_leaves)
         lp = np.asarray(forest.leaf_patch, dtype=np.int64)
-        for p in np.unique(lp[self.clipped[lp]]):
+        leaves = np.flatnonzero(self.clipped[lp])  # the panel cells' leaves, grouped by patch
+        if len(leaves) == 0:
+            return out
+        leaves = leaves[np.argsort(lp[leaves], kind="stable")]
+        cells, first = np.unique(lp[leaves], return_index=True)
+        for p, sel in zip(cells, np.split(leaves, first[1:]), strict=True):
             sat = np.zeros((self.n + 1, self.n + 1))
             sat[1:, 1:] = self.coverage(p, self.n).cumsum(axis=0).cumsum(axis=1)
-            sel = np.flatnonzero(lp == p)
             size = self.n >> np.asarray(forest.leaf_level[sel], dtype=np.int64)
             i0 = np.asarray(forest.leaf_i[sel], dtype=np.int64)
             j0 = np.asarray(forest.leaf_j[sel], dtype=np.int64)
