@@ -24,7 +24,15 @@ from iat.radiosity.options import (
 )
 from iat.radiosity.patches import Patches, ReceiverGeometry
 from iat.radiosity.pointlight import lumped_light
-from iat.radiosity.sampling import disk_to_hemisphere, hash_uniform, luminance_of, pattern_side, rotated_disk
+from iat.radiosity.sampling import (
+    disk_to_hemisphere,
+    finer_strata,
+    hash_uniform,
+    luminance_of,
+    nested_pattern,
+    pattern_side,
+    rotated_disk,
+)
 from iat.radiosity.sky import sky_radiance
 from iat.radiosity.tasks import TaskPool
 from iat.radiosity.traced import sky_escape, sun_escape
@@ -161,7 +169,7 @@ class DirectLight:
         for sun in self.suns:
             incoming += self.sun_irradiance(sun, geo, check) / np.pi
         if self.sky is not None:
-            incoming += self.sky_irradiance(geo, check) / np.pi
+            incoming += self.sky_irradiance(geo, check, np.pi * luminance_of(incoming)) / np.pi
         return self.patches.albedo[geo.patch] * incoming
 
     def add_penumbra(self, keys: np.ndarray, seen: np.ndarray, free: np.ndarray) -> None:
@@ -173,15 +181,19 @@ class DirectLight:
         if part.any():
             self.penumbra = qt.sorted_unique(np.concatenate([self.penumbra, keys[part]]))
 
-    def _escape(self, geo: ReceiverGeometry, idx: np.ndarray, dirs: np.ndarray) -> np.ndarray:
+    def _escape(
+        self, geo: ReceiverGeometry, idx: np.ndarray, dirs: np.ndarray, traced: np.ndarray | None = None
+    ) -> np.ndarray:
         """(k, S) float: what of the rays from vertices ``idx`` (k,) along ``dirs`` (k, S, 3) leaves
-        the scene (1 free, 0 blocked, a glass's transmittance through it)."""
+        the scene (1 free, 0 blocked, a glass's transmittance through it); only the rays where
+        ``traced`` (k, S) bool is set (default all) are traced, the others get 0."""
         k, S = dirs.shape[:2]
-        o = np.repeat(geo.origin32()[idx], S, axis=0)
-        free = self.vis.visible(
-            o, dirs.reshape(-1, 3), np.full(k * S, 4.0 * self.patches.scale, dtype=np.float32)
-        )
-        return free.reshape(k, S)
+        rays = np.ones((k, S), dtype=bool) if traced is None else traced
+        o = np.repeat(geo.origin32()[idx], rays.sum(axis=1), axis=0)
+        free = np.zeros((k, S))
+        far = np.full(len(o), 4.0 * self.patches.scale, dtype=np.float32)
+        free[rays] = self.vis.visible(o, dirs[rays], far)
+        return free
 
     def sun_irradiance(self, sun, geo: ReceiverGeometry, check: Callable[[], None]) -> np.ndarray:
         """(n, 3) irradiance from a directional light (the sun): ``E cos`` times the fraction of
@@ -219,56 +231,75 @@ class DirectLight:
             out[idx] = (cos[idx] * frac)[:, None] * sun.radiant_intensity[None, :]
         return out
 
-    def sky_irradiance(self, geo: ReceiverGeometry, check: Callable[[], None]) -> np.ndarray:
+    def sky_irradiance(
+        self, geo: ReceiverGeometry, check: Callable[[], None], other: np.ndarray | None = None
+    ) -> np.ndarray:
         """(n, 3) irradiance from the sky through whatever of each vertex's hemisphere is open:
         ``pi`` times the mean sky radiance over cosine-distributed directions that leave the scene,
         ``SKY_SAMPLES`` of them (stratified, rotated per vertex). A vertex whose estimate's standard
-        error (from its pattern's four interleaved quarters, luminance) exceeds ``SKY_NOISE`` of it
-        is estimated again with 4 x the directions (twice as many strata a side), up to
-        ``SKY_PASSES`` estimates: through a window most of the hemisphere is wall, and the
-        refinement would split on that noise and multiply it."""
+        error (from its pattern's four interleaved quarters, luminance) exceeds ``SKY_NOISE`` of its
+        direct light (this sky's, plus ``other`` (n,): the luminance irradiance of its other sources,
+        W/m²) is estimated again with 4 x the directions (twice as many strata a side: its old
+        directions and 3 new ones in each old stratum), up to ``SKY_PASSES`` estimates: through a
+        window most of the hemisphere is wall, and the refinement would split on that noise and
+        multiply it."""
         n = len(geo.key)
-        out = np.zeros((n, 3))
-        todo = np.arange(n)
+        side = pattern_side(SKY_SAMPLES)
+        pat = self.gathers.pattern(self.patches.n_patches, side, 2)
+        strata = np.stack(np.divmod(np.arange(side * side), side), axis=1)
+        rng = np.random.default_rng([int(self.opts.seed), self.patches.n_patches, 2, side, 1])
+        total, groups = np.zeros((n, 3)), np.zeros((n, SKY_PASSES, 4))
+        out, todo = np.zeros((n, 3)), np.arange(n)
         for k in range(SKY_PASSES):
             if not len(todo):
                 break
-            e, var = self._sky_pass(geo, todo, k, check)
-            out[todo] = e
-            todo = todo[np.sqrt(var) > SKY_NOISE * np.maximum(luminance_of(e), 1e-300)]
+            hot, st = [], strata  # each point's quarter on the grids of this pass and the later ones
+            for level in range(k, SKY_PASSES):
+                hot.append(np.eye(4)[(st[:, 0] % 2) * 2 + st[:, 1] % 2])
+                st = finer_strata(st, pat, side << level)
+            s, g = self._sky_pass(geo, todo, pat, np.concatenate(hot, axis=1), check)
+            total[todo] += s
+            groups[todo, k:] += g.reshape(len(todo), SKY_PASSES - k, 4)
+            count = (side << k) ** 2
+            out[todo] = e = np.pi * total[todo] / count
+            q = np.pi * groups[todo, k] / (count / 4)  # the four quarters' estimates, luminance
+            err = np.sqrt(q.var(axis=1, ddof=1) / 4.0)
+            direct = luminance_of(e) if other is None else luminance_of(e) + other[todo]
+            todo = todo[err > SKY_NOISE * np.maximum(direct, 1e-300)]
+            if k + 1 < SKY_PASSES and len(todo):
+                pat, strata = nested_pattern(pat, strata, side << k, rng)
         return out
 
-    def _sky_pass(self, geo: ReceiverGeometry, rows: np.ndarray, k: int, check) -> tuple:
-        """Estimate k of :meth:`sky_irradiance` at the vertices ``rows`` (r,), ``SKY_SAMPLES x 4^k``
-        directions each: (r, 3) irradiance and (r,) the variance of that estimate, from its four
-        interleaved quarters (luminance)."""
-        m = pattern_side(SKY_SAMPLES) << k
-        pat = self.gathers.pattern(self.patches.n_patches, m, 2)
-        quarter = (np.arange(m * m) // m % 2) * 2 + np.arange(m * m) % 2  # (i % 2, j % 2) of a stratum
-        size = max(1, GATHER_BLOCK * 16 // (m * m))
+    def _sky_pass(
+        self, geo: ReceiverGeometry, rows: np.ndarray, pat: np.ndarray, hot: np.ndarray, check
+    ) -> tuple:
+        """The directions ``pat`` (S, 2) of :meth:`sky_irradiance` at the vertices ``rows`` (r,):
+        (r, 3) the sum of their sky radiance times what gets out, and (r, G) that sum's luminance
+        by the groups ``hot`` (S, G) (one-hot) of the directions."""
+        size = max(1, GATHER_BLOCK * 16 // len(pat))
         salt = int(self.opts.seed) * 7919 + 29
+        dark = not np.any(self.sky.ground)  # below the horizon nothing comes: not traced
 
         def block(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             rot = hash_uniform(geo.key[idx], salt, 2)
             t1, t2 = self.patches.tangent[geo.patch[idx], 0], self.patches.tangent[geo.patch[idx], 1]
             far = 4.0 * self.patches.scale
-            traced = sky_escape(self.vis, pat, rot, t1, t2, geo.normal[idx], geo.origin32()[idx], far)
+            traced = sky_escape(self.vis, pat, rot, t1, t2, geo.normal[idx], geo.origin32()[idx], far, dark)
             if traced is not None:  # made and traced in one kernel (the same directions)
                 w, free = traced
             else:
                 w = disk_to_hemisphere(*rotated_disk(pat, rot[:, :1], rot[:, 1:2]), t1, t2, geo.normal[idx])
-                free = self._escape(geo, idx, w)
-            L = sky_radiance(self.sky, w.reshape(-1, 3)).reshape(len(idx), m * m, 3)
-            e = np.pi * np.einsum("ks,ksc->kc", free, L) / (m * m)
-            y = np.pi * free * luminance_of(L)  # (b, S) per sample
-            q = np.stack([y[:, quarter == j].mean(axis=1) for j in range(4)], axis=1)
-            return e, q.var(axis=1, ddof=1) / 4.0
+                free = self._escape(geo, idx, w, (w[..., 1] >= 0) if dark else None)
+            L = np.zeros(w.shape)  # looked up where a ray gets out only
+            seen = free > 0
+            L[seen] = sky_radiance(self.sky, w[seen])
+            return np.einsum("ks,ksc->kc", free, L), (free * luminance_of(L)) @ hot
 
         blocks = [rows[a : a + size] for a in range(0, len(rows), size)]
-        out, var = np.zeros((len(rows), 3)), np.zeros(len(rows))
-        for j, (e, v) in zip(range(0, len(rows), size), self.pool.imap(block, blocks, check), strict=True):
-            out[j : j + len(e)], var[j : j + len(e)] = e, v
-        return out, var
+        out, grouped = np.zeros((len(rows), 3)), np.zeros((len(rows), hot.shape[1]))
+        for j, (e, g) in zip(range(0, len(rows), size), self.pool.imap(block, blocks, check), strict=True):
+            out[j : j + len(e)], grouped[j : j + len(e)] = e, g
+        return out, grouped
 
     def max_mean_reflected(self) -> float:
         """Upper bound of the scene's area-mean reflected luminance radiance: all the emitted power

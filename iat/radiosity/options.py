@@ -105,8 +105,9 @@ SUN_SAMPLES = 64
 #: ~5 % of a room's hemisphere a window is, ~5 % per vertex at 1024), a count
 SKY_SAMPLES = 1024
 #: a vertex's sky estimate whose standard error, as its four interleaved quarters tell it (they
-#: understate it), is above this fraction of it is estimated again with 4 x the directions, up to
-#: SKY_PASSES estimates (benchmarks/window_room.py: noise 1.45 -> 0.32 %, elements 17.7 k -> 5.7 k)
+#: understate it), is above this fraction of the vertex's direct light (the sky's and the other
+#: sources') is estimated again with 4 x the directions (the old ones kept), up to SKY_PASSES
+#: estimates (benchmarks/window_room.py: noise 1.45 -> 0.32 %, elements 17.7 k -> 5.7 k)
 SKY_NOISE = 0.01
 SKY_PASSES = 2
 

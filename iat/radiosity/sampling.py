@@ -228,6 +228,26 @@ def _tent_down(f: np.ndarray, tent: np.ndarray, r: int) -> np.ndarray:
     return f
 
 
+def finer_strata(strata: np.ndarray, pattern: np.ndarray, side: int) -> np.ndarray:
+    """(S, 2) int64 strata of a side x side grid's points ``pattern`` (S, 2) in [0, 1)^2, lying in
+    the strata ``strata`` (S, 2), on the grid of 2 side: each point's quarter of its stratum."""
+    return 2 * strata + (pattern * side - strata >= 0.5)
+
+
+def nested_pattern(
+    pattern: np.ndarray, strata: np.ndarray, side: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """The 3 S points that make a pattern of one point a stratum on the grid of 2 side, with the
+    S points ``pattern`` (S, 2) of a side x side grid (one in each of its strata ``strata``
+    (S, 2)): one jittered point in each quarter of a stratum its old point is not in.
+    Returns ((3 S, 2) points, (3 S, 2) their strata on the finer grid)."""
+    quarters = np.array([[0, 0], [0, 1], [1, 0], [1, 1]])
+    sub = 2 * strata[:, None, :] + quarters[None]  # (S, 4, 2)
+    free = np.any(sub != finer_strata(strata, pattern, side)[:, None, :], axis=2)
+    new = sub[free]
+    return (new + rng.random(new.shape)) / (2 * side), new
+
+
 def pattern_side(samples: int) -> int:
     return max(1, math.ceil(math.sqrt(samples) - 1e-9))
 

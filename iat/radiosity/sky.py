@@ -123,6 +123,9 @@ def sky_radiance(sky: Sky, dirs: np.ndarray) -> np.ndarray:
       by ``sky.rotation`` about +Y) times ``radiance``.
     """
     _check_sky(sky)
+    if sky.kind == "uniform":  # no direction needed beyond its side of the horizon
+        below = (np.asarray(dirs)[..., 1] < 0.0)[..., None]
+        return np.where(below, sky.ground, sky.radiance)
     d = _unit(dirs)
     shape = d.shape
     d = d.reshape(-1, 3)
@@ -131,9 +134,7 @@ def sky_radiance(sky: Sky, dirs: np.ndarray) -> np.ndarray:
     out[below] = sky.ground
     up = ~below
     du = d[up]
-    if sky.kind == "uniform":
-        val = np.broadcast_to(sky.radiance, du.shape)
-    elif sky.kind == "cie_overcast":
+    if sky.kind == "cie_overcast":
         val = ((1.0 + 2.0 * np.clip(du[:, 1], 0.0, 1.0)) / 3.0)[:, None] * sky.radiance
     elif sky.kind == "preetham":
         val = preetham_rgb(du, sky.sun_direction, sky.turbidity) * sky.radiance

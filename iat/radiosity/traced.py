@@ -122,15 +122,16 @@ def _gather_task(task, scratch, b, S, n_s, occ, isect, scene, glass, glass_tau, 
 
 # -- the sun's and the sky's rays ----------------------------------------------------------------
 @njit(cache=True, parallel=True, nogil=True, error_model="numpy")
-def sky_rays(occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, origin32, tfar, w, free):
+def sky_rays(occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, origin32, tfar, min_y, w, free):
     """The sky's directions of b vertices and what of each gets out: pattern pat (S, 2) rotated by
     rot (b, 2) per vertex, mapped to the disc and lifted to the hemisphere of the frame t1, t2,
     normal (b, 3) (``sampling.rotated_disk`` then ``sampling.disk_to_hemisphere``, the same
     arithmetic) into ``w`` (b, S, 3) float64; traced from origin32 (b, 3) float32 as far as tfar
-    (float32) into ``free`` (b, S) (:func:`.embree.visible1`). Returns the rays traced against
-    the glass besides."""
+    (float32) into ``free`` (b, S) (:func:`.embree.visible1`); a direction whose y is below min_y
+    (float32: 0 for a sky whose ground is black) is not traced and gets 0. Returns the rays traced
+    against the glass besides."""
     return _escape(_sky_direction, (t1, t2, normal, w), occ, isect, scene, glass, glass_tau, pat, rot,
-                   origin32, tfar, free)  # fmt: skip
+                   origin32, tfar, min_y, free)  # fmt: skip
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -150,7 +151,7 @@ def sun_rays(occ, isect, scene, glass, glass_tau, pat, rot, to_sun, half, t1, t2
     ``DirectLight.sun_irradiance``), traced from origin32 (b, 3) float32 as far as tfar into
     ``free`` (b, S). Returns the rays traced against the glass besides."""
     return _escape(_sun_direction, (to_sun, half, t1, t2), occ, isect, scene, glass, glass_tau, pat, rot,
-                   origin32, tfar, free)  # fmt: skip
+                   origin32, tfar, np.float32(-np.inf), free)  # fmt: skip
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -164,9 +165,10 @@ def _sun_direction(i, j, dx, dy, to_sun, half, t1, t2):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _escape(direction, dir_args, occ, isect, scene, glass, glass_tau, pat, rot, origin32, tfar, free):
+def _escape(direction, dir_args, occ, isect, scene, glass, glass_tau, pat, rot, origin32, tfar, min_y, free):
     """:func:`sky_rays` and :func:`sun_rays`: direction j of vertex i is ``direction(i, j, dx, dy,
-    *dir_args)`` (float32) from the rotated pattern's disc point dx, dy. The workers take vertices
+    *dir_args)`` (float32) from the rotated pattern's disc point dx, dy, traced if its y is at least
+    min_y (else 0). The workers take vertices
     from the shared counter as :func:`.embree.take_tasks` does, but run the row here: inlined into
     the kernel, direction stays a global function (passed on to a task as a value, it would keep
     the kernel from numba's cache), and the ``prange`` is the kernel's."""
@@ -182,6 +184,9 @@ def _escape(direction, dir_args, occ, isect, scene, glass, glass_tau, pat, rot, 
             for j in range(pat.shape[0]):
                 dx, dy = concentric_unit(wrap_unit(pat[j, 0], rot[i, 0]), wrap_unit(pat[j, 1], rot[i, 1]))
                 wx, wy, wz = direction(i, j, dx, dy, *dir_args)
+                if wy < min_y:
+                    free[i, j] = 0.0
+                    continue
                 v = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, wx, wy, wz, tfar)
                 free[i, j] = v
                 if glass != 0 and v > 0:
@@ -190,19 +195,22 @@ def _escape(direction, dir_args, occ, isect, scene, glass, glass_tau, pat, rot, 
     return through.sum()
 
 
-def sky_escape(vis, pat, rot, t1, t2, normal, origin32, tfar: float):
+def sky_escape(vis, pat, rot, t1, t2, normal, origin32, tfar: float, dark_ground: bool = False):
     """With the C API (:meth:`Visibility.embree_args`), :func:`sky_rays` of a block of k vertices on
-    the ray threads, counted in ``vis``: ``(w (k, S, 3), free (k, S))``; None with embreex."""
+    the ray threads, counted in ``vis``: ``(w (k, S, 3), free (k, S))``; None with embreex. With
+    ``dark_ground`` the directions below the horizon are not traced (``free`` 0: they bring nothing)."""
     args = vis.embree_args()
     if args is None:
         return None
     k, S = len(rot), len(pat)
     w, free = np.empty((k, S, 3)), np.empty((k, S))
     t0 = time.perf_counter()
+    min_y = np.float32(0.0 if dark_ground else -np.inf)
     with vis.kernel_threads():
         through = sky_rays(*args, pat, rot, _c(t1), _c(t2), _c(normal), np.ascontiguousarray(origin32),
-                           np.float32(tfar), w, free)  # fmt: skip
-    vis.count(k * S + int(through), time.perf_counter() - t0)
+                           np.float32(tfar), min_y, w, free)  # fmt: skip
+    traced = k * S - int(np.count_nonzero(w[..., 1] < 0)) if dark_ground else k * S
+    vis.count(traced + int(through), time.perf_counter() - t0)
     return w, free
 
 
