@@ -234,3 +234,31 @@ def test_solves_same_bits(make, monkeypatch):
     assert np.array_equal(ref.vert_key, sol.vert_key)
     assert np.array_equal(ref.vert_radiance, sol.vert_radiance)
     assert ref.stats["rays"] == sol.stats["rays"]
+
+
+def test_sky_rays_below_a_black_ground_are_not_traced():
+    """:func:`.traced.sky_escape` with ``dark_ground``: the directions below the horizon get 0 and
+    count no ray (nor any through the glass), the others are traced as before (the same
+    directions and answers)."""
+    from iat.radiosity.traced import sky_escape
+
+    scene = pane_scene()  # no ground: the ceiling panel sees the sky below the horizon
+    with Visibility.of_scene(scene, backend="c") as vis:
+        ctx = Context(scene, SolveOptions(), vis)
+        n = ctx.patches.n
+        p = np.arange(scene.n_patches)
+        keys = qt.make_key(p, np.full(len(p), n // 2), np.full(len(p), n // 2), n)
+        geo = ctx.patches.geometry(keys)
+        rot = np.random.default_rng(0).random((len(p), 2))
+        pat = ctx.gathers.pattern(0, 8, 2)
+        t1, t2 = ctx.patches.tangent[p, 0], ctx.patches.tangent[p, 1]
+        args = (vis, pat, rot, t1, t2, geo.normal, geo.origin32(), 4.0 * ctx.patches.scale)
+        before = vis.rays
+        w, free = sky_escape(*args)
+        every = vis.rays - before
+        w2, free2 = sky_escape(*args, dark_ground=True)
+        below = w[..., 1] < 0
+        assert 0.1 < below.mean() < 0.9 and (free[below] > 0).any() and (free[~below] > 0).any()
+        assert np.array_equal(w, w2) and np.array_equal(free2[~below], free[~below])
+        assert not free2[below].any()
+        assert vis.rays - before - every <= every - int(below.sum())  # (and the glass's extra counts)

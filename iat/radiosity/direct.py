@@ -33,7 +33,7 @@ from iat.radiosity.sampling import (
     pattern_side,
     rotated_disk,
 )
-from iat.radiosity.sky import sky_radiance
+from iat.radiosity.sky import SkyTable, sky_radiance
 from iat.radiosity.tasks import TaskPool
 from iat.radiosity.traced import sky_escape, sun_escape
 from iat.radiosity.visibility import Visibility
@@ -51,6 +51,8 @@ class DirectLight:
         self.lights = [lt for lt in scene.lights if lt.kind in ("point", "spot")]
         self.suns = [lt for lt in scene.lights if lt.kind == "directional" and np.any(lt.radiant_intensity)]
         self.sky = getattr(scene, "sky", None)
+        #: the sky as the gathers look it up (a Preetham sky in a table)
+        self.sky_table = None if self.sky is None else SkyTable(self.sky)
         #: sorted keys of the vertices evaluated so far that lie in an emitting patch's penumbra
         #: (:meth:`direct`; :func:`iat.radiosity.meshing.split_test` refines their elements further)
         self.penumbra = np.zeros(0, dtype=np.int64)
@@ -292,7 +294,7 @@ class DirectLight:
                 free = self._escape(geo, idx, w, (w[..., 1] >= 0) if dark else None)
             L = np.zeros(w.shape)  # looked up where a ray gets out only
             seen = free > 0
-            L[seen] = sky_radiance(self.sky, w[seen])
+            L[seen] = self.sky_table.radiance(w[seen])
             return np.einsum("ks,ksc->kc", free, L), (free * luminance_of(L)) @ hot
 
         blocks = [rows[a : a + size] for a in range(0, len(rows), size)]

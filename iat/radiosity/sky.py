@@ -37,6 +37,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from iat.errors import LoadError
 from iat.io.scene import Sky
@@ -142,6 +143,63 @@ def sky_radiance(sky: Sky, dirs: np.ndarray) -> np.ndarray:
         val = equirect_lookup(sky.image, rotate_y(du, -sky.rotation)) * sky.radiance
     out[up] = val
     return out.reshape(shape)
+
+
+#: grid points a side of the table the solver's sky gathers look a Preetham sky up in
+#: (:class:`SkyTable`; 2 / 512 in the equal-area map: a fifth of a degree at the zenith)
+SKY_TABLE_SIDE = 513
+
+
+class SkyTable:
+    """A sky as the solver's gathers read it: :meth:`radiance` is :func:`sky_radiance`, but for a
+    Preetham sky bilinear in a table of it over the disc of the directions above the horizon
+    (Lambert's equal-area map, ``(d_x, d_z) / sqrt(1 + d_y)``: as fine at the horizon as at the
+    zenith; :data:`SKY_TABLE_SIDE` points a side; exact below the horizon), a sixth of the cost of
+    its exponentials a direction."""
+
+    def __init__(self, sky: Sky):
+        _check_sky(sky)
+        self.sky = sky
+        self.table = None
+        if sky.kind == "preetham":
+            t = np.linspace(-1.0, 1.0, SKY_TABLE_SIDE)
+            x, z = np.meshgrid(t, t, indexing="ij")
+            rim = np.minimum(1.0, 1.0 / np.maximum(np.hypot(x, z), 1e-300))  # outside the disc: its rim
+            x, z = x * rim, z * rim
+            y = np.maximum(1.0 - x * x - z * z, 0.0)
+            d = np.stack([x * np.sqrt(1.0 + y), y, z * np.sqrt(1.0 + y)], axis=-1)
+            self.table = np.ascontiguousarray(sky_radiance(sky, d.reshape(-1, 3)).reshape(*x.shape, 3))
+
+    def radiance(self, dirs: np.ndarray) -> np.ndarray:
+        """(n, 3) float64 radiance, W/(m² sr), arriving from the unit directions ``dirs`` (n, 3)."""
+        if self.table is None:
+            return sky_radiance(self.sky, dirs)
+        out = np.empty((len(dirs), 3))
+        _table_radiance(self.table, self.sky.ground, np.ascontiguousarray(dirs, dtype=np.float64), out)
+        return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _table_radiance(table, ground, dirs, out):
+    """:meth:`SkyTable.radiance`: bilinear in ``table`` (m, m, 3) over ``(d_x, d_z) / sqrt(1 + d_y)``
+    in [-1, 1]^2."""
+    cells = table.shape[0] - 1
+    for i in range(dirs.shape[0]):
+        if dirs[i, 1] < 0.0:
+            for c in range(3):
+                out[i, c] = ground[c]
+            continue
+        s = 1.0 / math.sqrt(1.0 + dirs[i, 1])
+        u = (dirs[i, 0] * s + 1.0) * 0.5 * cells
+        v = (dirs[i, 2] * s + 1.0) * 0.5 * cells
+        a = min(max(int(u), 0), cells - 1)
+        b = min(max(int(v), 0), cells - 1)
+        fu = min(max(u - a, 0.0), 1.0)
+        fv = min(max(v - b, 0.0), 1.0)
+        for c in range(3):
+            lo = table[a, b, c] + fv * (table[a, b + 1, c] - table[a, b, c])
+            hi = table[a + 1, b, c] + fv * (table[a + 1, b + 1, c] - table[a + 1, b, c])
+            out[i, c] = lo + fu * (hi - lo)
 
 
 def cie_overcast_irradiance(zenith_radiance) -> np.ndarray:
