@@ -249,6 +249,7 @@ class DirectLight:
         side = pattern_side(SKY_SAMPLES)
         pat = self.gathers.pattern(self.patches.n_patches, side, 2)
         strata = np.stack(np.divmod(np.arange(side * side), side), axis=1)
+        every, every_strata = pat, strata  # all points so far (pat, strata: this pass's)
         rng = np.random.default_rng([int(self.opts.seed), self.patches.n_patches, 2, side, 1])
         total, groups = np.zeros((n, 3)), np.zeros((n, SKY_PASSES, 4))
         out, todo = np.zeros((n, 3)), np.arange(n)
@@ -268,8 +269,10 @@ class DirectLight:
             err = np.sqrt(q.var(axis=1, ddof=1) / 4.0)
             direct = luminance_of(e) if other is None else luminance_of(e) + other[todo]
             todo = todo[err > SKY_NOISE * np.maximum(direct, 1e-300)]
-            if k + 1 < SKY_PASSES and len(todo):
-                pat, strata = nested_pattern(pat, strata, side << k, rng)
+            if k + 1 < SKY_PASSES and len(todo):  # the next grid's new points, from all of this one's
+                pat, strata = nested_pattern(every, every_strata, side << k, rng)
+                every_strata = np.concatenate([finer_strata(every_strata, every, side << k), strata])
+                every = np.concatenate([every, pat])
         return out
 
     def _sky_pass(
