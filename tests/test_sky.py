@@ -397,6 +397,18 @@ def test_mitsuba_floor_irradiance(sky):
     np.testing.assert_allclose(seen, 0.7 * sk.sky_irradiance(sky) / np.pi, rtol=0.03)
 
 
+def window_room_back_wall():
+    """The window-lit room and the vertex keys of a 16 x 16 lattice on its back wall (its sky is seen
+    through the window only)."""
+    from iat.geometry import quadtree as qt
+    from tests.support.daylight import ROOM_WALLS, window_room
+
+    n = 1 << 6
+    i, j = np.meshgrid(np.arange(1, n, 4), np.arange(1, n, 4), indexing="ij")
+    keys = np.sort(qt.make_key(np.full(i.size, ROOM_WALLS["back (x=0)"]), i.ravel(), j.ravel(), n))
+    return window_room(), keys
+
+
 def test_a_noisy_sky_estimate_is_made_again_finer(monkeypatch):
     """In the window-lit room (a uniform sky through a 2 x 1.2 m opening) the back wall's direct sky
     light estimated with two seeds: with a second, finer estimate where the first's quarters
@@ -404,14 +416,9 @@ def test_a_noisy_sky_estimate_is_made_again_finer(monkeypatch):
     1 024 directions by 11 % (the refinement split on that and multiplied it). The quarters'
     spread underestimates a stratified estimate's error: 1 % (``SKY_NOISE``) is not what is left."""
     import iat.radiosity.direct as direct
-    from iat.geometry import quadtree as qt
     from iat.radiosity.solver import evaluate_direct
-    from tests.support.daylight import ROOM_WALLS, window_room
 
-    scene = window_room()
-    n = 1 << 6
-    i, j = np.meshgrid(np.arange(1, n, 4), np.arange(1, n, 4), indexing="ij")
-    keys = np.sort(qt.make_key(np.full(i.size, ROOM_WALLS["back (x=0)"]), i.ravel(), j.ravel(), n))
+    scene, keys = window_room_back_wall()
 
     def spread() -> float:
         a, b = (evaluate_direct(scene, keys, SolveOptions(seed=s)) @ LUMINANCE for s in (1, 2))
@@ -462,14 +469,9 @@ def test_a_third_sky_estimate_keeps_the_light(monkeypatch):
     stays that of two passes (within 1 %; each pass's directions must make one point a stratum
     of its grid, or the mean falls by what is missing)."""
     import iat.radiosity.direct as direct
-    from iat.geometry import quadtree as qt
     from iat.radiosity.solver import evaluate_direct
-    from tests.support.daylight import ROOM_WALLS, window_room
 
-    scene = window_room()
-    n = 1 << 6
-    i, j = np.meshgrid(np.arange(1, n, 4), np.arange(1, n, 4), indexing="ij")
-    keys = np.sort(qt.make_key(np.full(i.size, ROOM_WALLS["back (x=0)"]), i.ravel(), j.ravel(), n))
+    scene, keys = window_room_back_wall()
     two = float((evaluate_direct(scene, keys, SolveOptions(seed=1)) @ LUMINANCE).mean())
     monkeypatch.setattr(direct, "SKY_PASSES", 3)
     three = float((evaluate_direct(scene, keys, SolveOptions(seed=1)) @ LUMINANCE).mean())

@@ -146,7 +146,7 @@ def sky_radiance(sky: Sky, dirs: np.ndarray) -> np.ndarray:
 
 
 #: grid points a side of the table the solver's sky gathers look a Preetham sky up in
-#: (:class:`SkyTable`; 2 / 512 in the equal-area map: a fifth of a degree at the zenith)
+#: (:class:`SkyTable`; 2 / 512 in the equal-area map: about a third of a degree)
 SKY_TABLE_SIDE = 513
 
 
