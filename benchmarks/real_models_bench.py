@@ -18,7 +18,8 @@ and IAT against the mesh.
 
     .venv/bin/python benchmarks/real_models_bench.py [figures] [panels]   (under xvfb-run or with EGL)
 
-Part ``daylight`` (issue 36's before and after): each IFC file of ``../shared/real-models`` solved
+Part ``daylight`` (issue 36's before and after): each IFC file of ``../shared/real-models`` (and
+``furnished``, a generated two-storey furnished house: :func:`model_path`) solved
 by the sun on :data:`SUN` at the model's place (IfcSite, else the default place) and the sky
 :data:`SKY`, at each preset, by the code of each tree given (``--tree LABEL=DIR``, repeatable; the
 default: this checkout as ``now``): one child process a solve (``PYTHONPATH=DIR``, :data:`CHILD`),
@@ -246,6 +247,7 @@ DAYLIGHT_MODELS = {
     "tekla": "tekla2019-carwash-structure.ifc",
     "openhouse": "ifcopenshell-open-house-ifc4.ifc",
     "swept": "blenderbim-swept-solid.ifc",
+    "furnished": None,  # generated: :func:`model_path`
 }
 #: issue 36's light: the sun at 10:00 on the solstice at the model's place, a uniform sky
 SUN = "2026-06-21T10:00"
@@ -352,6 +354,19 @@ def run_child(tree: Path, model: Path, preset: str, cap: float, log: Path) -> di
     return row
 
 
+def model_path(name: str, out_dir: Path) -> Path:
+    """The file of daylight model ``name``: one of :data:`REAL_MODELS`, or ``furnished``, the
+    two-storey furnished house of 5 x 5 rooms that ``tests/support/large_ifc.py`` writes (27.6 k
+    triangles; issue 41's generated house), written into ``out_dir``."""
+    if DAYLIGHT_MODELS[name] is not None:
+        return REAL_MODELS / DAYLIGHT_MODELS[name]
+    from tests.support.large_ifc import large_ifc_house
+
+    return large_ifc_house(
+        out_dir / "furnished-house.ifc", storeys=2, rooms_per_side=5, windows_per_room=3, furnished=True
+    )
+
+
 def daylight_part(trees: dict, models: list, presets: list, cap: float, json_path: Path) -> None:
     """Part ``daylight``: every model, preset and tree, one at a time, rows into ``json_path``."""
     result = (
@@ -372,7 +387,7 @@ def daylight_part(trees: dict, models: list, presets: list, cap: float, json_pat
                 date = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
                 row = run_child(
                     tree,
-                    REAL_MODELS / DAYLIGHT_MODELS[name],
+                    model_path(name, logs),
                     preset,
                     cap,
                     logs / f"{name}-{preset}-{label}.log",

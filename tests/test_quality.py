@@ -39,8 +39,23 @@ def test_presets_and_overrides(tmp_path):
     assert (opts["max_depth"], opts["samples"]) == (3, QUALITY_PRESETS["draft"]["samples"])
     assert opts["ambient_rays"] == 64
     out = tmp_path / "r.npz"
-    assert main(["solve", str(MODEL), "--quality", "draft", "--ambient-rays", "100", "-o", str(out)]) == 0
-    assert Solution.load(out).options["ambient_rays"] == 100
+    args = [
+        "solve",
+        str(MODEL),
+        "--quality",
+        "draft",
+        "--ambient-rays",
+        "100",
+        "--sky-samples",
+        "256",
+        "-o",
+        str(out),
+    ]
+    assert main(args) == 0
+    assert {k: Solution.load(out).options[k] for k in ("ambient_rays", "sky_samples")} == {
+        "ambient_rays": 100,
+        "sky_samples": 256,
+    }
 
 
 def test_error_falls_from_draft_to_final(egl_ctx):

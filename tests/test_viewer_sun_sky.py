@@ -58,7 +58,9 @@ def test_changes_go_to_the_re_solve(tmp_path):
         d = ss.daylight
         assert ss.given and (d.latitude, d.longitude, d.hour, d.date) == (48.85, 2.35, 10.0, coming_equinox())
         assert sun_sky.shown_daylight(s) == d  # the solution on screen is the model's own setting
-        # the time slider: the sun moves, so the scene is solved afresh (one step, a new mesh)
+        # the time slider: the sun moves, so the scene is solved afresh (a new mesh), after a preview
+        # of the new sun on the mesh on screen
+        published = s.lighting.relighter.published
         sun_sky.change(s, hour=15.0, date=datetime.date(2026, 6, 21))
         assert sun_sky.apply_pending(s) and s.lighting.relight_version == s.lighting.editor.version
         (sun,) = [lt for lt in s.lighting.editor.scene.lights if lt.kind == "directional"]
@@ -67,14 +69,15 @@ def test_changes_go_to_the_re_solve(tmp_path):
         m = sun_sky.sun_marker(s)  # the marker shows the new sun at once
         assert (m.azimuth, m.elevation) == pytest.approx(solar_position(48.85, 2.35, when), abs=1e-9)
         r = wait_result(s.lighting.relighter)
-        assert r.error is None and r.steps == 1 and r.scene is s.lighting.editor.scene
+        assert r.error is None and (r.steps, r.mode) == (2, "solve") and r.scene is s.lighting.editor.scene
+        assert s.lighting.relighter.published == published + 2  # the preview, then the new solve
         assert not sun_sky.apply_pending(s)  # nothing new
-        # the sky alone: on the mesh, the relighter's coarse steps first
+        # the sky alone: on the mesh, after a preview
         sun_sky.change(s, sky_scale=2.0)
         assert sun_sky.apply_pending(s)
         assert s.lighting.editor.scene.sky.radiance == pytest.approx(2.0 * r.scene.sky.radiance)
         r2 = wait_result(s.lighting.relighter)
-        assert r2.error is None and r2.steps > 1
+        assert r2.error is None and r2.steps == 2
         assert np.array_equal(r2.solution.vert_key, r.solution.vert_key)
         s.model.scene = r2.scene
         assert sun_sky.shown_daylight(s).sky_scale == 2.0

@@ -588,11 +588,16 @@ class ViewerApp:
             else:
                 s.model.solution, s.model.scene = res.solution, res.scene
                 s.lighting.relight_step, s.lighting.relight_seconds = (res.step, res.steps), res.total_seconds
+                s.lighting.relight_mode = res.mode
                 s.lighting.relights += 1
                 self._submit_source(BakeSource(res.solution, res.scene))
                 if res.final:
                     s.messages.set_status(
                         f"lighting re-solved in {res.total_seconds:.2f} s ({res.mode}, {res.steps} steps)"
+                    )
+                elif res.mode == "preview":
+                    s.messages.set_status(
+                        f"preview of the new light in {res.total_seconds:.2f} s; solving in full"
                     )
         r.set_blend(*s.lighting.day_blend())
         return changed

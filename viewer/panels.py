@@ -624,6 +624,12 @@ def file_panel(state: AppState) -> None:
     if changed:
         o.ambient_rays = int(v)
     _help("rays a vertex of the ambient term (the light still unshot): more is smoother indoors")
+    changed, v = imgui.slider_int(
+        "Sky rays", int(o.sky_samples), 64, 4096, flags=imgui.SliderFlags_.logarithmic
+    )
+    if changed:
+        o.sky_samples = int(v)
+    _help("directions a vertex towards the sky (noisy ones get 4 x more): more is smoother by daylight")
     changed, state.model.use_cache = imgui.checkbox("Use solution cache", state.model.use_cache)
     _help("Solved models are kept (by file content and options) so they reopen at once.")
 

@@ -3,9 +3,10 @@ its progress kept for the Lighting panel (fraction, step, an ETA from the measur
 Cancel.
 
 A re-solve after a light edit takes seconds to minutes (37-109 s on the house on 2 shared cores);
-the panel shows a bar, the step under way (the Relighter solves coarse steps first) and the time
-left, estimated from the rate measured in this step so far: ``elapsed * (1 - f) / f`` once a few
-percent are done (None before: no guess from nothing). Cancel stops the step at its next progress
+the panel shows a bar, the step under way (the Relighter solves coarse steps first, or by daylight
+a preview on the mesh on screen) and the time left, estimated from the rate measured in this step
+so far: ``elapsed * (1 - f) / f`` once a few percent are done (None before: no guess from
+nothing). Cancel stops the step at its next progress
 report; the view keeps the lighting it shows (the last step solved, or from before the edit),
 and says so.
 """

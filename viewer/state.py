@@ -261,7 +261,8 @@ class LightingState:
     editor : the open model's :class:`iat.lighting.editor.LightEditor`
     relighter : the :class:`iat.lighting.relight.Relighter` that re-solves after edits
     relight_version : the editor version last submitted; relight_submitted : when (throttles drags)
-    relight_step : (step, steps) of the last result shown; relight_seconds : edit to that result
+    relight_step : (step, steps) of the last result shown; relight_seconds : edit to that result;
+    relight_mode : its mode ("preview": a daylight edit's first look, the full solve under way)
     relights : results shown
     states : the model's named lighting states; set_job : their solve on one mesh
     solution_set : the day cycle's :class:`iat.lighting.solution_set.SolutionSet`
@@ -273,6 +274,7 @@ class LightingState:
     relight_version: int = 0
     relight_step: tuple[int, int] = (0, 0)
     relight_seconds: float = 0.0
+    relight_mode: str = ""
     relights: int = 0
     relight_submitted: float = 0.0
     selected_light: int = -1

@@ -5,9 +5,10 @@
 with the camera's heading up: N and the sun), the date, a time slider (clock hours in the
 longitude's zone), sun on/off, the sky model (clear: Preetham with its turbidity; overcast: CIE;
 uniform; none) and the sky's brightness; the sun's azimuth, elevation and W/m²; the re-solve's
-progress, time left and Cancel. Under it the sun study: hours (``8-18``), *Solve sun study* (the
-hours as lighting states on one mesh; progress, time left, Cancel), then the time slider plays
-it. Artificial lights stay in the Lighting panel.
+progress, time left and Cancel (a preview of the new light is shown within seconds, while the full
+solve goes on: :func:`iat.lighting.relight.preview`). Under it the sun study: hours (``8-18``),
+*Solve sun study* (the hours as lighting states on one mesh; progress, time left, Cancel), then the
+time slider plays it. Artificial lights stay in the Lighting panel.
 
 :func:`frame` is the app's per-frame call: it hands the panel's change to the re-solve
 (:func:`viewer.sun_sky.apply_pending`), puts the shown sky behind the model and draws the sun's
@@ -143,6 +144,10 @@ def resolve_progress(state: AppState) -> None:
         f, eta = float(rl.fraction), rl.eta
         left = f"{seconds(eta)} left" if eta is not None else "measuring..."
         bar(f, f"solving the new light: {100 * f:.0f} %  {left}")
+        if state.lighting.relight_mode == "preview":
+            imgui.text_colored(
+                DIM, f"shown: a preview ({seconds(state.lighting.relight_seconds)}), bounces estimated"
+            )
         if imgui.button("Cancel##sun"):
             rl.cancel()
         help_mark("Stop the solve; the view keeps the light it shows.")

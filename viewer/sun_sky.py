@@ -9,11 +9,12 @@ change is taken up at the next frame (:func:`apply_pending`):
 - the sun and sky of the new setting become a lighting state (:func:`iat.lighting.sun_study.daylight_state`)
   applied to the light editor (:meth:`iat.lighting.editor.LightEditor.apply_state`), and the
   viewer's background re-solve (:class:`viewer.relight.ProgressRelighter`) is handed the scene:
-  progress, ETA and Cancel as for a light edit, and the solution on screen stays until the new one
-  arrives. A sun that moved (or came on) needs a new mesh for its shadows, so that is solved afresh
-  (``remesh``: one adaptive solve, whose first stage is the meshing on the new direct light; there
-  is no view of the direct light before it, see docs/lighting.md); a sky or a sun's brightness
-  alone re-solves on the mesh (the relighter's coarse step first);
+  progress, ETA and Cancel as for a light edit. First a preview of the new light on the mesh on
+  screen replaces the solution shown (:func:`iat.lighting.relight.preview`: the direct sun and sky
+  with fewer rays, the bounces mostly from the ambient term; the open house in about 2 s). Then a
+  sun that moved (or came on), which needs a new mesh for its shadows, is solved afresh
+  (``remesh``: one adaptive solve, whose first stage is the meshing on the new direct light); a sky
+  or a sun's brightness alone re-solves on the mesh;
 - while a sun study is shown (the day cycle), the time slider moves the time of day instead:
   the study's states are blended at once, with no solve.
 

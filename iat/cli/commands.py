@@ -92,7 +92,15 @@ def _solve_options(args):
     from iat.radiosity import SolveOptions
 
     kw = {}
-    for name in ("max_depth", "tolerance", "max_edge", "samples", "convergence", "ambient_rays"):
+    for name in (
+        "max_depth",
+        "tolerance",
+        "max_edge",
+        "samples",
+        "convergence",
+        "ambient_rays",
+        "sky_samples",
+    ):
         v = getattr(args, name, None)
         if v is not None:
             kw[name] = v
@@ -580,6 +588,9 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--max-edge", type=float, dest="max_edge", help="pre-split patches longer than this")
         sp.add_argument("--samples", type=int, help="shooter samples for visibility")
         sp.add_argument("--ambient-rays", type=int, dest="ambient_rays", help="ambient term's rays a vertex")
+        sp.add_argument(
+            "--sky-samples", type=int, dest="sky_samples", help="sky's directions a vertex (1024)"
+        )
         sp.add_argument(
             "--convergence",
             type=float,

@@ -5,6 +5,13 @@ continues from the last converged solution (shooting only the difference) on the
 mesh; the work is re-run with increasing effort (a coarse convergence first, then the
 final one), each result published as it arrives so the view improves step by step. A
 newer edit cancels the work in progress.
+
+By daylight (a sun or a sky, before or after the edit) the coarse steps would cost nearly what the
+final one does (each gathers the sky anew), so the first step is a *preview* instead: the new light
+on the mesh on screen with :meth:`~iat.radiosity.SolveOptions.preview`'s options (the direct sun
+and sky with fewer rays, every bounce from the ambient term, no shots), then the final step (afresh
+when the sun moved, else on the mesh). The open house by a new sun: the preview in 2.1 s, the new
+solve in 21 s (docs/benchmarks.md, "A first sunlit image").
 """
 
 from __future__ import annotations
@@ -31,7 +38,8 @@ class RelightResult:
     step, steps : this step (1-based) of the effort schedule; ``final`` when step == steps
     version : the edit it answers (``submit``'s version)
     seconds : time of this step; total_seconds : since the edit was taken up
-    mode : "resolve" (continued from the previous solution), "mesh" or "solve"
+    mode : "resolve" (continued from the previous solution), "mesh", "solve" or "preview" (a
+      daylight edit's first look on the mesh on screen)
     """
 
     solution: Any
@@ -57,7 +65,8 @@ class Relighter(LatestWorker):
     schedule : coarser steps solved before the final one, as multiples of the final
       convergence (capped at 0.5); each step starts again from the last converged solution
       with more effort and is published as it arrives (the first after a fraction of the
-      final time). The default (8, 2.5) with convergence 0.05 runs 0.4, 0.125, then 0.05.
+      final time). The default (8, 2.5) with convergence 0.05 runs 0.4, 0.125, then 0.05. By
+      daylight a preview replaces them (see the module's docstring).
 
     ``submit(scene)`` asks for the lights of ``scene`` (cancels the step in progress, except a
     first, coarse step, which finishes so that a continuous drag still shows progress);
@@ -118,7 +127,10 @@ class Relighter(LatestWorker):
         progress = self._progress
         try:
             final_conv = float(self.options.convergence)
-            if remesh or not lights_only_changed(self.base_scene, scene):
+            fresh = remesh or not lights_only_changed(self.base_scene, scene)
+            if daylit(scene) or daylit(self.base_scene):
+                plan = [("preview", final_conv), ("solve" if fresh else "resolve", final_conv)]
+            elif fresh:
                 plan = [("solve", final_conv)]
             else:
                 coarse = sorted({min(0.5, final_conv * m) for m in self.schedule}, reverse=True)
@@ -129,7 +141,11 @@ class Relighter(LatestWorker):
                     break
                 opts = dataclasses.replace(self.options, convergence=conv)
                 t0 = time.perf_counter()
-                if how == "solve":
+                if how == "preview":
+                    sol = preview(scene, self.base, self.options, progress)
+                    if sol is None:  # other patches: no preview
+                        continue
+                elif how == "solve":
                     sol = solve(scene, opts, progress)
                 else:
                     try:
@@ -159,3 +175,23 @@ class Relighter(LatestWorker):
             log.debug("relight failed:\n%s", traceback.format_exc())
             msg = str(e) if isinstance(e, IATError) else f"{type(e).__name__}: {e}"
             self._publish(RelightResult(None, scene, 0, 0, version, error=msg))
+
+
+def daylit(scene) -> bool:
+    """``scene`` has a sky or a directional light (the sun)."""
+    return getattr(scene, "sky", None) is not None or any(lt.kind == "directional" for lt in scene.lights)
+
+
+def preview(scene, previous, options, progress=None):
+    """The light of ``scene`` on ``previous``'s mesh at ``options.preview()`` (a first look), or None
+    when ``previous`` was solved on other patches than ``scene``'s."""
+    from iat.radiosity import solve
+    from iat.radiosity.checks import check_mesh
+
+    try:
+        check_mesh(previous, scene, "preview")
+    except IATError:
+        return None
+    sol = solve(scene, options.preview(), progress, mesh=previous)
+    sol.stats["mode"] = "preview"
+    return sol

@@ -18,7 +18,6 @@ from iat.radiosity.options import (
     PENUMBRA_EDGE,
     SKY_NOISE,
     SKY_PASSES,
-    SKY_SAMPLES,
     SUN_SAMPLES,
     SolveOptions,
 )
@@ -238,15 +237,15 @@ class DirectLight:
     ) -> np.ndarray:
         """(n, 3) irradiance from the sky through whatever of each vertex's hemisphere is open:
         ``pi`` times the mean sky radiance over cosine-distributed directions that leave the scene,
-        ``SKY_SAMPLES`` of them (stratified, rotated per vertex). A vertex whose estimate's standard
-        error (from its pattern's four interleaved quarters, luminance) exceeds ``SKY_NOISE`` of its
-        direct light (this sky's, plus ``other`` (n,): the luminance irradiance of its other sources,
-        W/m²) is estimated again with 4 x the directions (twice as many strata a side: its old
-        directions and 3 new ones in each old stratum), up to ``SKY_PASSES`` estimates: through a
-        window most of the hemisphere is wall, and the refinement would split on that noise and
-        multiply it."""
+        ``opts.sky_samples`` of them (stratified, rotated per vertex). A vertex whose estimate's
+        standard error (from its pattern's four interleaved quarters, luminance) exceeds
+        ``SKY_NOISE`` of its direct light (this sky's, plus ``other`` (n,): the luminance irradiance
+        of its other sources, W/m²) is estimated again with 4 x the directions (twice as many strata
+        a side: its old directions and 3 new ones in each old stratum), up to ``SKY_PASSES``
+        estimates: through a window most of the hemisphere is wall, and the refinement would split
+        on that noise and multiply it."""
         n = len(geo.key)
-        side = pattern_side(SKY_SAMPLES)
+        side = pattern_side(self.opts.sky_samples)
         pat = self.gathers.pattern(self.patches.n_patches, side, 2)
         strata = np.stack(np.divmod(np.arange(side * side), side), axis=1)
         every, every_strata = pat, strata  # all points so far (pat, strata: this pass's)

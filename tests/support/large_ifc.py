@@ -6,8 +6,11 @@ exterior walls with windows (a door on the ground floor), a grid of ``rooms_per_
 rooms per storey whose dividing walls run at an angle, a skewed lowered ceiling per storey, and a
 pitched roof (two sloped slabs and two gables) over the top storey. The geometry kernel
 triangulates it into about 35 000 triangles at the defaults (the voids cut by
-``feature.add_feature`` fan the wall faces). GlobalIds and the header time stamp are fixed, so the
-bytes are the same on every run.
+``feature.add_feature`` fan the wall faces). ``furnished`` puts a round table with four chairs, a
+sofa, a floor lamp and a cabinet (IfcFurniture, about 600 triangles) in every room but the skewed
+row's and the stair's, as furniture comes from real tools: closed solids, and open sheets (the sofa:
+its seen faces only; the lamp's shade; the chairs, whose boxes meet along edges: non-manifold). Two storeys of 5 x 5 rooms: about 28 000 triangles.
+GlobalIds and the header time stamp are fixed, so the bytes are the same on every run.
 
 Coordinates are metres, Z up (as IFC is): the rooms cover ``x`` in ``[0, R * ROOM]``, ``y`` in
 ``[-R * ROOM, 0]``; storey ``k`` has its floor at ``z = k * STOREY``. :func:`light_positions` gives
@@ -56,7 +59,74 @@ def skew_row(rooms_per_side: int) -> int:
     return rooms_per_side // 2
 
 
-def large_ifc_house(path, storeys: int = 5, rooms_per_side: int = 9, windows_per_room: int = 4) -> Path:
+def box(lo, hi) -> tuple[list, list]:
+    """A closed box from corner ``lo`` to ``hi`` (x, y, z): 8 vertices, 6 quads wound outwards."""
+    (x0, y0, z0), (x1, y1, z1) = lo, hi
+    v = [(x, y, z) for z in (z0, z1) for y in (y0, y1) for x in (x0, x1)]
+    faces = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    return v, faces
+
+
+def _merge(parts) -> tuple[list, list]:
+    verts: list = []
+    faces: list = []
+    for v, f in parts:
+        faces += [tuple(i + len(verts) for i in fc) for fc in f]
+        verts += list(v)
+    return verts, faces
+
+
+def cylinder(cx: float, cy: float, z0: float, z1: float, r: float, seg: int, caps: bool = True):
+    """A vertical cylinder of ``seg`` sides about (cx, cy) from z0 to z1, wound outwards; without
+    ``caps`` an open sheet (a lamp shade)."""
+    a = 2 * np.pi * np.arange(seg) / seg
+    ring = [(cx + r * np.cos(t), cy + r * np.sin(t)) for t in a]
+    v = [(x, y, z0) for x, y in ring] + [(x, y, z1) for x, y in ring]
+    f = [(i, (i + 1) % seg, seg + (i + 1) % seg, seg + i) for i in range(seg)]
+    if caps:
+        f += [tuple(range(seg - 1, -1, -1)), tuple(range(seg, 2 * seg))]
+    return v, f
+
+
+def furnish(b: IfcBuilder, k: int, x: float, y: float, z: float, style_wood, style_cloth) -> None:
+    """A round table with four chairs, a sofa, a floor lamp and a cabinet in the room whose corner
+    (smallest x, largest y) is (x, y), its floor at ``z``: about 600 triangles."""
+    name = f"{k} {x:g} {y:g}"
+    furniture = {"ifc_class": "IfcFurniture", "storey": k}
+    tx, ty = x + 2.6, y - 2.4  # the table: a round top on a pedestal
+    table = _merge([cylinder(tx, ty, z + 0.72, z + 0.76, 0.6, 32), cylinder(tx, ty, z, z + 0.72, 0.06, 16)])
+    b.mesh(f"table {name}", *table, style_wood, **furniture)
+    for c, (dx, dy) in enumerate(((-0.85, 0.0), (0.85, 0.0), (0.0, -0.85), (0.0, 0.85))):
+        cx, cy = tx + dx - 0.2, ty + dy - 0.2  # a chair: four legs, a seat, a back away from the table
+        legs = [
+            box((cx + u, cy + w, z), (cx + u + 0.04, cy + w + 0.04, z + 0.45))
+            for u in (0, 0.36)
+            for w in (0, 0.36)
+        ]
+        bx, by = (cx + (0.36 if dx > 0 else 0.0), cy) if dx else (cx, cy + (0.36 if dy > 0 else 0.0))
+        back = box((bx, by, z + 0.45), (bx + (0.04 if dx else 0.4), by + (0.4 if dx else 0.04), z + 0.9))
+        seat = box((cx, cy, z + 0.45), (cx + 0.4, cy + 0.4, z + 0.49))
+        b.mesh(f"chair {c} {name}", *_merge([*legs, seat, back]), style_wood, **furniture)
+    sx, sy = x + 0.4, y - 0.45  # the sofa along the wall y = y: what is seen of it, open below and behind
+    s1, s2, h, top = sx + 1.6, sy - 0.9, z + 0.42, z + 0.85
+    v = [(sx, s2, z), (s1, s2, z), (s1, s2, h), (sx, s2, h), (s1, sy - 0.2, h), (sx, sy - 0.2, h)]
+    v += [(s1, sy - 0.2, top), (sx, sy - 0.2, top), (s1, sy, top), (sx, sy, top)]
+    f = [(0, 1, 2, 3), (3, 2, 4, 5), (5, 4, 6, 7), (7, 6, 8, 9)]  # front, seat, back rest, its top
+    b.mesh(f"sofa {name}", v, f, style_cloth, **furniture)
+    lamp = _merge(
+        [
+            cylinder(x + 0.25, y - 0.3, z, z + 1.5, 0.02, 12),
+            cylinder(x + 0.25, y - 0.3, z + 1.5, z + 1.75, 0.2, 24, caps=False),
+        ]
+    )
+    b.mesh(f"floor lamp {name}", *lamp, style_cloth, **furniture)  # its shade an open sheet
+    cx, cy = x + ROOM - 0.7, y - ROOM + 0.9  # a cabinet in the far corner
+    b.mesh(f"cabinet {name}", *box((cx, cy, z), (cx + 0.5, cy + 0.45, z + 1.8)), style_wood, **furniture)
+
+
+def large_ifc_house(
+    path, storeys: int = 5, rooms_per_side: int = 9, windows_per_room: int = 4, furnished: bool = False
+) -> Path:
     """Write the house to ``path`` (a file name, or a directory: ``large_house.ifc`` in it); returns
     the file's path. ``storeys`` floors of ``rooms_per_side``\\ ² rooms of :data:`ROOM` metres."""
     path = Path(path)
@@ -70,6 +140,7 @@ def large_ifc_house(path, storeys: int = 5, rooms_per_side: int = 9, windows_per
     floor_s = b.style("floor", (0.50, 0.38, 0.26))
     roof_s = b.style("roof", (0.62, 0.22, 0.16))
     ceiling_s = b.style("ceiling", (0.85, 0.85, 0.82))
+    wood_s, cloth_s = b.style("wood", (0.55, 0.40, 0.28)), b.style("cloth", (0.35, 0.42, 0.55))
     t = OUTER_T
     lo, hi = -t, side + t  # outer faces of the exterior walls (x; y runs -hi .. -lo)
     stair = (ROOM * 0.25, -ROOM * 0.25 - 2.5, 1.2, 2.5)  # x, y, width, depth of the stair hole (room 0)
@@ -147,6 +218,11 @@ def large_ifc_house(path, storeys: int = 5, rooms_per_side: int = 9, windows_per
                     inner_s,
                     [(door_c - DOOR_W / 2, door_c + DOOR_W / 2, 0.0, DOOR_H)],
                 )
+        if furnished:
+            for i in range(n):
+                for j in range(n):
+                    if j != srow and not (k and i == j == 0):  # (leaning walls; the stair hole)
+                        furnish(b, k, i * ROOM, -j * ROOM, z, wood_s, cloth_s)
         # a skewed lowered ceiling in a room of the skewed row
         cx = ROOM * (k % max(n - 1, 1))
         cy = -srow * ROOM
