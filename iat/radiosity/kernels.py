@@ -514,6 +514,39 @@ def leaf_fields(out, first, step, leaves, patch, level, li, lj, flip, is_quad, c
                     )
 
 
+@njit(cache=True, parallel=True, nogil=True, error_model="numpy")
+def tent_means(out, f, is_quad, quad, tri, tent, r):
+    """Per patch, its fine field ``f`` (Q, M, M, 3) read down to ``out`` (Q, G, G, 3), every r-th
+    point (M = (G - 1) r + 1): the mean of the field around it weighted by ``tent`` (2 r - 1,) along
+    each axis (the window cut at the edges) and by the fine points' shares of the patch, ``quad`` or
+    ``tri`` (M, M) as ``is_quad`` (Q,) says."""
+    m, g, h = f.shape[1], out.shape[1], tent.shape[0] // 2
+    for q in prange(f.shape[0]):
+        w = quad if is_quad[q] else tri
+        rows = np.zeros((g, m, 4))  # along the first axis: 3 weighted channels and the weight
+        for i in range(g):
+            for a in range(tent.shape[0]):
+                x = i * r + a - h
+                if 0 <= x < m:
+                    for y in range(m):
+                        wt = tent[a] * w[x, y]
+                        for k in range(3):
+                            rows[i, y, k] += wt * f[q, x, y, k]
+                        rows[i, y, 3] += wt
+        for i in range(g):
+            for j in range(g):
+                s0 = s1 = s2 = s3 = 0.0
+                for b in range(tent.shape[0]):
+                    y = j * r + b - h
+                    if 0 <= y < m:
+                        s0 += tent[b] * rows[i, y, 0]
+                        s1 += tent[b] * rows[i, y, 1]
+                        s2 += tent[b] * rows[i, y, 2]
+                        s3 += tent[b] * rows[i, y, 3]
+                s3 = max(s3, 1e-300)
+                out[q, i, j, 0], out[q, i, j, 1], out[q, i, j, 2] = s0 / s3, s1 / s3, s2 / s3
+
+
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _MIX1 = np.uint64(0xBF58476D1CE4E5B9)
 _MIX2 = np.uint64(0x94D049BB133111EB)

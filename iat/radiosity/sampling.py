@@ -10,7 +10,7 @@ import numpy as np
 from iat.color import LUMINANCE_WEIGHTS
 from iat.geometry import quadtree as qt
 from iat.radiosity.bundles import ShooterArrays
-from iat.radiosity.kernels import hash_keys, leaf_fields
+from iat.radiosity.kernels import hash_keys, leaf_fields, tent_means
 
 #: a coarse grid point is the tent-weighted mean of this many fine points per cell side
 COARSE_SUB = 4
@@ -200,10 +200,7 @@ class Lattice:
             b = min(a + COARSE_CHUNK, self.forest.n_patches)
             leaves = self.order[self.starts[a] : self.starts[b]]
             f = self._fields(leaves, b - a, a, self.n // fine, values)
-            w = np.where(self.forest.patch_is_quad[a:b, None, None], quad[None], tri[None])
-            out[a:b] = _tent_down(f * w[..., None], tent, r) / np.maximum(
-                _tent_down(w[..., None], tent, r), 1e-300
-            )
+            tent_means(out[a:b], f, self.forest.patch_is_quad[a:b], quad, tri, tent, r)
         return out
 
     def _fields(self, leaves: np.ndarray, count: int, first: int, step: int, values: np.ndarray):
@@ -215,17 +212,6 @@ class Lattice:
             fo.patch_is_quad, self.corner, np.ascontiguousarray(values, dtype=np.float64),
         )  # fmt: skip
         return out
-
-
-def _tent_down(f: np.ndarray, tent: np.ndarray, r: int) -> np.ndarray:
-    """(P, g+1, g+1, C) the sums of ``tent`` x ``tent``-weighted windows of f (P, g r + 1, g r + 1, C)
-    centred on every r-th point (windows cut at the edges)."""
-    pad = len(tent) // 2
-    for axis in (1, 2):
-        fp = np.pad(f, [(pad, pad) if a == axis else (0, 0) for a in range(4)])
-        n = f.shape[axis]
-        f = sum(w * np.take(fp, np.arange(k, k + n, r), axis=axis) for k, w in enumerate(tent))
-    return f
 
 
 def finer_strata(strata: np.ndarray, pattern: np.ndarray, side: int) -> np.ndarray:
