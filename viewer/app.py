@@ -51,6 +51,7 @@ from viewer.bake_worker import BakeSource, BakeWorker
 from viewer.jobs import Opened, OpenJob, SetJob, error_text
 from viewer.navigation import CameraPath, load_paths, paths_file, save_paths, walker
 from viewer.panel_cache import PanelCache
+from viewer.relight import result_line
 from viewer.state import AppState, default_model
 from viewer.view3d import View3D, auto_exposure, screenshot
 
@@ -591,14 +592,8 @@ class ViewerApp:
                 s.lighting.relight_mode = res.mode
                 s.lighting.relights += 1
                 self._submit_source(BakeSource(res.solution, res.scene))
-                if res.final:
-                    s.messages.set_status(
-                        f"lighting re-solved in {res.total_seconds:.2f} s ({res.mode}, {res.steps} steps)"
-                    )
-                elif res.mode == "preview":
-                    s.messages.set_status(
-                        f"preview of the new light in {res.total_seconds:.2f} s; solving in full"
-                    )
+                if res.final or res.mode == "preview":
+                    s.messages.set_status(result_line(res))
         r.set_blend(*s.lighting.day_blend())
         return changed
 

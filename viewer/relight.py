@@ -22,6 +22,13 @@ from iat.lighting.relight import Relighter
 ETA_MIN_FRACTION = 0.03
 
 
+def result_line(res) -> str:
+    """The status line of a published :class:`~iat.lighting.relight.RelightResult`."""
+    if res.mode == "preview" and not res.final:
+        return f"preview of the new light in {res.total_seconds:.2f} s; solving in full"
+    return f"lighting re-solved in {res.total_seconds:.2f} s ({res.mode}, {res.steps} steps)"
+
+
 class ProgressRelighter(Relighter):
     """A :class:`Relighter` whose progress the UI reads: ``fraction`` (0..1 of the step under way),
     ``message``, ``step`` (1, 2, ... within an edit's plan), :attr:`eta` (seconds, or None), and

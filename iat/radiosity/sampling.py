@@ -10,7 +10,8 @@ import numpy as np
 from iat.color import LUMINANCE_WEIGHTS
 from iat.geometry import quadtree as qt
 from iat.radiosity.bundles import ShooterArrays
-from iat.radiosity.kernels import hash_keys, leaf_fields, tent_means
+from iat.radiosity.kernels import hash_keys
+from iat.radiosity.lattice_kernels import leaf_fields, tent_means
 
 #: a coarse grid point is the tent-weighted mean of this many fine points per cell side
 COARSE_SUB = 4
