@@ -8,15 +8,18 @@ Boulder (IfcSite), TrueNorth turned 30 degrees, a 1 x 1 m skylight in its roof; 
 1. the first view is lit (median luminance above 0), and the sun's patch on the floor stands
    where the 9:00 sun through the skylight puts it;
 2. the panel's Time slider to 17:00: the progress of the re-solve shows (with the 9:00 light still
-   on screen) before the first view lit by the new sun; the sun marker's azimuth and elevation are
-   NOAA's for 17:00, its direction the site's (true north applied), and the lit patch has moved
-   across the floor against the sun's move, where the 17:00 sun puts it;
-3. 13:00, then Cancel: the solve stops and the 17:00 light stays;
+   on screen) before the first view lit by the new sun, a preview on the 9:00 mesh, then the new
+   solve; the sun marker's azimuth and elevation are NOAA's for 17:00, its direction the site's (true
+   north applied), and the lit patch has moved across the floor against the sun's move, where the
+   17:00 sun puts it;
+3. 13:00, then Cancel: the solve stops; the 17:00 light stays, or the 13:00 preview if it came first;
 4. the sun study from the panel (9-17/4): three hours on one mesh; the Time slider then plays it
    (no solve): at 17:00 the marker and the lit patch are those of the 17:00 state.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pytest
@@ -151,6 +154,8 @@ def test_sun_and_sky_panel(tmp_path, monkeypatch, gui_child):
         got["seventeen"] = shot(ctx, "17")
         testing.capture(ctx, str(tmp_path / "window-17.png"))  # (docs/screenshots/viewer-sun-sky.png)
 
+        rl = s.lighting.relighter  # a 13:00 solve long enough that the click lands in it on a busy machine
+        opts, rl.options = rl.options, dataclasses.replace(rl.options, max_depth=7, tolerance=0.02)
         ctx.item_input_value("//Sun & sky/Time", 13.0)
         wait_until(ctx, lambda: s.lighting.relighting, 60, "the 13:00 solve to start")
         ctx.item_click("//Sun & sky/Cancel##sun")
@@ -158,6 +163,7 @@ def test_sun_and_sky_panel(tmp_path, monkeypatch, gui_child):
         ctx.yield_(30)
         kept = "17:00" if s.model.solution is got["sol17"] else s.lighting.relight_mode  # (or its preview)
         got["cancelled"] = (s.lighting.relighter.cancelled, kept, sun_sky.shown_daylight(s).hour)
+        rl.options = opts  # (the sun study below solves at the model's options)
 
         ctx.item_input_value("//Sun & sky/Hours", "9-17/4")
         ctx.item_click("//Sun & sky/Solve sun study")
@@ -196,7 +202,7 @@ def test_sun_and_sky_panel(tmp_path, monkeypatch, gui_child):
     first_new = next(k for k, f in enumerate(after) if f[2] is not got["sol9"])
     assert any(f[0] for f in after[:first_new]), "no progress shown before the first view of the new sun"
     assert all(f[2] is got["sol9"] for f in after[:first_new])  # the old light stays until then
-    assert max(f[1] for f in after[:first_new]) > 0  # the bar moved
+    assert max(f[1] for f in after if f[0]) > 0  # the bar moved (the preview may come before it does)
     preview = after[first_new][2]
     assert after[first_new][3] == "preview" and np.array_equal(preview.vert_key, got["sol9"].vert_key)
     assert got["sol17"].stats["mode"] == "solve" and got["sol17"] is not preview

@@ -51,7 +51,7 @@ from viewer.bake_worker import BakeSource, BakeWorker
 from viewer.jobs import Opened, OpenJob, SetJob, error_text
 from viewer.navigation import CameraPath, load_paths, paths_file, save_paths, walker
 from viewer.panel_cache import PanelCache
-from viewer.relight import result_line
+from viewer.relight import options_in_force, result_line
 from viewer.state import AppState, default_model
 from viewer.view3d import View3D, auto_exposure, screenshot
 
@@ -539,13 +539,7 @@ class ViewerApp:
             if s.lighting.solution_set is not None:
                 s.lighting.day_cycle = True
             elif s.lighting.states and ed is not None and s.model.solution is not None:
-                from iat.radiosity import SolveOptions
-
-                try:
-                    opts = SolveOptions.from_dict(s.model.solution.options)
-                except Exception:
-                    opts = s.model.solve_options
-                s.lighting.set_job = SetJob(ed.base, s.lighting.states, opts)
+                s.lighting.set_job = SetJob(ed.base, s.lighting.states, options_in_force(s))
                 s.messages.set_status(f"solving {len(s.lighting.states)} lighting states on one mesh")
         job = s.lighting.set_job
         if job is not None and job.done:

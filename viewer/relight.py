@@ -22,6 +22,20 @@ from iat.lighting.relight import Relighter
 ETA_MIN_FRACTION = 0.03
 
 
+def options_in_force(state):
+    """The :class:`~iat.radiosity.SolveOptions` of the open model's solves: its re-solve's (the
+    solution on screen may be a preview, solved at lighter ones), else its solution's, else the
+    Model panel's."""
+    from iat.radiosity import SolveOptions
+
+    if state.lighting.relighter is not None:
+        return state.lighting.relighter.options
+    try:
+        return SolveOptions.from_dict(state.model.solution.options)
+    except Exception:
+        return state.model.solve_options
+
+
 def result_line(res) -> str:
     """The status line of a published :class:`~iat.lighting.relight.RelightResult`."""
     if res.mode == "preview" and not res.final:

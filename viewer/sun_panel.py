@@ -144,13 +144,11 @@ def resolve_progress(state: AppState) -> None:
         f, eta = float(rl.fraction), rl.eta
         left = f"{seconds(eta)} left" if eta is not None else "measuring..."
         bar(f, f"solving the new light: {100 * f:.0f} %  {left}")
-        if state.lighting.relight_mode == "preview":
-            imgui.text_colored(
-                DIM, f"shown: a preview ({seconds(state.lighting.relight_seconds)}), bounces estimated"
-            )
         if imgui.button("Cancel##sun"):
             rl.cancel()
         help_mark("Stop the solve; the view keeps the light it shows.")
+        if state.lighting.relight_mode == "preview":  # (under the button, which stays where it was)
+            imgui.text_colored(DIM, f"shown: a preview ({seconds(state.lighting.relight_seconds)})")
     elif getattr(rl, "cancelled", False):
         imgui.text_colored(RED, "cancelled: the view keeps the last light solved")
     elif sun_sky.sun_sky(state).daylight is not None and sun_sky.shown_daylight(state) is not None:

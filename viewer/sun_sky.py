@@ -209,8 +209,8 @@ def start_study(state: AppState) -> None:
     """Solve the sun study of the panel's place, date and sky at its hours on one mesh (a
     :class:`viewer.jobs.SetJob`: progress, ETA, Cancel in the panel); the app shows the set with the
     day cycle's time-of-day slider once solved."""
-    from iat.radiosity import SolveOptions
     from viewer.jobs import SetJob
+    from viewer.relight import options_in_force
 
     ss = sun_sky(state)
     lt, ed = state.lighting, state.lighting.editor
@@ -223,10 +223,7 @@ def start_study(state: AppState) -> None:
         ss.error = str(e)
         return
     ss.error = ""
-    try:
-        opts = SolveOptions.from_dict(state.model.solution.options)
-    except Exception:
-        opts = state.model.solve_options
+    opts = options_in_force(state)
     if lt.set_job is not None and not lt.set_job.done:
         lt.set_job.cancel()
     lt.states, lt.solution_set, lt.day_cycle = states, None, False

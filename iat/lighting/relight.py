@@ -9,9 +9,9 @@ newer edit cancels the work in progress.
 By daylight (a sun or a sky, before or after the edit) the coarse steps would cost nearly what the
 final one does (each gathers the sky anew), so the first step is a *preview* instead: the new light
 on the mesh on screen with :meth:`~iat.radiosity.SolveOptions.preview`'s options (the direct sun
-and sky with fewer rays, every bounce from the ambient term, no shots), then the final step (afresh
-when the sun moved, else on the mesh). The open house by a new sun: the preview in 2.1 s, the new
-solve in 21 s (docs/benchmarks.md, "A first sunlit image").
+and sky with fewer rays, the strongest patches shot, the other bounces from the ambient term), then
+the final step (afresh when the sun moved, else on the mesh). The open house by a new sun: the
+preview in 2.3 s, the new solve in 26 s (docs/benchmarks.md, "A first sunlit image").
 """
 
 from __future__ import annotations

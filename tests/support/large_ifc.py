@@ -9,7 +9,8 @@ triangulates it into about 35 000 triangles at the defaults (the voids cut by
 ``feature.add_feature`` fan the wall faces). ``furnished`` puts a round table with four chairs, a
 sofa, a floor lamp and a cabinet (IfcFurniture, about 600 triangles) in every room but the skewed
 row's and the stair's, as furniture comes from real tools: closed solids, and open sheets (the sofa:
-its seen faces only; the lamp's shade; the chairs, whose boxes meet along edges: non-manifold). Two storeys of 5 x 5 rooms: about 28 000 triangles.
+its seen faces only; the lamp's shade; the chairs, whose boxes meet along edges: non-manifold). Two
+storeys of 5 x 5 rooms: about 28 000 triangles.
 GlobalIds and the header time stamp are fixed, so the bytes are the same on every run.
 
 Coordinates are metres, Z up (as IFC is): the rooms cover ``x`` in ``[0, R * ROOM]``, ``y`` in
