@@ -6,9 +6,8 @@ A re-solve after a light edit takes seconds to minutes (37-109 s on the house on
 the panel shows a bar, the step under way (the Relighter solves coarse steps first, or by daylight
 a preview on the mesh on screen) and the time left, estimated from the rate measured in this step
 so far: ``elapsed * (1 - f) / f`` once a few percent are done (None before: no guess from
-nothing). Cancel stops the step at its next progress
-report; the view keeps the lighting it shows (the last step solved, or from before the edit),
-and says so.
+nothing). Cancel stops the step at its next progress report; the view keeps the lighting it shows
+(the last step solved, or from before the edit), and says so.
 """
 
 from __future__ import annotations
