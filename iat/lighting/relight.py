@@ -120,6 +120,7 @@ class Relighter(LatestWorker):
 
     def _work(self, request) -> None:
         from iat.radiosity import resolve, solve
+        from iat.radiosity.sources import daylit
 
         scene, version, remesh = request
         t_job = time.perf_counter()
@@ -175,11 +176,6 @@ class Relighter(LatestWorker):
             log.debug("relight failed:\n%s", traceback.format_exc())
             msg = str(e) if isinstance(e, IATError) else f"{type(e).__name__}: {e}"
             self._publish(RelightResult(None, scene, 0, 0, version, error=msg))
-
-
-def daylit(scene) -> bool:
-    """``scene`` has a sky or a directional light (the sun)."""
-    return getattr(scene, "sky", None) is not None or any(lt.kind == "directional" for lt in scene.lights)
 
 
 def preview(scene, previous, options, progress=None):

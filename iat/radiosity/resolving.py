@@ -19,7 +19,7 @@ from iat.radiosity.progress import SolveCancelled
 from iat.radiosity.run import SolveRun
 from iat.radiosity.solution import Solution
 from iat.radiosity.solver import solve
-from iat.radiosity.sources import light_from_record, light_record, light_signature
+from iat.radiosity.sources import daylit, light_from_record, light_record, light_signature
 from iat.radiosity.state import Shoot
 from iat.radiosity.visibility import Visibility
 
@@ -57,8 +57,7 @@ def resolve(
     if not np.allclose(previous.patch_albedo, solver_albedo(scene), rtol=1e-6, atol=1e-9):
         raise OptionError("resolve: the albedos changed since the previous solution; solve again")
     src = previous.stats.get("sources") if isinstance(previous.stats, dict) else None
-    daylight = getattr(scene, "sky", None) is not None or any(lt.kind == "directional" for lt in scene.lights)
-    if not src or daylight or src.get("daylight"):  # (the sun and the sky: solved afresh on the mesh)
+    if not src or daylit(scene) or src.get("daylight"):  # (the sun and the sky: solved afresh on the mesh)
         return solve(scene, opts, progress, mesh=previous)
     change = SourceChange.between(src, scene)
     if change.power > RESOLVE_MAX_CHANGE * change.new_power:

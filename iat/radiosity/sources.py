@@ -13,6 +13,11 @@ from iat.io.ies import Photometry
 _IES_ARRAYS = ("vertical", "horizontal", "candela")
 
 
+def daylit(scene) -> bool:
+    """``scene`` has a sky or a directional light (a sun)."""
+    return getattr(scene, "sky", None) is not None or any(lt.kind == "directional" for lt in scene.lights)
+
+
 def sources_record(ctx) -> dict:
     """JSON-able description of the light sources of a solve on ``ctx`` (a
     :class:`iat.radiosity.context.Context`): its point / spot lights and its emitting patches

@@ -61,11 +61,9 @@ def skew_row(rooms_per_side: int) -> int:
 
 
 def box(lo, hi) -> tuple[list, list]:
-    """A closed box from corner ``lo`` to ``hi`` (x, y, z): 8 vertices, 6 quads wound outwards."""
+    """A closed box from corner ``lo`` to ``hi`` (x, y, z), wound outwards: a :func:`prism` along x."""
     (x0, y0, z0), (x1, y1, z1) = lo, hi
-    v = [(x, y, z) for z in (z0, z1) for y in (y0, y1) for x in (x0, x1)]
-    faces = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
-    return v, faces
+    return prism([(y0, z0), (y1, z0), (y1, z1), (y0, z1)], x0, x1)
 
 
 def _merge(parts) -> tuple[list, list]:
