@@ -1,6 +1,6 @@
 """The Cornell box's walls (issue 37): per solver seed, the noise on its four walls
 (:func:`iat.measure.noise.wall_noise`, %, what the render has beyond a quadratic and beyond the
-4096-spp Mitsuba reference's real structure, per 12 x 12-pixel window, 96 x 96, mesh mode), the mean
+65 536-spp Mitsuba reference's real structure, per 12 x 12-pixel window, 96 x 96, mesh mode), the mean
 relative error per pixel on its smooth lit parts, elements, rays and solve time, at the defaults or
 at options given as JSON. One JSON line a seed.
 
@@ -27,15 +27,15 @@ def run(seeds: list[int], options: dict, refs: Path = ROOT / "tests" / "refs"):
 
     from iat.io.load import load_scene
     from iat.measure.metrics import reference_errors, smooth_lit_mask
-    from iat.measure.noise import patch_image, wall_noise
+    from iat.measure.noise import NOISE_SPP, patch_image, wall_noise
     from iat.measure.reference import box_filtered_render, render_reference_cached
     from iat.radiosity import SolveOptions, solve
     from iat.render.renderer import Renderer
 
     scene = load_scene(ROOT / "sample_models" / "cornell_box.glb")
     camera = scene.default_camera()
-    ref = render_reference_cached(scene, camera, (96, 96), spp=4096, cache_dir=refs, seed=3)
-    other = render_reference_cached(scene, camera, (96, 96), spp=512, cache_dir=refs, seed=1)
+    ref = render_reference_cached(scene, camera, (96, 96), spp=NOISE_SPP, cache_dir=refs, seed=3)
+    other = render_reference_cached(scene, camera, (96, 96), spp=NOISE_SPP // 8, cache_dir=refs, seed=1)
     patches, mask = patch_image(scene, camera, (96, 96)), smooth_lit_mask(ref)
     r = Renderer(moderngl.create_standalone_context(backend="egl"))
     try:

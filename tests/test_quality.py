@@ -89,19 +89,19 @@ def test_error_falls_from_draft_to_final(egl_ctx):
 def wall_noise_of(egl_ctx, quality: str) -> dict:
     """{wall: :func:`iat.measure.noise.wall_noise` row} of the Cornell box solved at ``quality``: on its
     walls (12 x 12-pixel windows wholly on one wall, away from edges, 96 x 96), what the render has
-    beyond a quadratic and beyond the light's real structure (the 4096-spp reference's, its own noise
-    estimated against the 512-spp one)."""
+    beyond a quadratic and beyond the light's real structure (the :data:`NOISE_SPP` reference's, its own
+    noise estimated against one of an eighth the samples)."""
     pytest.importorskip("mitsuba")
     from iat.io.load import load_scene
     from iat.measure.metrics import smooth_lit_mask
-    from iat.measure.noise import patch_image, wall_noise
+    from iat.measure.noise import NOISE_SPP, patch_image, wall_noise
     from iat.measure.reference import box_filtered_render, render_reference_cached
     from iat.render.renderer import Renderer
 
     scene = load_scene(MODEL)
     camera = scene.default_camera()
-    ref = render_reference_cached(scene, camera, (96, 96), spp=4096, cache_dir=REFS, seed=3)
-    other = render_reference_cached(scene, camera, (96, 96), spp=512, cache_dir=REFS, seed=1)
+    ref = render_reference_cached(scene, camera, (96, 96), spp=NOISE_SPP, cache_dir=REFS, seed=3)
+    other = render_reference_cached(scene, camera, (96, 96), spp=NOISE_SPP // 8, cache_dir=REFS, seed=1)
     walls = {"ceiling": 1, "back": 2, "red": 3, "green": 4}
     assert all(scene.patch_area[p] > 0.3 for p in walls.values())  # the box's five big patches
     r = Renderer(egl_ctx)

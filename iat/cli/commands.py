@@ -187,7 +187,7 @@ def cmd_info(args) -> int:
     if scene.pierce is not None:  # faces other objects pierce (iat.geometry.pierce)
         pc = scene.pierce
         info.update(cut=pc.mode, piercing_pairs=pc.pairs, contacts=pc.contacts)
-        info.update(intersecting_objects=pc.objects, faces_cut=pc.faces_cut)
+        info.update(intersecting_objects=pc.objects, faces_cut=pc.faces_cut, regions_fanned=pc.fanned_regions)
     _emit(args, info)
     return 0
 

@@ -73,15 +73,15 @@ def fault_faces(
     faces: np.ndarray,
     turned: np.ndarray,
     back: np.ndarray,
-    parent: np.ndarray,
+    cut: np.ndarray,
     repeats: np.ndarray,
 ) -> FaultFaces:
     """The loader's faulty faces.
 
     vertices : (n, 3) float64 welded; faces : (f, 3) int64 after the sides step (turned outward)
     turned : (f,) bool faces of inside-out solids turned; back : (f,) bool faces given a back face
-    parent : (f',) int64 the face each face after the cuts came from (a face of more than one
-      piece was cut); repeats : (r, 3, 3) float64 the dropped repeated faces' corners
+    cut : (f,) bool faces cut in pieces where other geometry pierces them
+    repeats : (r, 3, 3) float64 the dropped repeated faces' corners
     """
     V = np.asarray(vertices, dtype=np.float64)
     F = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
@@ -89,7 +89,7 @@ def fault_faces(
     bits = np.zeros(len(F), dtype=np.uint8)
     bits[np.asarray(turned, dtype=bool)] |= INSIDE_OUT
     bits[back] |= OPEN_SHEET
-    bits[np.bincount(np.asarray(parent, dtype=np.int64), minlength=len(F))[: len(F)] > 1] |= CROSSING
+    bits[np.asarray(cut, dtype=bool)] |= CROSSING
     k = np.flatnonzero(bits)
     rep = np.asarray(repeats, dtype=np.float64).reshape(-1, 3, 3)
     return FaultFaces(

@@ -25,8 +25,11 @@ are made:
    loader passes (material, region) pairs as the materials :func:`iat.geometry.mesh.merge_quads`
    and :func:`iat.geometry.panels.make_panels` see (so no quad, no panel and no panel cell spans
    a cut) and maps them back after.
+4. :func:`refan_regions`: a region holding pieces, flat, on one uv map, whose outline is one convex
+   polygon once its straight vertices are dropped, is made again as a fan of that polygon (a wall's
+   rectangle between two slabs: two triangles, one quad, where the pieces' fans made many).
 
-:func:`cut_pierced` runs the three; its :class:`PierceReport` is ``Scene.pierce`` (``iat info``).
+:func:`cut_pierced` runs the four; its :class:`PierceReport` is ``Scene.pierce`` (``iat info``).
 """
 
 from __future__ import annotations
@@ -38,7 +41,7 @@ from numba import njit
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from iat.geometry.mesh import degenerate_faces, weld_vertices
+from iat.geometry.mesh import QUAD_SKEW_TOL, degenerate_faces, quad_twist, weld_vertices
 
 #: the loader's choices (``load_scene(cut=...)``, ``--cut``): ``crossings`` (``True``): faces cut
 #: where faces of other objects cross them;
@@ -56,6 +59,12 @@ PIERCE_TOL = 1e-5
 MIN_CROSSING = 0.25
 #: faces are coplanar neighbours of one region when their normals are within this (radians; as panels)
 REGION_ANGLE_TOL = 1e-3
+#: a region's outline vertex within this fraction of the scene diagonal of its neighbours' chord is
+#: straight (dropped from its fan), and its faces within it of one plane are flat (:func:`refan_regions`)
+STRAIGHT_TOL = 1e-8
+#: a region's faces follow one affine uv map when their corners' uvs are within this of it (relative
+#: to the uvs' size, at least 1: as merge_quads)
+UV_TOL = 1e-6
 
 
 @dataclass
@@ -69,8 +78,10 @@ class PierceReport:
     objects : objects (IFC elements, glTF primitives, OBJ groups) with a face in such a pair
     faces_cut : triangles cut (0 when ``cut`` is False; a crossing shorter than
       :data:`MIN_CROSSING` of the face's chord cuts nothing)
-    pieces : triangles they became
+    pieces : triangles they were cut into
     joined_regions : regions that joined around a cut's end (their faces merge no further)
+    fanned_regions : regions of pieces made again as one fan of their convex outline
+    triangles : triangles out, cut or not, after the fans (the input's when nothing is cut)
     """
 
     cut: bool = True
@@ -81,6 +92,8 @@ class PierceReport:
     faces_cut: int = 0
     pieces: int = 0
     joined_regions: int = 0
+    fanned_regions: int = 0
+    triangles: int = 0
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -499,17 +512,13 @@ def _spread(V, F, group, face, by, tol):
     return np.concatenate([face, f[cross]]), np.concatenate([by, by_of[rep][cross]])
 
 
-def region_labels(
-    V: np.ndarray, F: np.ndarray, material: np.ndarray, barrier: np.ndarray, parent: np.ndarray | None = None
-):
+def region_labels(V: np.ndarray, F: np.ndarray, material: np.ndarray, barrier: np.ndarray):
     """(f,) int64 region of each face and the number of regions that joined around a cut.
 
     Regions: faces joined by edges shared with a face of the same material whose normal is within
     :data:`REGION_ANGLE_TOL`, except ``barrier`` (k, 2) edges. Every face of a region holding both
-    sides of a barrier edge gets a region of its own (label ``-1 - face``), and so does every face of
-    a region made of the pieces of one ``parent`` (f,) triangle (a cut triangle of a curved surface
-    stays triangles, as it was, rather than becoming a panel); the others keep their region's number.
-    V (n, 3), F (f, 3) int64, material (f,) int64.
+    sides of a barrier edge gets a region of its own (label ``-1 - face``); the others keep their
+    region's number (>= 0). V (n, 3), F (f, 3) int64, material (f,) int64.
     """
     nf, nv = len(F), len(V)
     fa, fb, kk, ok = _coplanar_neighbours(V, F, material)
@@ -521,11 +530,174 @@ def region_labels(
     across = ok & on_barrier & (region[fa] == region[fb])
     joined = np.unique(region[fa[across]])
     lone = np.isin(region, joined)
-    if parent is not None:  # regions of one parent's pieces
-        pairs = np.unique(np.stack([region, parent], axis=1), axis=0)
-        lone |= (np.bincount(pairs[:, 0], minlength=nf) == 1)[region]
     region[lone] = -1 - np.flatnonzero(lone)
     return region, len(joined)
+
+
+def _affine_uv(tri: np.ndarray, uv: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(f, k, 2) uvs at points ``q`` (f, k, 3) by the affine maps of triangles ``tri`` (f, 3, 3) with
+    corner uvs ``uv`` (f, 3, 2), extended over their planes (barycentric coordinates)."""
+    p0 = tri[:, 0]
+    e1, e2, d = tri[:, 1] - p0, tri[:, 2] - p0, q - p0[:, None]
+    d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+    det = np.maximum(d11 * d22 - d12 * d12, 1e-300)[:, None]
+    q1, q2 = (d * e1[:, None]).sum(2), (d * e2[:, None]).sum(2)
+    beta, gamma = (d22[:, None] * q1 - d12[:, None] * q2) / det, (d11[:, None] * q2 - d12[:, None] * q1) / det
+    out = (1 - beta - gamma)[..., None] * uv[:, None, 0] + beta[..., None] * uv[:, None, 1]
+    return out + gamma[..., None] * uv[:, None, 2]
+
+
+@njit(cache=True, nogil=True)
+def _turn(V, a, b, c, n):
+    """Distance of vertex b from the chord from a to c (rows of V (n, 3)), positive where a, b, c
+    turn left about the unit normal ``n`` (3,)."""
+    ch = V[c] - V[a]
+    return (np.cross(V[b] - V[a], V[c] - V[b]) * n).sum() / max(np.sqrt((ch * ch).sum()), 1e-300)
+
+
+@njit(cache=True, nogil=True)
+def _loop(F, faces, nv):
+    """The outline of faces ``faces`` (m,) of F (f, 3) (nv vertices) as one loop: (k,) int64 the
+    face corners ``3 f + j`` starting its edges, in order; empty unless it is one loop of edges
+    that its faces use once each."""
+    m, none = 3 * len(faces), np.zeros(0, np.int64)
+    key = np.empty(m, np.int64)  # half-edge 3 i + j: faces[i]'s from its corner j
+    for h in range(m):
+        key[h] = F[faces[h // 3], h % 3] * nv + F[faces[h // 3], (h % 3 + 1) % 3]
+    o = np.argsort(key)
+    ks = key[o]
+    rev = ks % nv * nv + ks // nv
+    b = o[ks[np.minimum(np.searchsorted(ks, rev), m - 1)] != rev]  # outline edges, by start vertex
+    if (ks[1:] == ks[:-1]).any() or len(b) == 0:
+        return none
+    start, out, i = key[b] // nv, np.empty(len(b), np.int64), 0
+    for s in range(len(b)):  # (a vertex starting two outline edges leaves one unvisited: none)
+        out[s], v = 3 * faces[b[i] // 3] + b[i] % 3, key[b[i]] % nv
+        i = np.searchsorted(start, v)
+        if i == len(b) or start[i] != v:
+            return none
+        if i == 0:
+            return out if s + 1 == len(b) else none
+    return none
+
+
+@njit(cache=True, nogil=True)
+def _convex(V, loop, n, tol):
+    """(k',) int64 the positions in ``loop`` (k,) (vertex ids of V) left once the straight vertices
+    (within ``tol`` of their neighbours' chord) are dropped, when that polygon is convex (every kept
+    vertex turns left about ``n`` by more than ``tol``, every dropped one lies within ``tol`` of the
+    edge replacing it); else empty."""
+    k, none = len(loop), np.zeros(0, np.int64)
+    corner = np.zeros(k, np.bool_)
+    for i in range(k):  # (a vertex where the outline turns back is no straight one)
+        back = ((V[loop[i]] - V[loop[i - 1]]) * (V[loop[(i + 1) % k]] - V[loop[i]])).sum() <= 0
+        corner[i] = back or abs(_turn(V, loop[i - 1], loop[i], loop[(i + 1) % k], n)) > tol
+    keep = np.nonzero(corner)[0]
+    for s in range(len(keep)):
+        i, j = keep[s], keep[(s + 1) % len(keep)]
+        if len(keep) < 3 or _turn(V, loop[keep[s - 1]], loop[i], loop[j], n) <= tol:
+            return none
+        for x in range(i + 1, i + (j - i) % k):
+            if abs(_turn(V, loop[i], loop[x % k], loop[j], n)) > tol:
+                return none
+    return keep
+
+
+@njit(cache=True, nogil=True)
+def _outline(F, V, faces, tol):
+    """The fan of faces ``faces`` (m,) of F (f, 3), V (n, 3): the corners (k,) int64 ``3 f + j`` of
+    their outline in order, its straight vertices dropped, when the faces lie within ``tol`` of one
+    plane, their outline is one loop (:func:`_loop`), convex (:func:`_convex`), and its fan covers
+    their area; else empty."""
+    n, none = np.zeros(3), np.zeros(0, np.int64)
+    for f in faces:
+        n += np.cross(V[F[f, 1]] - V[F[f, 0]], V[F[f, 2]] - V[F[f, 0]])
+    area = 0.5 * np.sqrt((n * n).sum())
+    n /= max(2.0 * area, 1e-300)
+    for f in faces:
+        for j in range(3):
+            if abs(((V[F[f, j]] - V[F[faces[0], 0]]) * n).sum()) > tol:
+                return none
+    loop = _loop(F, faces, len(V))
+    keep = _convex(V, F.ravel()[loop], n, tol) if len(loop) else loop
+    c = F.ravel()[loop[keep]]
+    fan, rim = 0.0, 0.0
+    for i in range(len(c)):
+        rim += np.sqrt(((V[c[(i + 1) % len(c)]] - V[c[i]]) ** 2).sum())
+        if 0 < i < len(c) - 1:
+            fan += 0.5 * (np.cross(V[c[i]] - V[c[0]], V[c[i + 1]] - V[c[0]]) * n).sum()
+    return loop[keep] if abs(fan - area) <= tol * rim else none  # (not an outline winding twice)
+
+
+@njit(cache=True, nogil=True)
+def _fans(F, V, order, start, tol):
+    """Fans (:func:`_outline`) of the regions ``order[start[r]:start[r + 1]]`` (faces of F (f, 3),
+    V (n, 3)) that have one: corners (t, 3) int64 (face corners ``3 f + j``: the fan's vertex
+    ``F[f, j]`` with that corner's uv), region (t,) int64 r; a fan has no more triangles than faces."""
+    cor, reg, t = np.empty((len(order), 3), np.int64), np.empty(len(order), np.int64), 0
+    for r in range(len(start) - 1):
+        c = _outline(F, V, order[start[r] : start[r + 1]], tol)
+        for i in range(1, len(c) - 1):
+            cor[t, 0], cor[t, 1], cor[t, 2] = c[0], c[i], c[i + 1]
+            reg[t] = r
+            t += 1
+    return cor[:t], reg[:t]
+
+
+def _off_map(V, F, uv, region, faces):
+    """(f,) bool the faces of the regions (``region`` >= 0) where a face of ``faces`` (k,) int64
+    leaves the affine uv map of its region's first face by more than :data:`UV_TOL`."""
+    first = np.full(len(F), len(F))
+    np.minimum.at(first, region[faces], faces)
+    ref = first[region[faces]]
+    err = np.abs(_affine_uv(V[F[ref]], uv[ref], V[F[faces]]) - uv[faces]).max(axis=(1, 2))
+    return np.isin(region, region[faces][err > UV_TOL * np.maximum(1.0, np.abs(uv[faces]).max(axis=(1, 2)))])
+
+
+def refan_regions(V, F, uv, region, parent, piece, tol):
+    """Each region (``region`` >= 0) holding a piece (``piece`` (f,) bool) whose faces follow one
+    affine uv map and whose outline is one convex loop once its straight vertices are dropped
+    (:func:`_fans`) becomes a fan of that loop: a rectangle cut from a wall, two triangles (one quad
+    for :func:`iat.geometry.mesh.merge_quads`). A dropped vertex stays a corner of the faces across
+    the outline: a T-junction between patches, as panels and pre-splits make.
+
+    V (n, 3) float64; F (f, 3) int64; uv (f, 3, 2) float64; region, parent (f,) int64; tol : scene
+    units. Returns (faces (f', 3), uv (f', 3, 2), region (f',), parent (f',) (a fan triangle's: its
+    region's first face's), fanned (f',) bool), each fan in place of its region's first face.
+    """
+    lab, real = np.maximum(region, 0), region >= 0
+    size, held = np.bincount(lab[real], minlength=len(F)), np.bincount(lab[real & piece], minlength=len(F))
+    cand = real & (size[lab] >= 2) & (held[lab] > 0)
+    cand &= ~_off_map(V, F, uv, region, np.flatnonzero(cand))
+    order = np.flatnonzero(cand)
+    if len(order) == 0:
+        return F, uv, region, parent, np.zeros(len(F), bool)
+    order = order[np.argsort(region[order], kind="stable")]
+    start = np.flatnonzero(np.r_[True, region[order][1:] != region[order][:-1], True])
+    cor, reg = _fans(F, V, order, start, tol)
+    head = order[start[reg]]  # each fan triangle's region's first face
+    keep = np.flatnonzero(~(cand & np.isin(region, region[head])))
+    o = np.argsort(np.concatenate([keep, head]), kind="stable")
+    return (
+        np.concatenate([F[keep], F.reshape(-1)[cor]])[o],
+        np.concatenate([uv[keep], uv.reshape(-1, 2)[cor]])[o],
+        np.concatenate([region[keep], region[head]])[o],
+        np.concatenate([parent[keep], parent[head]])[o],
+        np.concatenate([np.zeros(len(keep), bool), np.ones(len(cor), bool)])[o],
+    )
+
+
+def _own_regions(V, F, region, one, fanned):
+    """(f,) bool faces that keep a region of their own: a joined region's (``region`` < 0) and a
+    region of one parent triangle's pieces (``one`` (labels,) bool) unless it is one triangle or a
+    fan of two making a parallelogram (the quad :func:`merge_quads` makes): a cut triangle of a
+    curved surface becomes one patch or stays triangles, not a panel. F (f, 3), fanned (f,) bool."""
+    lab = np.maximum(region, 0)
+    size = np.bincount(lab[region >= 0], minlength=len(one))
+    i = np.flatnonzero(fanned[:-1] & (size[lab[:-1]] == 2) & (region[1:] == region[:-1]))  # fan pairs
+    twist = quad_twist(V[F[i, 0]], V[F[i, 1]], V[F[i, 2]], V[F[i + 1, 2]])
+    flat = np.isin(region, region[i][twist <= QUAD_SKEW_TOL])
+    return (region < 0) | (one[lab] & (size[lab] > 1) & ~flat)
 
 
 @dataclass
@@ -535,7 +707,8 @@ class Pierced:
     vertices (n', 3) float64; faces (f', 3) int64; face_uv (f', 3, 2) float64 (interpolated);
     code (f',) int64: the materials the patch makers see, (material, region) pairs numbered;
     codes (codes,) int64: each code's material, or None when nothing was cut (then
-    ``code`` is the material); parent (f',) int64 input face; report :class:`PierceReport`.
+    ``code`` is the material); parent (f',) int64 input face (a fan triangle's: one of its
+    region's); cut (f,) bool the input faces cut in pieces; report :class:`PierceReport`.
     """
 
     vertices: np.ndarray
@@ -544,6 +717,7 @@ class Pierced:
     code: np.ndarray
     codes: np.ndarray | None
     parent: np.ndarray
+    cut: np.ndarray
     report: PierceReport
 
 
@@ -558,7 +732,8 @@ def cut_pierced(
     tol_rel: float = PIERCE_TOL,
 ) -> Pierced:
     """Find the faces other objects pierce (:func:`pierced_pairs`) and, when ``cut``, cut them
-    (:func:`cut_faces`) and label the sides of each cut (:func:`region_labels`).
+    (:func:`cut_faces`), label the sides of each cut (:func:`region_labels`) and fan the convex
+    regions again (:func:`refan_regions`).
 
     V (n, 3) float64 welded; F (f, 3) int64; material (f,) int64; face_uv (f, 3, 2) float64;
     objects (f,) int64; contacts : also cut a face along the faces that rest on it (a slab ending
@@ -569,7 +744,8 @@ def cut_pierced(
     F = np.asarray(F, dtype=np.int64).reshape(-1, 3)
     material = np.asarray(material, dtype=np.int64)
     used = V[np.unique(F)] if len(F) else np.zeros((1, 3))
-    tol = tol_rel * max(float(np.linalg.norm(used.max(axis=0) - used.min(axis=0))), 1e-300)
+    diag = max(float(np.linalg.norm(used.max(axis=0) - used.min(axis=0))), 1e-300)
+    tol = tol_rel * diag
     pp = pierced_pairs(V[F], objects, tol, contacts)
     face, by = np.concatenate([pp.a, pp.b, pp.c]), np.concatenate([pp.b, pp.a, pp.d])
     chord = np.concatenate([pp.span[:, 0], pp.span[:, 1], pp.contact_span[:, 0]])
@@ -581,25 +757,26 @@ def cut_pierced(
     face, by = _long_crossings(F, V, face, by, chord, overlap, tol)
     group = np.unique(np.stack([objects, material], axis=1), axis=0, return_inverse=True)[1].reshape(-1)
     face, by = _spread(V, F, group, face, by, tol)
-    same = Pierced(V, F, face_uv, material, None, np.arange(len(F)), report)
+    report.triangles = len(F)
+    same = Pierced(V, F, face_uv, material, None, np.arange(len(F)), np.zeros(len(F), bool), report)
     if not cut or len(face) == 0:
         return same
     V2, F2, parent, barrier, n_cut = cut_faces(V, F, face, by, tol)
-    # uvs: each corner's barycentric coordinates in its parent triangle
-    p0, p1, p2 = (V[F[parent, k]] for k in range(3))
-    e1, e2 = p1 - p0, p2 - p0
-    q = V2[F2] - p0[:, None]
-    d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
-    det = np.maximum(d11 * d22 - d12 * d12, 1e-300)[:, None]
-    q1, q2 = (q * e1[:, None]).sum(2), (q * e2[:, None]).sum(2)
-    beta, gamma = (d22[:, None] * q1 - d12[:, None] * q2) / det, (d11[:, None] * q2 - d12[:, None] * q1) / det
-    uvp = np.asarray(face_uv, dtype=np.float64)[parent]  # (f', 3, 2)
-    uv = (1 - beta - gamma)[..., None] * uvp[:, None, 0] + beta[..., None] * uvp[:, None, 1]
-    uv += gamma[..., None] * uvp[:, None, 2]
-    region, joined = region_labels(V2, F2, material[parent], barrier, parent)
+    was_cut = np.bincount(parent, minlength=len(F)) > 1
+    uv = _affine_uv(V[F[parent]], np.asarray(face_uv, dtype=np.float64)[parent], V2[F2])
+    region, joined = region_labels(V2, F2, material[parent], barrier)
+    real = region >= 0  # regions of one parent's pieces
+    pairs = np.unique(np.stack([region[real], parent[real]], axis=1), axis=0)
+    one = np.bincount(pairs[:, 0], minlength=len(F2)) == 1
+    piece = np.isin(parent, face)
+    F2, uv, region, parent, fanned = refan_regions(V2, F2, uv, region, parent, piece, STRAIGHT_TOL * diag)
+    report.fanned_regions = len(np.unique(region[fanned]))
+    lone = _own_regions(V2, F2, region, one, fanned)
+    region[lone] = -1 - np.flatnonzero(lone)
+    used, F2 = np.unique(F2, return_inverse=True)  # the fans' dropped vertices
+    V2, F2 = V2[used], F2.reshape(-1, 3)
     pairs, code = np.unique(np.stack([material[parent], region], axis=1), axis=0, return_inverse=True)
-    report.faces_cut = int(n_cut)
-    report.pieces = int(np.isin(parent, np.unique(face)).sum())
-    report.joined_regions = int(joined)
+    report.faces_cut, report.pieces, report.joined_regions = int(n_cut), int(piece.sum()), int(joined)
+    report.triangles = len(F2)
     code = code.reshape(-1).astype(np.int64)
-    return Pierced(V2, F2, uv, code, pairs[:, 0].astype(np.int64), parent, report)
+    return Pierced(V2, F2, uv, code, pairs[:, 0].astype(np.int64), parent, was_cut, report)

@@ -460,7 +460,7 @@ def load_scene(
     if cut == "auto":  # a model taken as built: its elements rest on each other
         cut = "all" if ext == ".ifc" or sides == "both" else "crossings"
     pierced = cut_pierced(V, F, M, UV, objects, cut=cut != "none", contacts=cut == "all")
-    faults = fault_faces(V, F, turned, side.back, pierced.parent, repeats)
+    faults = fault_faces(V, F, turned, side.back, pierced.cut, repeats)
     V, F, UV, M, code_material = pierced.vertices, pierced.faces, pierced.face_uv, pierced.code, pierced.codes
     report(_STAGES["weld"], "merging quads")
     corners, pmat, puv = merge_quads(V, F, M, UV)
