@@ -195,7 +195,8 @@ def test_traced_gather_is_the_three_steps(field, correlated):
                 fld = np.random.default_rng(1).random((9, 9, 3))
                 mean = fld.reshape(-1, 3).mean(axis=0)
             got = ctx.gathers.gathers(1, [(geo, None)], 5, 3, fld, mean, correlated=correlated)[0]
-            out[name, threads] = (*got, ctx.gathers._vis_rays[1], ctx.gathers._vis_seen[1] > 0, vis.rays)
+            patch, rays, seen = ctx.gathers.culling.rows[1]
+            out[name, threads] = (*got, patch, rays, seen > 0, vis.rays)
     ref = out["embreex", 2]
     assert len(ref[0]) > 200 and 0 < (ref[1] > 0).mean() < 1
     for key, res in out.items():

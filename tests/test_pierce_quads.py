@@ -129,16 +129,20 @@ def test_a_triangle_cut_into_a_parallelogram_and_trapezoids():
     assert _area(p.vertices[tri]).sum() == pytest.approx(0.5 * W * W, rel=1e-12)
 
 
-def test_a_non_convex_region_keeps_its_pieces():
+def test_a_non_convex_region_is_two_quads():
     """An L-shaped wall cut across its foot: the strip below is one quad, the L above (not convex)
-    keeps the pieces the cut made."""
+    two (iat.geometry.decompose, cut across its longest edge, the foot's)."""
     L = [(0, 0, 0), (2, 0, 0), (2, 1, 0), (1, 1, 0), (1, 2, 0), (0, 2, 0)]
     V = np.array(L + [(-1, 0.5, -1), (-1, 0.5, 1), (3, 0.5, 1), (3, 0.5, -1)], float)
     F = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 5], [3, 4, 5], [6, 7, 8], [6, 8, 9]])
     obj = np.array([0, 0, 0, 0, 1, 1])
     p, corners, owner, _ = _patches(V, F, obj, np.zeros((len(F), 3, 2)))
-    c = p.vertices[corners[owner == 0]]
-    below = c[..., 1].max(axis=1) <= 0.5 + 1e-12
-    assert below.sum() == 1 and (corners[owner == 0][below, 3] >= 0).all()
+    wall = corners[owner == 0]
+    assert (wall[:, 3] >= 0).all() and len(wall) == 3 and p.report.decomposed_regions == 1
+    q = p.vertices[wall]
+    box = np.stack([q[..., 0].min(1), q[..., 0].max(1), q[..., 1].min(1), q[..., 1].max(1)], axis=1)
+    np.testing.assert_allclose(box[np.lexsort(box.T[::-1])], [[0, 1, 0.5, 2], [0, 2, 0, 0.5], [1, 2, 0.5, 1]])
     above = p.faces[(p.parent < 4) & (p.vertices[p.faces][..., 1].min(axis=1) >= 0.5 - 1e-12)]
-    assert len(above) > 4 and _area(p.vertices[above]).sum() == pytest.approx(2.0, rel=1e-12)
+    assert len(above) == 4 and _area(p.vertices[above]).sum() == pytest.approx(2.0, rel=1e-12)
+    P = p.vertices[above]
+    assert (np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])[:, 2] > 0).all()  # the wall's winding

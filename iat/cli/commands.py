@@ -188,6 +188,7 @@ def cmd_info(args) -> int:
         pc = scene.pierce
         info.update(cut=pc.mode, piercing_pairs=pc.pairs, contacts=pc.contacts)
         info.update(intersecting_objects=pc.objects, faces_cut=pc.faces_cut, regions_fanned=pc.fanned_regions)
+        info.update(regions_in_cells=pc.decomposed_regions)
     _emit(args, info)
     return 0
 

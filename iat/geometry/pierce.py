@@ -27,7 +27,8 @@ are made:
    a cut) and maps them back after.
 4. :func:`refan_regions`: a region holding pieces, flat, on one uv map, whose outline is one convex
    polygon once its straight vertices are dropped, is made again as a fan of that polygon (a wall's
-   rectangle between two slabs: two triangles, one quad, where the pieces' fans made many).
+   rectangle between two slabs: two triangles, one quad, where the pieces' fans made many); else
+   as fans of the convex cells :mod:`iat.geometry.decompose` cuts it into (a wall with a door: three).
 
 :func:`cut_pierced` runs the four; its :class:`PierceReport` is ``Scene.pierce`` (``iat info``).
 """
@@ -41,6 +42,7 @@ from numba import njit
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from iat.geometry.decompose import decompose_regions, region_plane
 from iat.geometry.mesh import QUAD_SKEW_TOL, degenerate_faces, quad_twist, weld_vertices
 
 #: the loader's choices (``load_scene(cut=...)``, ``--cut``): ``crossings`` (``True``): faces cut
@@ -80,7 +82,9 @@ class PierceReport:
       :data:`MIN_CROSSING` of the face's chord cuts nothing)
     pieces : triangles they were cut into
     joined_regions : regions that joined around a cut's end (their faces merge no further)
-    fanned_regions : regions of pieces made again as one fan of their convex outline
+    fanned_regions : regions of pieces made again as fans: of their convex outline, or of the convex
+      cells they are cut into (:func:`refan_regions`)
+    decomposed_regions : of those, the regions cut into convex cells (an outline not convex, or holes)
     triangles : triangles out, cut or not, after the fans (the input's when nothing is cut)
     """
 
@@ -93,6 +97,7 @@ class PierceReport:
     pieces: int = 0
     joined_regions: int = 0
     fanned_regions: int = 0
+    decomposed_regions: int = 0
     triangles: int = 0
 
     def to_dict(self) -> dict:
@@ -609,16 +614,8 @@ def _outline(F, V, faces, tol):
     their outline in order, its straight vertices dropped, when the faces lie within ``tol`` of one
     plane, their outline is one loop (:func:`_loop`), convex (:func:`_convex`), and its fan covers
     their area; else empty."""
-    n, none = np.zeros(3), np.zeros(0, np.int64)
-    for f in faces:
-        n += np.cross(V[F[f, 1]] - V[F[f, 0]], V[F[f, 2]] - V[F[f, 0]])
-    area = 0.5 * np.sqrt((n * n).sum())
-    n /= max(2.0 * area, 1e-300)
-    for f in faces:
-        for j in range(3):
-            if abs(((V[F[f, j]] - V[F[faces[0], 0]]) * n).sum()) > tol:
-                return none
-    loop = _loop(F, faces, len(V))
+    n, area = region_plane(F, V, faces, tol)  # area 0: not flat
+    loop = _loop(F, faces, len(V)) if area > 0.0 else np.zeros(0, np.int64)
     keep = _convex(V, F.ravel()[loop], n, tol) if len(loop) else loop
     c = F.ravel()[loop[keep]]
     fan, rim = 0.0, 0.0
@@ -626,7 +623,7 @@ def _outline(F, V, faces, tol):
         rim += np.sqrt(((V[c[(i + 1) % len(c)]] - V[c[i]]) ** 2).sum())
         if 0 < i < len(c) - 1:
             fan += 0.5 * (np.cross(V[c[i]] - V[c[0]], V[c[i + 1]] - V[c[0]]) * n).sum()
-    return loop[keep] if abs(fan - area) <= tol * rim else none  # (not an outline winding twice)
+    return loop[keep] if abs(fan - area) <= tol * rim else loop[:0]  # (not an outline winding twice)
 
 
 @njit(cache=True, nogil=True)
@@ -656,14 +653,18 @@ def _off_map(V, F, uv, region, faces):
 
 def refan_regions(V, F, uv, region, parent, piece, tol):
     """Each region (``region`` >= 0) holding a piece (``piece`` (f,) bool) whose faces follow one
-    affine uv map and whose outline is one convex loop once its straight vertices are dropped
-    (:func:`_fans`) becomes a fan of that loop: a rectangle cut from a wall, two triangles (one quad
-    for :func:`iat.geometry.mesh.merge_quads`). A dropped vertex stays a corner of the faces across
-    the outline: a T-junction between patches, as panels and pre-splits make.
+    affine uv map is made again as fans: one of its outline when that is one convex loop once its
+    straight vertices are dropped (:func:`_fans`; a rectangle cut from a wall: two triangles, one
+    quad for :func:`iat.geometry.mesh.merge_quads`), else one of each convex cell
+    :func:`iat.geometry.decompose.decompose_regions` cuts it into (a wall with a door: three). A
+    dropped vertex or a cut's new end on the outline stays a corner of the faces across it: a
+    T-junction between patches, as panels and pre-splits make.
 
     V (n, 3) float64; F (f, 3) int64; uv (f, 3, 2) float64; region, parent (f,) int64; tol : scene
-    units. Returns (faces (f', 3), uv (f', 3, 2), region (f',), parent (f',) (a fan triangle's: its
-    region's first face's), fanned (f',) bool), each fan in place of its region's first face.
+    units. Returns (vertices (n', 3) (V, then the new corners), faces (f', 3), uv (f', 3, 2) (a
+    cell's by its region's affine map), region (f',), parent (f',) (a fan triangle's: its region's
+    first face's), made (f',) int8: 1 a triangle of a convex outline's fan, 2 of a cell's, 0 kept),
+    each region's fans in place of its first face.
     """
     lab, real = np.maximum(region, 0), region >= 0
     size, held = np.bincount(lab[real], minlength=len(F)), np.bincount(lab[real & piece], minlength=len(F))
@@ -671,19 +672,32 @@ def refan_regions(V, F, uv, region, parent, piece, tol):
     cand &= ~_off_map(V, F, uv, region, np.flatnonzero(cand))
     order = np.flatnonzero(cand)
     if len(order) == 0:
-        return F, uv, region, parent, np.zeros(len(F), bool)
+        return V, F, uv, region, parent, np.zeros(len(F), np.int8)
     order = order[np.argsort(region[order], kind="stable")]
     start = np.flatnonzero(np.r_[True, region[order][1:] != region[order][:-1], True])
     cor, reg = _fans(F, V, order, start, tol)
-    head = order[start[reg]]  # each fan triangle's region's first face
+    rest = np.ones(len(start) - 1, bool)
+    rest[reg] = False  # the regions with no convex outline
+    sub = order[np.repeat(rest, np.diff(start))]
+    sub_start = np.r_[0, np.cumsum(np.diff(start)[rest])]
+    tri, creg, points = decompose_regions(F, V, sub, sub_start, tol)
+    if len(points):  # a cut's end that regions either side of a barrier share: one vertex
+        points, at = weld_vertices(points, np.arange(len(points)))
+        new = tri >= len(V)
+        tri[new] = len(V) + at[tri[new] - len(V)]
+    head = np.r_[order[start[reg]], sub[sub_start[creg]]]  # each triangle's region's first face
+    V2 = np.concatenate([V, points])
     keep = np.flatnonzero(~(cand & np.isin(region, region[head])))
     o = np.argsort(np.concatenate([keep, head]), kind="stable")
+    cell_uv = _affine_uv(V[F[head[len(cor) :]]], uv[head[len(cor) :]], V2[tri])
+    made = np.repeat(np.array([0, 1, 2], np.int8), [len(keep), len(cor), len(tri)])
     return (
-        np.concatenate([F[keep], F.reshape(-1)[cor]])[o],
-        np.concatenate([uv[keep], uv.reshape(-1, 2)[cor]])[o],
+        V2,
+        np.concatenate([F[keep], F.reshape(-1)[cor], tri])[o],
+        np.concatenate([uv[keep], uv.reshape(-1, 2)[cor], cell_uv])[o],
         np.concatenate([region[keep], region[head]])[o],
         np.concatenate([parent[keep], parent[head]])[o],
-        np.concatenate([np.zeros(len(keep), bool), np.ones(len(cor), bool)])[o],
+        made[o],
     )
 
 
@@ -769,9 +783,10 @@ def cut_pierced(
     pairs = np.unique(np.stack([region[real], parent[real]], axis=1), axis=0)
     one = np.bincount(pairs[:, 0], minlength=len(F2)) == 1
     piece = np.isin(parent, face)
-    F2, uv, region, parent, fanned = refan_regions(V2, F2, uv, region, parent, piece, STRAIGHT_TOL * diag)
-    report.fanned_regions = len(np.unique(region[fanned]))
-    lone = _own_regions(V2, F2, region, one, fanned)
+    V2, F2, uv, region, parent, made = refan_regions(V2, F2, uv, region, parent, piece, STRAIGHT_TOL * diag)
+    report.fanned_regions = len(np.unique(region[made > 0]))
+    report.decomposed_regions = len(np.unique(region[made == 2]))
+    lone = _own_regions(V2, F2, region, one, made > 0)
     region[lone] = -1 - np.flatnonzero(lone)
     used, F2 = np.unique(F2, return_inverse=True)  # the fans' dropped vertices
     V2, F2 = V2[used], F2.reshape(-1, 3)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from iat.radiosity.direct import DirectLight
 from iat.radiosity.gathers import Gathers
+from iat.radiosity.heap import fix_mmap_threshold
 from iat.radiosity.options import SolveOptions
 from iat.radiosity.patches import Patches
 from iat.radiosity.tasks import TaskPool
@@ -18,6 +19,7 @@ class Context:
     ``light`` (:class:`~iat.radiosity.direct.DirectLight`: the sources and their direct light)."""
 
     def __init__(self, scene, opts: SolveOptions, vis: Visibility):
+        fix_mmap_threshold()
         self.opts, self.vis = opts, vis
         self.patches = Patches.of_scene(scene, opts)
         self.pool = TaskPool(vis)

@@ -20,9 +20,9 @@ from iat.radiosity.bundles import (
     sample_rays,
     traced_rows,
 )
+from iat.radiosity.culling import CullCounts, pack, unpack
 from iat.radiosity.formfactor import point_polygon
 from iat.radiosity.options import (
-    CULL_RAYS,
     F_DIRECTION,
     FF_FAR,
     GATHER_BLOCK,
@@ -52,8 +52,9 @@ class _Shot(NamedTuple):
 
 class Gathers:
     """The gathers of one solve. Owns the caches they share across shots (patterns, shooters,
-    per-thread scratch, the patches in front of each shooter) and the culling counts: per
-    shooter, the rays traced to each receiver patch and how many got through. Thread-safe:
+    per-thread scratch, the patches in front of each shooter as bits) and ``culling``
+    (:class:`~iat.radiosity.culling.CullCounts`: per shooter, the rays traced to each receiver
+    patch it reached and how many got through). Thread-safe:
     shots run two at a time (:class:`~iat.radiosity.tasks.TaskPool`)."""
 
     def __init__(self, patches: Patches, opts: SolveOptions, vis: Visibility, pool: TaskPool):
@@ -63,9 +64,8 @@ class Gathers:
         self._pattern_points = 0  # (u, v) pairs in _patterns
         self._buffers = threading.local()  # per thread: the gathers' scratch (:meth:`_scratch`)
         self._lock = threading.Lock()  # form-factor caches and cull counts, shared by gather threads
-        self._cand: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        self._vis_rays: dict[int, np.ndarray] = {}
-        self._vis_seen: dict[int, np.ndarray] = {}
+        self._cand: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # packed (:meth:`candidates`)
+        self.culling = CullCounts()
 
     def pattern(self, s: int, m: int, shot: int) -> np.ndarray:
         """(m*m, 2) stratified jittered (u, v) in [0, 1)^2 for patch s (fixed per seed, patch, shot)."""
@@ -111,6 +111,7 @@ class Gathers:
     def candidates(self, s: int) -> tuple[np.ndarray, np.ndarray]:
         """(P,) bool ``full, part``: receiver patches that can see the front of patch s, entirely
         in front of its plane (``full``) or straddling it (``part``: test per vertex)."""
+        P = self.patches.n_patches
         if s not in self._cand:
             poly = self.patches.polygon(s)
             # some corner of s strictly in front of the receiver's plane
@@ -124,16 +125,19 @@ class Gathers:
             ahead = hr > 0.1 * self.patches.eps_ff + 1e-9 * self.patches.scale
             any_ahead = (ahead & self.patches.valid_corner).any(axis=1)
             all_ahead = (ahead | ~self.patches.valid_corner).all(axis=1)
-            self._cand[s] = (sees & all_ahead, sees & any_ahead & ~all_ahead)
-        return self._cand[s]
+            self._cand[s] = (pack(sees & all_ahead), pack(sees & any_ahead & ~all_ahead))
+        full, part = self._cand[s]
+        return unpack(full, P), unpack(part, P)
 
     def allowed(self, s: int, cull: bool, patches: np.ndarray | None) -> np.ndarray | None:
         """(P,) bool receiver patches allowed for s (``patches``, less the ones earlier gathers
         of s found fully occluded when ``cull``), or None for all."""
         ok = None if patches is None else np.asarray(patches, dtype=bool)
-        if cull and s in self._vis_rays:
-            hidden = (self._vis_rays[s] >= CULL_RAYS) & (self._vis_seen[s] == 0)
-            ok = ~hidden if ok is None else ok & ~hidden
+        if cull and s in self.culling:
+            with self._lock:
+                hidden = self.culling.hidden(s)
+            ok = np.ones(self.patches.n_patches, dtype=bool) if ok is None else ok.copy()
+            ok[hidden] = False
         return ok
 
     def receiver_patches(self, s: int, cull: bool = False, patches: np.ndarray | None = None) -> np.ndarray:
@@ -172,7 +176,8 @@ class Gathers:
         cache = geo.cache
         with self._lock:  # gathers of other shooters may share the cache (:meth:`imap`)
             entry = None if cache is None else cache.entry(s, self.patches.n_patches)
-        need = ok if entry is None else (~entry[2] if ok is None else ok & ~entry[2])
+        done = None if entry is None else unpack(entry[2], self.patches.n_patches)
+        need = ok if entry is None else (~done if ok is None else ok & ~done)
         if entry is None or need.any():
             idx = self.receivers(s, geo, need)
             f = self._form_factors(s, geo.ff[idx], geo.normal[idx])
@@ -182,7 +187,7 @@ class Gathers:
                 return idx, f
             entry[0] = np.concatenate([entry[0], idx])
             entry[1] = np.concatenate([entry[1], f.astype(np.float32)])
-            entry[2] |= True if need is None else need
+            entry[2] = pack(done | need)
             with self._lock:
                 cache.grew(s, len(idx))
         idx, f = entry[0], entry[1]
@@ -216,10 +221,10 @@ class Gathers:
     def culled_fraction(self) -> float:
         """Fraction of (shooter, candidate receiver patch) pairs found fully occluded."""
         tot = hid = 0
-        for s, rays in self._vis_rays.items():
+        for s in self.culling.rows:
             full, part = self.candidates(s)
             tot += int((full | part).sum())
-            hid += int(((rays >= CULL_RAYS) & (self._vis_seen[s] == 0) & (full | part)).sum())
+            hid += int((full | part)[self.culling.hidden(s)].sum())
         return hid / tot if tot else 0.0
 
     def gather(
@@ -307,18 +312,12 @@ class Gathers:
         embree_args = self.vis.embree_args()
         if embree_args is not None:  # each set in one kernel that traces its own rays
             done = [self._traced(shot_job, k, embree_args) for k in range(len(sets))]
-            outs, rays_p, seen_p = ([d[j] for d in done] for j in range(3))
+            outs, counts = [d[0] for d in done], [d[1:] for d in done]
         else:
-            outs, rays_p, seen_p = self._blocks(shot_job, field is not None)
+            outs, counts = self._blocks(shot_job, field is not None)
         with self._lock:
-            for k, (_, idx, _) in enumerate(sets):
-                if len(idx) == 0:
-                    continue
-                if s in self._vis_rays:
-                    self._vis_rays[s] += rays_p[k]
-                    self._vis_seen[s] += seen_p[k]
-                else:
-                    self._vis_rays[s], self._vis_seen[s] = rays_p[k], seen_p[k]
+            for c in counts:
+                self.culling.add(s, *c)
         if with_ff:
             return [(idx, out, f) for (_, idx, f), out in zip(sets, outs, strict=True)]
         return [(idx, out) for (_, idx, _), out in zip(sets, outs, strict=True)]
@@ -334,11 +333,11 @@ class Gathers:
 
     def _traced(self, shot: _Shot, k: int, embree_args: tuple):
         """Set k of a gather in one :func:`~iat.radiosity.traced.gather_traced` call on the ray
-        threads: its rows' values, and the rays traced and seen per receiver patch (P,)."""
+        threads: its rows' values, and per row its patch, rays traced and rays seen (k,)."""
         geo, idx, f = shot.sets[k]
-        P = self.patches.n_patches
         if len(idx) == 0:
-            return np.zeros(0 if not shot.field.has_field else (0, 3)), np.zeros(P), np.zeros(P)
+            e = np.zeros(0)
+            return np.zeros(0 if not shot.field.has_field else (0, 3)), e.astype(np.int64), e, e
         t0 = time.perf_counter()
         with self.vis.kernel_threads():
             out, seen, rays, through = traced_rows(
@@ -347,17 +346,13 @@ class Gathers:
                 shot.pat, shot.shooter, shot.field,
             )  # fmt: skip
         self.vis.count(int(rays.sum()) + int(through), time.perf_counter() - t0)
-        patch = geo.patch[idx]
-        return (
-            out if shot.field.has_field else out[:, 0],
-            np.bincount(patch, weights=rays, minlength=P),
-            np.bincount(patch, weights=seen, minlength=P),
-        )
+        return out if shot.field.has_field else out[:, 0], geo.patch[idx], rays, seen
 
     def _blocks(self, shot: _Shot, has_field: bool) -> tuple[list, list, list]:
         """A gather's sets in blocks of at most ``GATHER_BLOCK`` receivers (a large set in as many
         as there are threads) on the gather threads, each traced with :meth:`Visibility.visible`
-        (embreex's path): per set its rows' values, rays and rays seen per receiver patch."""
+        (embreex's path): per set its rows' values, and per block its rows' patches, rays traced and
+        rays seen (the counts :class:`CullCounts` takes)."""
         jobs = []
         for k, (_, idx, _) in enumerate(shot.sets):
             size = GATHER_BLOCK
@@ -365,19 +360,17 @@ class Gathers:
                 size = min(size, -(-len(idx) // self.vis.threads))
             jobs += [(k, slice(a, a + size)) for a in range(0, len(idx), size)]
         outs = [np.zeros(len(idx) if not has_field else (len(idx), 3)) for _, idx, _ in shot.sets]
-        rays_p = [np.zeros(self.patches.n_patches) for _ in shot.sets]
-        seen_p = [np.zeros(self.patches.n_patches) for _ in shot.sets]
+        counts = []
         results = self.pool.imap(lambda job: self._block(shot, job), jobs, no_check)
         for (k, sl), res in zip(jobs, results, strict=True):
             if res is not None:
                 outs[k][sl] = res[0]
-                rays_p[k] += res[1]
-                seen_p[k] += res[2]
-        return outs, rays_p, seen_p
+                counts.append(res[1:])
+        return outs, counts
 
     def _block(self, shot: _Shot, job: tuple[int, slice]):
         """One block of receivers of a gather, ``job = (set, rows)``: its rows' values, and the
-        rays traced and seen per receiver patch (P,); None when no sample has weight."""
+        patches, rays traced and rays seen (b,); None when no sample has weight."""
         geo, idx, f = shot.sets[job[0]]
         sl = job[1]
         fb = np.ascontiguousarray(f[sl], dtype=np.float64)
@@ -394,9 +387,4 @@ class Gathers:
             return None
         vis = self.vis.visible(smp.o, smp.d, smp.tfar)
         val, seen = finish_rows(smp, vis, fb, rows, shot.shooter, shot.field)
-        P = self.patches.n_patches
-        return (
-            val if shot.field.has_field else val[:, 0],
-            np.bincount(rows.patch, weights=np.diff(smp.off), minlength=P),
-            np.bincount(rows.patch, weights=seen, minlength=P),
-        )
+        return val if shot.field.has_field else val[:, 0], rows.patch, np.diff(smp.off), seen

@@ -40,7 +40,7 @@ COARSE_EPS = (0.002, 0.02)
 COARSE_SIZE = (0.125, 0.25)
 #: distance in shooter radii beyond which a form factor comes from a Gauss rule (cheaper, accurate far off)
 FF_FAR = 4.0
-#: (receiver, shooter) form factors kept for the shooters' later shots on one mesh, a count (8 bytes each)
+#: (receiver, shooter) form factors kept for the shooters' later shots on one mesh, a count (12 bytes each)
 FF_CACHE_ENTRIES = 12_000_000
 #: sample patterns kept for reuse (stage C gathers every source with one pattern per pass), in (u, v) pairs
 PATTERN_CACHE_POINTS = 1_000_000

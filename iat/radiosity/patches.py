@@ -12,6 +12,7 @@ import numpy as np
 from iat.geometry import quadtree as qt
 from iat.geometry.clip import clamp_into, coverage_grid
 from iat.geometry.sides import twin_index
+from iat.radiosity.culling import pack
 from iat.radiosity.options import (
     FF_CACHE_ENTRIES,
     FF_EPS,
@@ -26,9 +27,11 @@ from iat.radiosity.sampling import luminance_of
 
 class FormFactorCache:
     """Per shooter, the analytic form factors it has to the receivers of one geometry (a mesh's
-    vertices or a coarse grid): ``entries[s] = [idx (k,) int64, f (k,) float32, done (P,) bool]``
-    (the receivers found so far and the patches already searched). A patch shoots several times
-    on the same mesh; when the entries exceed ``FF_CACHE_ENTRIES`` the oldest shooters go first."""
+    vertices or a coarse grid): ``entries[s] = [idx (k,) int64, f (k,) float32, done (ceil(P /
+    8),) uint8]`` (the receivers found so far, and the patches already searched as
+    :func:`~iat.radiosity.culling.pack`'s bits). A patch shoots several times on the same mesh;
+    when the entries (``done`` counted as its bytes / 12) exceed ``FF_CACHE_ENTRIES`` the oldest
+    shooters go first."""
 
     def __init__(self):
         self.entries: dict[int, list[np.ndarray]] = {}
@@ -41,16 +44,17 @@ class FormFactorCache:
             e = self.entries[s] = [
                 np.zeros(0, dtype=np.int64),
                 np.zeros(0, dtype=np.float32),
-                np.zeros(n_patches, dtype=bool),
+                pack(np.zeros(n_patches, dtype=bool)),
             ]
+            self.size += len(e[2]) // 12
         return e
 
     def grew(self, s: int, n: int) -> None:
         """Count n more entries of shooter s, dropping the oldest other shooters above the limit."""
         self.size += n
         while self.size > FF_CACHE_ENTRIES and len(self.entries) > 1:
-            old = next(k for k in self.entries if k != s)
-            self.size -= len(self.entries.pop(old)[0])
+            old = self.entries.pop(next(k for k in self.entries if k != s))
+            self.size -= len(old[0]) + len(old[2]) // 12
 
 
 @dataclass
