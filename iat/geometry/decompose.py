@@ -23,19 +23,33 @@ from numba.typed import Dict
 
 
 @njit(cache=True, nogil=True)
+def boundary_half_edges(F, faces, nv):
+    """The half-edges of faces ``faces`` (m,) of F (f, 3) (nv vertices), ``3 i + j`` the one of
+    ``faces[i]`` from its corner j, that no face uses the other way: (b,) int64, by start vertex, and
+    their keys ``start * nv + end`` (b,); both empty when a half-edge repeats (an edge used twice the
+    same way) or there is none."""
+    m, none = 3 * len(faces), (np.zeros(0, np.int64), np.zeros(0, np.int64))
+    key = np.empty(m, np.int64)
+    for h in range(m):
+        key[h] = F[faces[h // 3], h % 3] * nv + F[faces[h // 3], (h % 3 + 1) % 3]
+    o = np.argsort(key)
+    ks = key[o]
+    rev = ks % nv * nv + ks // nv
+    rim = ks[np.minimum(np.searchsorted(ks, rev), m - 1)] != rev
+    if (ks[1:] == ks[:-1]).any() or not rim.any():
+        return none
+    return o[rim], ks[rim]
+
+
+@njit(cache=True, nogil=True)
 def boundary_loops(F, faces, nv):
     """The boundary of faces ``faces`` (m,) of F (f, 3) (nv vertices) as loops (the faces on their
     left): vertex ids (b,) int64 along each loop and the loops' starts in it (l + 1,) int64; both
     empty unless each edge is used once per direction and each boundary vertex starts and ends one
     boundary edge (no pinched outline)."""
-    m, none = 3 * len(faces), (np.zeros(0, np.int64), np.zeros(0, np.int64))
-    key = np.empty(m, np.int64)  # half-edges, start * nv + end
-    for h in range(m):
-        key[h] = F[faces[h // 3], h % 3] * nv + F[faces[h // 3], (h % 3 + 1) % 3]
-    ks = np.sort(key)
-    rev = ks % nv * nv + ks // nv
-    b = ks[ks[np.minimum(np.searchsorted(ks, rev), m - 1)] != rev]  # boundary, by start vertex
-    if (ks[1:] == ks[:-1]).any() or len(b) == 0:
+    none = (np.zeros(0, np.int64), np.zeros(0, np.int64))
+    b = boundary_half_edges(F, faces, nv)[1]
+    if len(b) == 0:
         return none
     src, dst = b // nv, b % nv
     if (src[1:] == src[:-1]).any() or (np.sort(dst) != src).any():
@@ -329,15 +343,15 @@ def _cells(F, V, faces, tol):
     rim = 0.0
     for i in range(len(kp)):
         rim += np.sqrt((x[kp[nxt[i]]] - x[kp[i]]) ** 2 + (y[kp[nxt[i]]] - y[kp[i]]) ** 2)
-    axis, fewest = -1, (0, 0)
-    for a in range(2):  # cuts across x, then across y (the coordinates turned a quarter right)
-        edge, _, cs, _, _ = _slabs(x[kp] if a == 0 else y[kp], y[kp] if a == 0 else -x[kp], nxt, tol)
-        if len(cs) > 1 and (axis < 0 or (len(cs), len(edge)) < fewest):  # fewer cells, then corners
-            axis, fewest = a, (len(cs), len(edge))
-    if axis < 0:
+    across_x = _slabs(x[kp], y[kp], nxt, tol)
+    across_y = _slabs(y[kp], -x[kp], nxt, tol)  # the coordinates turned a quarter right
+    nx, ny = len(across_x[2]), len(across_y[2])  # cells + 1 (1: the slabs failed)
+    if nx == 1 and ny == 1:
         return none
-    X, Y = (x, y) if axis == 0 else (y, -x)
-    edge, at, cs, line, pos = _slabs(X[kp], Y[kp], nxt, tol)
+    # the axis with fewer cells, then fewer corners
+    turned = nx == 1 or (ny > 1 and (ny, len(across_y[0])) < (nx, len(across_x[0])))
+    X, Y = (y, -x) if turned else (x, y)
+    edge, at, cs, line, pos = across_y if turned else across_x
     ids, px, py, P = _corner_points(V, verts, starts, kp, loop, nxt, X, Y, edge, at, line, pos, tol)
     tri = _fan_cells(ids, px, py, cs, area, rim, len(faces), tol)
     return _used_points(tri, P) if len(tri) else none

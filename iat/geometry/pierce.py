@@ -42,7 +42,7 @@ from numba import njit
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from iat.geometry.decompose import decompose_regions, region_plane
+from iat.geometry.decompose import boundary_half_edges, decompose_regions, region_plane
 from iat.geometry.mesh import QUAD_SKEW_TOL, degenerate_faces, quad_twist, weld_vertices
 
 #: the loader's choices (``load_scene(cut=...)``, ``--cut``): ``crossings`` (``True``): faces cut
@@ -565,19 +565,13 @@ def _loop(F, faces, nv):
     """The outline of faces ``faces`` (m,) of F (f, 3) (nv vertices) as one loop: (k,) int64 the
     face corners ``3 f + j`` starting its edges, in order; empty unless it is one loop of edges
     that its faces use once each."""
-    m, none = 3 * len(faces), np.zeros(0, np.int64)
-    key = np.empty(m, np.int64)  # half-edge 3 i + j: faces[i]'s from its corner j
-    for h in range(m):
-        key[h] = F[faces[h // 3], h % 3] * nv + F[faces[h // 3], (h % 3 + 1) % 3]
-    o = np.argsort(key)
-    ks = key[o]
-    rev = ks % nv * nv + ks // nv
-    b = o[ks[np.minimum(np.searchsorted(ks, rev), m - 1)] != rev]  # outline edges, by start vertex
-    if (ks[1:] == ks[:-1]).any() or len(b) == 0:
+    none = np.zeros(0, np.int64)
+    b, key = boundary_half_edges(F, faces, nv)  # outline edges, by start vertex
+    if len(b) == 0:
         return none
-    start, out, i = key[b] // nv, np.empty(len(b), np.int64), 0
+    start, out, i = key // nv, np.empty(len(b), np.int64), 0
     for s in range(len(b)):  # (a vertex starting two outline edges leaves one unvisited: none)
-        out[s], v = 3 * faces[b[i] // 3] + b[i] % 3, key[b[i]] % nv
+        out[s], v = 3 * faces[b[i] // 3] + b[i] % 3, key[i] % nv
         i = np.searchsorted(start, v)
         if i == len(b) or start[i] != v:
             return none
