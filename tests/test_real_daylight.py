@@ -327,15 +327,11 @@ def test_within_the_issue_bounds_at_the_defaults(case, egl_ctx, tmp_path_factory
     assert f["rel_error"] <= BOUND_DEFAULT, f
 
 
-#: cases whose error rose from draft to default to fine when last measured (draft 6.4-12.6 %, default
-#: 2.4-5.9 %, fine 2.2-5.7 %)
+#: cases whose error rose from draft to default to fine when last measured (draft 6.9-7.8 %, default
+#: 2.4-4.2 %, fine 2.2-3.8 %)
 KNOWN_RISING: dict[str, str] = {}
 #: cases above 5 % at fine when last measured
-KNOWN_SHORT_FINE: dict[str, str] = {
-    "near_white": "measured 5.7 % at fine (default 5.9 %): the room of albedo 0.97 reads 5 % darker than "
-    "Mitsuba everywhere; a 0.4 % difference per bounce in what the mesh receives, x 14 over the bounces "
-    "(docs/benchmarks.md, 'Panel cells by their covered area': the near-white room's deficit)",
-}
+KNOWN_SHORT_FINE: dict[str, str] = {}
 #: how much an error may rise from one preset to the next and still count as not rising (the
 #: reference's noise on the blocks is ~1.5 %, but common to all presets: the solves differ far less)
 RISE_SLACK = 0.005

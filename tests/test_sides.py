@@ -392,3 +392,36 @@ def test_walls_with_their_own_backs_keep_the_ambient_term(tmp_path):
         out[name] = (float(sol.vert_radiance[inner, 0].mean()), sol.stats["ambient_luminance_fraction"])
     assert out["backs"][0] == pytest.approx(out["plain"][0], rel=0.01)
     assert out["backs"][1] == pytest.approx(out["plain"][1], rel=0.05) and out["plain"][1] > 0.3
+
+
+def test_overlap_groups_find_patches_overlapping_in_their_plane():
+    """A cladding panel on its wall and a plaque on the panel make one group; the wall's back face
+    (the other way), a neighbouring wall sharing an edge, the two triangles of a split quad and a
+    panel a hair in front of the wall's plane make none."""
+    from iat.geometry.sides import overlap_groups
+
+    def quad(x0, x1, y0, y1, z=0.0, facing=1):
+        q = np.array([[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]], dtype=float)
+        return q if facing > 0 else q[[0, 3, 2, 1]]
+
+    tri_a = np.array([[10, 0, 0], [12, 0, 0], [12, 2, 0], [12, 2, 0]], dtype=float)
+    tri_b = np.array([[10, 0, 0], [12, 2, 0], [10, 2, 0], [10, 2, 0]], dtype=float)
+    corners = np.stack(
+        [
+            quad(0, 4, 0, 3),  # 0 the wall
+            quad(0.5, 3.5, 0.3, 2.4),  # 1 the cladding on it
+            quad(1, 2, 1, 2),  # 2 a plaque on the cladding
+            quad(0, 4, 0, 3, facing=-1),  # 3 the wall's back
+            quad(4, 8, 0, 3),  # 4 the next wall, sharing an edge
+            tri_a,  # 5, 6 a quad split in two
+            tri_b,
+            quad(20, 22, 0, 2),  # 7 a wall, and 8 a panel 1 mm in front of it
+            quad(20.5, 21.5, 0.5, 1.5, z=0.001),
+        ]
+    )
+    is_quad = np.array([True] * 5 + [False, False, True, True])
+    normal = np.tile([0.0, 0.0, 1.0], (9, 1))
+    normal[3] = [0.0, 0.0, -1.0]
+    got = overlap_groups(corners, is_quad, normal, 1e-5)
+    assert got[0] == got[1] == got[2] >= 0
+    assert (got[3:] == -1).all()

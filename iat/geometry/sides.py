@@ -407,3 +407,52 @@ def twin_index(corner_positions: np.ndarray, is_quad: np.ndarray) -> tuple[np.nd
     swap = has & (pos[t, 0] == pos[:, 0]).all(axis=1)
     swap &= (pos[t, 1] == pos[np.arange(P), last]).all(axis=1)
     return twin, swap
+
+
+def overlap_groups(
+    corner_positions: np.ndarray, is_quad: np.ndarray, normal: np.ndarray, tol: float
+) -> np.ndarray:
+    """(P,) int64: for each patch that overlaps another patch of the same plane facing the same way
+    (a cladding panel on its wall, a finish on its slab; the centre of one lies inside the other),
+    the label of its group of such patches (0, 1, ...); -1 for the rest. Two planes are one when
+    their normals agree to 1e-3 and their offsets to ``tol`` (m); a partial overlap that covers
+    neither centre is not found.
+
+    corner_positions : (P, 4, 3) (a triangle's slot 3 repeats slot 2); is_quad : (P,) bool;
+    normal : (P, 3) unit normals, the corners counter-clockwise about them."""
+    pos = np.asarray(corner_positions, dtype=np.float64).reshape(-1, 4, 3)
+    q = np.asarray(is_quad, dtype=bool)
+    nrm = np.asarray(normal, dtype=np.float64)
+    P = len(pos)
+    if P < 2:
+        return np.full(P, -1, dtype=np.int64)
+    centre = np.where(q[:, None], pos.mean(axis=1), pos[:, :3].mean(axis=1))
+    key = np.column_stack([np.round(nrm / 1e-3), np.round((nrm * centre).sum(axis=1) / max(tol, 1e-300))])
+    order = np.lexsort(key.T[::-1])
+    ks = key[order]
+    cut = np.flatnonzero((ks[1:] != ks[:-1]).any(axis=1)) + 1
+    # edges (P, 4, 3): a triangle's last edge closes it, its fourth is empty
+    nxt = np.where(q[:, None], np.array([1, 2, 3, 0]), np.array([1, 2, 0, 0]))
+    edge = np.take_along_axis(pos, nxt[..., None], axis=1) - pos
+    edge[~q, 3] = 0.0
+    pairs = []
+    for group in np.split(order, cut):
+        if len(group) < 2:
+            continue
+        size = np.linalg.norm(edge[group], axis=-1).max(axis=-1)  # (m,)
+        empty = ~q[group][:, None] & (np.arange(4) == 3)  # (m, 4): a triangle's fourth edge
+        for a in range(0, len(group), 1024):  # the centres tested, in blocks
+            rows = group[a : a + 1024]
+            rel = centre[rows][:, None, None, :] - pos[group][None]  # (r, m, 4, 3)
+            side = (np.cross(edge[group][None], rel) * nrm[group][None, :, None, :]).sum(axis=-1)
+            inside = ((side > 1e-9 * size[None, :, None] ** 2) | empty[None]).all(axis=-1)
+            i, j = np.nonzero(inside & (rows[:, None] != group[None, :]))
+            pairs.append(np.column_stack([rows[i], group[j]]))
+    pairs = np.concatenate(pairs) if pairs else np.zeros((0, 2), dtype=np.int64)
+    label = np.full(P, -1, dtype=np.int64)
+    if len(pairs):
+        member = np.unique(pairs)
+        at = np.searchsorted(member, pairs)
+        graph = coo_matrix((np.ones(len(at)), (at[:, 0], at[:, 1])), shape=(len(member), len(member)))
+        label[member] = connected_components(graph, directed=False)[1]
+    return label

@@ -682,7 +682,7 @@ def cosine_rays(dx, dy, t1, t2, normal, origin32, w, o, d):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def ambient_hits(tri, bary, dirs, tri_patch, tri_uv, normal, twin, twin_swap, means, flat, g, k, first,
-                 rows, cols, counts):  # fmt: skip
+                 back, rows, cols, counts):  # fmt: skip
     """The ambient term's rays of a block of vertices, ``k`` each, in vertex order (n * k,): where
     a ray meets a front face (opaque triangle ``tri`` >= 0, barycentric ``bary`` (n*k, 2), direction
     ``dirs`` (n*k, 3) against the normal (P, 3) of its patch ``tri_patch[tri]``), the unshot radiance
@@ -690,9 +690,10 @@ def ambient_hits(tri, bary, dirs, tri_patch, tri_uv, normal, twin, twin_swap, me
     each patch's g x g lattice) at the hit's lattice (u, v) (``tri_uv`` (T, 3, 2)); a ray that meets
     the back of a patch with a coincident ``twin`` (P,) (-1: none) facing it reads the twin there
     (at (v, u) where ``twin_swap`` (P,), else the twin's mean ``means`` (P, 3)). Adds each
-    vertex's mean over its rays to ``first`` (n, 3); writes per vertex the patches its rays met
-    (``rows`` its index in the block, ``cols`` the patch) and the fraction of its rays on each
-    (``counts``), and returns how many such pairs."""
+    vertex's mean over its rays to ``first`` (n, 3) and the fraction of its rays that meet a back
+    face (no twin: the inside of a solid, a vertex buried in it) to ``back`` (n,); writes per
+    vertex the patches its rays met (``rows`` its index in the block, ``cols`` the patch) and the
+    fraction of its rays on each (``counts``), and returns how many such pairs."""
     n = tri.shape[0] // k
     found = np.empty(k, dtype=np.int64)
     tally = np.empty(k, dtype=np.int64)
@@ -709,6 +710,7 @@ def ambient_hits(tri, bary, dirs, tri_patch, tri_uv, normal, twin, twin_swap, me
             swap = False
             if dirs[q, 0] * normal[p, 0] + dirs[q, 1] * normal[p, 1] + dirs[q, 2] * normal[p, 2] >= 0.0:
                 if twin[p] < 0:
+                    back[v] += 1.0 / k
                     continue  # a back face
                 swap = twin_swap[p]
                 p = twin[p]  # the back of a sheet whose twin faces the ray: the twin's light

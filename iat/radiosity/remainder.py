@@ -9,11 +9,22 @@ remainder's first bounce ``R1``, at the resolution of the unshot light (a sunlit
 lights what faces it, not its whole room). The same rays, traced again, read ``R1`` where they land
 for the second bounce ``R2`` (a patch's light is uneven: the Cornell box's walls are one patch
 each), except on panel cells (clipped patches), which give their patch mean over their surface
-(their lattice square reaches past it). The bounces after are solved on the patches: the rays, averaged
-over each patch, give a sampled patch-to-patch form-factor matrix ``F = M F_v`` (P, P); the later
-reflected radiance ``B`` (P, 3) solves ``B = rho F (R2 + B)`` (``R2`` as patch means), and each
-vertex adds ``rho F_v (R2 + B)``. Rays that leave the scene or meet a back face bring nothing, so an
-open scene's remainder escapes as it would.
+(their lattice square reaches past it). The bounces after are solved on the patches.
+
+What the vertices gather gives each bounce its shape; how much power a patch holds comes from the
+same rays read the other way. A vertex's rays, weighted by the power its radiance stands for,
+carry that power to the patches they meet (``F_v`` transposed: every watt lands somewhere or
+leaves the scene), and each bounce's vertex values are scaled, patch by patch, to hold the power
+their patch so receives (:func:`ambient_term`'s ``fit``). Linear interpolation between vertices
+that gathered the light is not kept: the light a coarse element misses between its corners (a
+wall lit by a sun patch on the floor is dark at its foot and bright above) would be lost at every
+bounce, 3.5 % of the first in a near-white box, and a room of albedo 0.97 multiplies that by ~30.
+The later bounces' power ``Phi`` (P, 3) is the series ``Phi = rho T (Phi2 + Phi)``, ``T`` the same
+rays' patch-to-patch transfer of uniform light, and each vertex adds ``rho F_v`` of the bounces'
+radiance, fitted to it. A patch's mean and the power its vertices send count only the vertices
+that can be seen (:func:`seen_average`: the floor under a cupboard is not lit), and patches that
+overlap in a plane hold and send their light as one surface (:func:`overlap_shares`). Rays that
+leave the scene or meet a back face bring nothing, so an open scene's remainder escapes as it would.
 """
 
 from __future__ import annotations
@@ -21,10 +32,12 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
+from iat.geometry.sides import overlap_groups
 from iat.radiosity.kernels import ambient_hits, cosine_rays
 from iat.radiosity.options import (
     AMBIENT_BLOCK_RAYS,
     AMBIENT_BOUNCE_TOL,
+    AMBIENT_FIT_LIMIT,
     AMBIENT_GRID,
     AMBIENT_MAX_BOUNCES,
     MAX_REFLECTANCE,
@@ -55,16 +68,17 @@ def hemisphere_rays(ctx, geo, rays: int):
 
 
 def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, rays: int, check, tally: bool):
-    """(V, 3) each vertex's mean, over its :func:`hemisphere_rays`, of the radiance ``grids``
-    ((P, g+1, g+1, 3): each patch's field on a g x g lattice) where they meet a front face, and,
-    when ``tally``, the (V, P) CSR fraction of each vertex's rays that meet each patch (else None).
+    """``(mean, fv, buried)``: (V, 3) each vertex's mean, over its :func:`hemisphere_rays`, of the
+    radiance ``grids`` ((P, g+1, g+1, 3): each patch's field on a g x g lattice) where they meet a
+    front face; when ``tally``, the (V, P) CSR fraction of each vertex's rays that meet each patch
+    (else None); (V,) the fraction of its rays that meet a back face (a vertex inside a solid).
     geo : the vertices' :class:`~iat.radiosity.patches.ReceiverGeometry`; tri_patch (T,), tri_uv
     (T, 3, 2): the patch and lattice (u, v) of each of ``vis``'s opaque triangles."""
     g = grids.shape[1] - 1
     pt = ctx.patches
     flat = np.ascontiguousarray(grids.reshape(-1, 3))
     means = np.ascontiguousarray(grids.reshape(len(grids), -1, 3).mean(axis=1))  # (P, 3), for twins
-    mean = np.zeros((len(geo.key), 3))
+    mean, buried = np.zeros((len(geo.key), 3)), np.zeros(len(geo.key))
     per_vertex, cols, counts = [], [], []  # (V, P) CSR by rows: the kernel writes them in vertex order
     for sl, o, d, w, k in hemisphere_rays(ctx, geo, rays):
         tri, bary = vis.first_hits(o, d, np.full(len(o), 4.0 * ctx.patches.scale, dtype=np.float32))
@@ -83,6 +97,7 @@ def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, rays:
             g,
             k,
             mean[sl],
+            buried[sl],
             r,
             c,
             f,
@@ -93,10 +108,50 @@ def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, rays:
             counts.append(f[:m])
         check()
     if not tally:
-        return mean, None
+        return mean, None, buried
     indptr = np.concatenate([[0], np.cumsum(np.concatenate(per_vertex))])
     shape = (len(geo.key), ctx.patches.n_patches)
-    return mean, sparse.csr_matrix((np.concatenate(counts), np.concatenate(cols), indptr), shape=shape)
+    fv = sparse.csr_matrix((np.concatenate(counts), np.concatenate(cols), indptr), shape=shape)
+    return mean, fv, buried
+
+
+def seen_average(avg: sparse.csr_matrix, buried: np.ndarray) -> sparse.csr_matrix:
+    """The patch-mean matrix ``avg`` (P, V) with each vertex weighted by the fraction of its
+    hemisphere that is not inside a solid (1 - ``buried`` (V,)), rows summed to 1 again: the mean
+    over the part of a patch that can be seen (a floor under a cupboard, a wall's foot in a slab
+    hold no light, and would dilute the patch's mean and its rows of F at every later bounce).
+    A patch buried whole keeps its row."""
+    w = avg @ sparse.diags(np.clip(1.0 - buried, 0.0, 1.0))
+    s = np.asarray(w.sum(axis=1)).ravel()
+    keep = s > 1e-9
+    w = sparse.diags(np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)) @ w
+    return sparse.csr_matrix(w + sparse.diags(~keep * 1.0) @ avg)
+
+
+def overlap_shares(pt):
+    """``(share, pooled)`` of the patches ``pt`` for the ambient term's powers: where patches overlap
+    in a plane (:func:`iat.geometry.sides.overlap_groups`: a cladding panel on its wall) the rays
+    that land there meet one or the other by chance, so such a group holds and sends its light as
+    one surface of its largest member's area. share (P,): the part of its area a patch sends from
+    (that area over the group's summed area; 1 elsewhere); pooled(power (P, 3)) -> (P, 3) the power
+    per unit area of each patch, of its group's summed power over that area where grouped."""
+    group = overlap_groups(pt.corners, pt.is_quad, pt.normal, pt.eps_ray)
+    grouped = group >= 0
+    share = np.ones(len(group))
+    if not grouped.any():
+        return share, lambda power: power / pt.area[:, None]
+    g = group[grouped]
+    span = np.zeros(g.max() + 1)
+    np.maximum.at(span, g, pt.area[grouped])
+    share[grouped] = span[g] / np.bincount(g, weights=pt.area[grouped])[g]
+
+    def pooled(power):
+        out = power / pt.area[:, None]
+        sums = np.stack([np.bincount(g, weights=power[grouped, c]) for c in range(3)], axis=1)
+        out[grouped] = sums[g] / span[g][:, None]
+        return out
+
+    return share, pooled
 
 
 def ambient_term(
@@ -106,29 +161,49 @@ def ambient_term(
     module docstring), on the solve's ``mesh`` (V vertices).
 
     unshot : (V, 3) unshot radiance; gain : (P,) each patch's shot gain; rays : per vertex."""
-    geo, avg, rho, lattice = mesh.geo, mesh.M, mesh.rho, mesh.lattice
-    g = min(AMBIENT_GRID, ctx.patches.n)
+    geo, rho, lattice, pt = mesh.geo, mesh.rho, mesh.lattice, ctx.patches
+    g = min(AMBIENT_GRID, pt.n)
     tris = scene.world_triangle_patch()[vis.opaque], scene.world_triangle_uv()[vis.opaque]
     grids = lattice.coarse_grids(unshot, g) * gain[:, None, None, None]
-    first, fv = hemisphere_gather(ctx, geo, vis, *tris, grids, rays, check, True)
-    r1 = rho * first
+    first, fv, buried = hemisphere_gather(ctx, geo, vis, *tris, grids, rays, check, True)
+    avg = seen_average(mesh.M, buried)
+    share, pooled = overlap_shares(pt)
+    unfit = share < 1.0
+    vp = np.pi * np.asarray(avg.T @ (pt.area * share))  # (V,) the power (W) of unit radiance at each
+    albedo = np.asarray(pt.albedo, dtype=np.float64)
+    fvt = fv.T  # (P, V), CSC: no copy
+
+    def sent(field):  # (P, 3) the power the vertices' radiance field (V, 3) sends to each patch
+        return np.asarray(fvt @ (vp[:, None] * field))
+
+    def fit(r, power):  # r (V, 3) scaled patch by patch to hold the power (P, 3) its patch receives
+        held = np.pi * pt.area[:, None] * np.asarray(avg @ r)
+        ok = held > 1e-300
+        c = np.where(ok & ~unfit[:, None], power / np.where(ok, held, 1.0), 1.0)
+        return r * np.clip(c, 1.0 / AMBIENT_FIT_LIMIT, AMBIENT_FIT_LIMIT)[geo.patch]
+
+    r1 = fit(rho * first, albedo * sent(unshot * gain[geo.patch][:, None]))
     grids = lattice.coarse_grids(r1, g)
-    grids[ctx.patches.clipped] = np.asarray(avg @ r1)[ctx.patches.clipped][:, None, None, :]
-    second, _ = hemisphere_gather(ctx, geo, vis, *tris, grids, rays, check, False)  # the same rays again
-    r2 = rho * second
-    rho_p = np.minimum(np.asarray(ctx.patches.albedo, dtype=np.float64), MAX_REFLECTANCE)
-    src = np.asarray(avg @ r2)
+    grids[pt.clipped] = np.asarray(avg @ r1)[pt.clipped][:, None, None, :]
+    second, _, _ = hemisphere_gather(ctx, geo, vis, *tris, grids, rays, check, False)  # the same rays again
+    power2 = albedo * sent(r1)
+    r2 = fit(rho * second, power2)
+    rho_p = np.minimum(albedo, MAX_REFLECTANCE)
 
-    def bounce(x):  # rho F x, F = M F_v (P, P) not formed: in a large building it holds every
-        return rho_p * np.asarray(avg @ np.asarray(fv @ x))  # pair of patches that see each other
+    def radiance(power):  # (P, 3) the uniform radiance of each patch's power, pooled where they overlap
+        return pooled(power) / np.pi
 
-    # B = rho F (R2 + B): its Neumann series, summed to a tolerance (rho F's norm < MAX_REFLECTANCE)
-    later = np.zeros_like(src)
-    term = bounce(src)
-    scale = max(float(np.abs(src).sum()), 1e-300)
+    def bounce(power):  # (P, 3) the power reflected from what each patch's uniform light sends
+        return rho_p * sent(radiance(power)[geo.patch])
+
+    # the later bounces' power, a Neumann series summed to a tolerance (each bounce < MAX_REFLECTANCE)
+    later = np.zeros_like(power2)
+    term = bounce(power2)
+    scale = max(float(np.abs(power2).sum()), 1e-300)
     for _ in range(AMBIENT_MAX_BOUNCES):
         later += term
         if np.abs(term).sum() <= AMBIENT_BOUNCE_TOL * scale:
             break
         term = bounce(term)
-    return r1 + r2 + rho * np.asarray(fv @ (src + later))
+    r3 = fit(rho * np.asarray(fv @ radiance(power2 + later)), later)
+    return r1 + r2 + r3
