@@ -94,7 +94,7 @@ AMBIENT_BOUNCE_TOL = 1e-4
 AMBIENT_MAX_BOUNCES = 500
 #: the ambient term scales a patch's bounce by at most this (or 1 / this) to hold the power its
 #: patch receives
-AMBIENT_FIT_LIMIT = 4.0
+AMBIENT_FIT_LIMIT = 1.5
 #: upper bound of the albedo in the ambient term's later bounces and of the measured reflected
 #: fraction r (keeps their sum finite in an albedo-1 room; at 0.95 a room of albedo 0.97 was 16 % dark)
 MAX_REFLECTANCE = 0.99
