@@ -93,7 +93,9 @@ AMBIENT_BOUNCE_TOL = 1e-4
 #: ... or this many bounces, a count
 AMBIENT_MAX_BOUNCES = 500
 #: the ambient term scales a patch's bounce by at most this (or 1 / this) to hold the power its
-#: patch receives
+#: patch receives: a patch whose vertices miss more of its light know its shape too little to scale
+#: it (4: the furnished room's slot beside its cabinet 4.1 % bright, the near-white room 2.3 % at
+#: fine; 1.5: 3.6 % and 3.1 %; 1.25: 2.5 % and 3.8 %)
 AMBIENT_FIT_LIMIT = 1.5
 #: upper bound of the albedo in the ambient term's later bounces and of the measured reflected
 #: fraction r (keeps their sum finite in an albedo-1 room; at 0.95 a room of albedo 0.97 was 16 % dark)
