@@ -435,19 +435,26 @@ def overlap_groups(
     nxt = np.where(q[:, None], np.array([1, 2, 3, 0]), np.array([1, 2, 0, 0]))
     edge = np.take_along_axis(pos, nxt[..., None], axis=1) - pos
     edge[~q, 3] = 0.0
+    lo = np.where(q[:, None], pos.min(axis=1), pos[:, :3].min(axis=1)) - tol
+    hi = np.where(q[:, None], pos.max(axis=1), pos[:, :3].max(axis=1)) + tol
     pairs = []
     for group in np.split(order, cut):
         if len(group) < 2:
             continue
-        size = np.linalg.norm(edge[group], axis=-1).max(axis=-1)  # (m,)
-        empty = ~q[group][:, None] & (np.arange(4) == 3)  # (m, 4): a triangle's fourth edge
         for a in range(0, len(group), 1024):  # the centres tested, in blocks
             rows = group[a : a + 1024]
-            rel = centre[rows][:, None, None, :] - pos[group][None]  # (r, m, 4, 3)
-            side = (np.cross(edge[group][None], rel) * nrm[group][None, :, None, :]).sum(axis=-1)
-            inside = ((side > 1e-9 * size[None, :, None] ** 2) | empty[None]).all(axis=-1)
-            i, j = np.nonzero(inside & (rows[:, None] != group[None, :]))
-            pairs.append(np.column_stack([rows[i], group[j]]))
+            c = centre[rows][:, None, :]
+            # candidates: the boxes that hold the centre; then the centre inside every edge
+            i, j = np.nonzero(((lo[group][None] <= c) & (c <= hi[group][None])).all(axis=-1))
+            i, j = rows[i], group[j]
+            keep = i != j
+            i, j = i[keep], j[keep]
+            rel = centre[i][:, None, :] - pos[j]  # (k, 4, 3)
+            side = (np.cross(edge[j], rel) * nrm[j][:, None, :]).sum(axis=-1)
+            size = np.linalg.norm(edge[j], axis=-1).max(axis=-1)
+            empty = ~q[j][:, None] & (np.arange(4) == 3)  # a triangle's fourth edge
+            inside = ((side > 1e-9 * size[:, None] ** 2) | empty).all(axis=-1)
+            pairs.append(np.column_stack([i[inside], j[inside]]))
     pairs = np.concatenate(pairs) if pairs else np.zeros((0, 2), dtype=np.int64)
     label = np.full(P, -1, dtype=np.int64)
     if len(pairs):
