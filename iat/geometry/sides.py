@@ -435,8 +435,7 @@ def overlap_groups(
     nxt = np.where(q[:, None], np.array([1, 2, 3, 0]), np.array([1, 2, 0, 0]))
     edge = np.take_along_axis(pos, nxt[..., None], axis=1) - pos
     edge[~q, 3] = 0.0
-    lo = np.where(q[:, None], pos.min(axis=1), pos[:, :3].min(axis=1)) - tol
-    hi = np.where(q[:, None], pos.max(axis=1), pos[:, :3].max(axis=1)) + tol
+    lo, hi = pos.min(axis=1) - tol, pos.max(axis=1) + tol  # (a triangle's slot 3 is a corner too)
     pairs = []
     for group in np.split(order, cut):
         if len(group) < 2:
