@@ -9,8 +9,10 @@ of another commit, ``git worktree add``), ``--runs`` times each, alternating.
 The model is loaded as ``iat solve`` loads it (``load_scene``, the default daylight with ``--sun``
 and ``--sky`` at the model's own place, the sun's shadows cut), then ``solve(scene, SolveOptions())``.
 Per run: load and solve seconds, the stages' seconds (``stats``), elements, shots, rays, and per
-sky pass the calls, vertices, directions a vertex and the pass's wall seconds (by wrapping
-``DirectLight._sky_pass`` where the tree has it).
+sky estimate the vertices, the rays traced and the directions that took their stratum's value
+(``stats["sky_counts"]``, trees from issue 41's seventh stop on), or for older trees per sky pass
+the calls, vertices, directions a vertex and the pass's wall seconds (by wrapping
+``DirectLight._sky_pass``).
 """
 
 from __future__ import annotations
@@ -57,6 +59,7 @@ print("RESULT " + json.dumps({
     "stages_s": {k: st.get(k) for k in ("meshing_s", "shooting_s", "refining_s")},
     "elements": int(st["elements"]), "shots": int(st["shots"]), "rays": int(st.get("rays", 0)),
     "sky_passes": [{"directions": k, "calls": v[0], "vertices": v[1], "s": v[2]} for k, v in passes.items()],
+    "sky_counts": st.get("sky_counts"),
 }), flush=True)
 """
 
@@ -80,12 +83,15 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     trees = dict(t.split("=", 1) for t in args.tree) or {"now": str(ROOT)}
     print("| tree | solve s | meshing / shooting / refining s | elements | shots | sky passes "
-          "(directions: vertices, s) |\n|---|---:|---|---:|---:|---|")  # fmt: skip
+          "(directions: vertices, s; or vertices: rays traced / directions given) |"
+          "\n|---|---:|---|---:|---:|---|")  # fmt: skip
     for _ in range(args.runs):
         for label, tree in trees.items():
             r = run(Path(tree).resolve(), args.model, args.sun, args.sky)
             stages = " / ".join(f"{v:.1f}" if v is not None else "-" for v in r["stages_s"].values())
             sky = ", ".join(f"{p['directions']}: {p['vertices']}, {p['s']:.1f}" for p in r["sky_passes"])
+            if r.get("sky_counts"):
+                sky = ", ".join(f"{v}: {t / 1e6:.1f} M / {g / 1e6:.1f} M" for v, t, g in r["sky_counts"])
             row = f"| {label} | {r['solve_s']:.1f} | {stages} | {r['elements']} | {r['shots']} | {sky} |"
             print(row, flush=True)
     return 0

@@ -476,3 +476,82 @@ def test_a_third_sky_estimate_keeps_the_light(monkeypatch):
     monkeypatch.setattr(direct, "SKY_PASSES", 3)
     three = float((evaluate_direct(scene, keys, SolveOptions(seed=1)) @ LUMINANCE).mean())
     assert three == pytest.approx(two, rel=0.01)
+
+
+def test_settled_strata_are_those_whose_neighbours_agree():
+    """:func:`.sky_passes.settled_strata`: a stratum is settled when every stratum within the radius
+    (on the torus the rotation wraps) has its value; the row and column that the rotation's wrap
+    cuts never are."""
+    from iat.radiosity.sky_passes import settled_strata
+
+    g = 8
+    grid = np.zeros((2, g, g))
+    grid[:, 2:5, 3:6] = 1.0  # a window of 3 x 3 strata
+    rot = np.array([[0.0, 0.0], [0.3, 0.55]])  # no wrap; wrap through row 5 and column 3
+    got = settled_strata(grid.reshape(2, -1), rot, 1).reshape(2, g, g)
+    want = np.ones((g, g), dtype=bool)
+    want[1:6, 2:7] = False  # the window and its ring
+    want[3, 4] = True  # the window's centre: all its neighbours are window
+    assert np.array_equal(got[0], want)
+    want[5, :] = want[:, 3] = False
+    assert np.array_equal(got[1], want)
+    assert settled_strata(grid.reshape(2, -1), rot, 2)[0].reshape(g, g)[3, 4] == False  # noqa: E712
+
+
+def test_sky_levels_nest_one_point_a_stratum():
+    """:func:`.sky_passes.sky_levels`: each later estimate's new points and the points before make
+    one point in each stratum of its grid, and each point's parent and cell are its strata."""
+    from iat.radiosity.sky_passes import sky_levels
+
+    side, rng = 4, np.random.default_rng(5)
+    a, b = np.divmod(np.arange(side * side), side)
+    pat = (np.stack([a, b], axis=1) + rng.random((side * side, 2))) / side
+    levels = sky_levels(pat, side, 3, rng)
+    every = pat
+    for k, lv in enumerate(levels):
+        g = side << k
+        assert lv.points.shape == (3 * g * g, 2)
+        up, fine = np.floor(lv.points * g).astype(int), np.floor(lv.points * 2 * g).astype(int)
+        assert np.array_equal(up[:, 0] * g + up[:, 1], lv.parent)
+        assert np.array_equal(fine[:, 0] * 2 * g + fine[:, 1], lv.cell)
+        old = np.floor(every * 2 * g).astype(int)
+        assert np.array_equal(old[:, 0] * 2 * g + old[:, 1], lv.old_cell)
+        cells = np.concatenate([lv.cell, lv.old_cell])
+        assert np.array_equal(np.sort(cells), np.arange(4 * g * g))
+        nxt = np.empty((4 * g * g, 2))
+        nxt[lv.old_cell], nxt[lv.cell] = every, lv.points
+        every = nxt
+
+
+def test_a_later_sky_estimate_traces_where_strata_differ(monkeypatch):
+    """The window-lit room's walls and floor: the second sky estimate traced only where a stratum's
+    neighbours differ (``SKY_SETTLED``) traces under 20 % of its directions (measured: 14.9 %), and
+    its light is that of tracing them all within 0.2 % on the whole (-0.02 %; it errs dark: an
+    opening no direction met is missed) and 1 % at 99 % of the vertices (0 %; the worst -33 %)."""
+    import iat.radiosity.direct as direct
+    from iat.geometry import quadtree as qt
+    from iat.radiosity.context import Context
+    from iat.radiosity.visibility import Visibility
+    from tests.support.daylight import ROOM_WALLS, window_room
+
+    scene, n = window_room(), 1 << 6
+    i, j = np.meshgrid(np.arange(1, n, 2), np.arange(1, n, 2), indexing="ij")
+    keys = np.sort(
+        np.concatenate(
+            [qt.make_key(np.full(i.size, p), i.ravel(), j.ravel(), n) for p in ROOM_WALLS.values()]
+        )
+    )
+
+    def direct_light():
+        with Visibility.of_scene(scene) as vis:
+            ctx = Context(scene, SolveOptions().validate(), vis)
+            return ctx.light.direct(keys, lambda: None) @ LUMINANCE, ctx.light.sky_counts.copy()
+
+    got, counts = direct_light()
+    monkeypatch.setattr(direct, "settled_strata", lambda grid, rot, radius: np.zeros(grid.shape, dtype=bool))
+    every, all_counts = direct_light()
+    assert counts[1, 0] == all_counts[1, 0] > 0.5 * len(keys)  # the same vertices estimated again
+    assert counts[1, 1] < 0.2 * (counts[1, 1] + counts[1, 2]) and all_counts[1, 2] == 0
+    lit = every > 0
+    rel = (got[lit] - every[lit]) / every[lit]
+    assert -0.002 < got.sum() / every.sum() - 1 <= 0.0 and np.percentile(np.abs(rel), 99) < 0.01

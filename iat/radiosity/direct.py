@@ -18,6 +18,7 @@ from iat.radiosity.options import (
     PENUMBRA_EDGE,
     SKY_NOISE,
     SKY_PASSES,
+    SKY_SETTLED,
     SUN_SAMPLES,
     SolveOptions,
 )
@@ -25,16 +26,15 @@ from iat.radiosity.patches import Patches, ReceiverGeometry
 from iat.radiosity.pointlight import lumped_light
 from iat.radiosity.sampling import (
     disk_to_hemisphere,
-    finer_strata,
     hash_uniform,
     luminance_of,
-    nested_pattern,
     pattern_side,
     rotated_disk,
 )
 from iat.radiosity.sky import SkyTable, sky_radiance
+from iat.radiosity.sky_passes import SkyLevel, quarter_sums, settled_strata, sky_levels
 from iat.radiosity.tasks import TaskPool
-from iat.radiosity.traced import sky_escape, sun_escape
+from iat.radiosity.traced import sky_escape, sky_pair_escape, sun_escape
 from iat.radiosity.visibility import Visibility
 
 
@@ -52,6 +52,9 @@ class DirectLight:
         self.sky = getattr(scene, "sky", None)
         #: the sky as the gathers look it up (a Preetham sky in a table)
         self.sky_table = None if self.sky is None else SkyTable(self.sky)
+        #: (SKY_PASSES, 3) per sky estimate: the vertices, the directions traced and those that took
+        #: their stratum's value (:meth:`sky_irradiance`)
+        self.sky_counts = np.zeros((SKY_PASSES, 3), dtype=np.int64)
         #: sorted keys of the vertices evaluated so far that lie in an emitting patch's penumbra
         #: (:meth:`direct`; :func:`iat.radiosity.meshing.split_test` refines their elements further)
         self.penumbra = np.zeros(0, dtype=np.int64)
@@ -182,19 +185,13 @@ class DirectLight:
         if part.any():
             self.penumbra = qt.sorted_unique(np.concatenate([self.penumbra, keys[part]]))
 
-    def _escape(
-        self, geo: ReceiverGeometry, idx: np.ndarray, dirs: np.ndarray, traced: np.ndarray | None = None
-    ) -> np.ndarray:
+    def _escape(self, geo: ReceiverGeometry, idx: np.ndarray, dirs: np.ndarray) -> np.ndarray:
         """(k, S) float: what of the rays from vertices ``idx`` (k,) along ``dirs`` (k, S, 3) leaves
-        the scene (1 free, 0 blocked, a glass's transmittance through it); only the rays where
-        ``traced`` (k, S) bool is set (default all) are traced, the others get 0."""
+        the scene (1 free, 0 blocked, a glass's transmittance through it)."""
         k, S = dirs.shape[:2]
-        rays = np.ones((k, S), dtype=bool) if traced is None else traced
-        o = np.repeat(geo.origin32()[idx], rays.sum(axis=1), axis=0)
-        free = np.zeros((k, S))
+        o = np.repeat(geo.origin32()[idx], S, axis=0)
         far = np.full(len(o), 4.0 * self.patches.scale, dtype=np.float32)
-        free[rays] = self.vis.visible(o, dirs[rays], far)
-        return free
+        return self.vis.visible(o, dirs.reshape(-1, 3), far).reshape(k, S)
 
     def sun_irradiance(self, sun, geo: ReceiverGeometry, check: Callable[[], None]) -> np.ndarray:
         """(n, 3) irradiance from a directional light (the sun): ``E cos`` times the fraction of
@@ -241,69 +238,113 @@ class DirectLight:
         standard error (from its pattern's four interleaved quarters, luminance) exceeds
         ``SKY_NOISE`` of its direct light (this sky's, plus ``other`` (n,): the luminance irradiance
         of its other sources, W/m²) is estimated again with 4 x the directions (twice as many strata
-        a side: its old directions and 3 new ones in each old stratum), up to ``SKY_PASSES``
-        estimates: through a window most of the hemisphere is wall, and the refinement would split
-        on that noise and multiply it."""
+        a side: its old directions and 3 new ones in each old stratum, traced where the light can
+        change: :mod:`.sky_passes`), up to ``SKY_PASSES`` estimates: through a window most of the
+        hemisphere is wall, and the refinement would split on that noise and multiply it."""
         n = len(geo.key)
         side = pattern_side(self.opts.sky_samples)
         pat = self.gathers.pattern(self.patches.n_patches, side, 2)
-        strata = np.stack(np.divmod(np.arange(side * side), side), axis=1)
-        every, every_strata = pat, strata  # all points so far (pat, strata: this pass's)
         rng = np.random.default_rng([int(self.opts.seed), self.patches.n_patches, 2, side, 1])
-        total, groups = np.zeros((n, 3)), np.zeros((n, SKY_PASSES, 4))
-        out, todo = np.zeros((n, 3)), np.arange(n)
-        for k in range(SKY_PASSES):
-            if not len(todo):
-                break
-            hot, st = [], strata  # each point's quarter on the grids of this pass and the later ones
-            for level in range(k, SKY_PASSES):
-                hot.append(np.eye(4)[(st[:, 0] % 2) * 2 + st[:, 1] % 2])
-                st = finer_strata(st, pat, side << level)
-            s, g = self._sky_pass(geo, todo, pat, np.concatenate(hot, axis=1), check)
-            total[todo] += s
-            groups[todo, k:] += g.reshape(len(todo), SKY_PASSES - k, 4)
-            count = (side << k) ** 2
-            out[todo] = e = np.pi * total[todo] / count
-            q = np.pi * groups[todo, k] / (count / 4)  # the four quarters' estimates, luminance
-            err = np.sqrt(q.var(axis=1, ddof=1) / 4.0)
-            direct = luminance_of(e) if other is None else luminance_of(e) + other[todo]
-            todo = todo[err > SKY_NOISE * np.maximum(direct, 1e-300)]
-            if k + 1 < SKY_PASSES and len(todo):  # the next grid's new points, from all of this one's
-                pat, strata = nested_pattern(every, every_strata, side << k, rng)
-                every_strata = np.concatenate([finer_strata(every_strata, every, side << k), strata])
-                every = np.concatenate([every, pat])
+        levels = sky_levels(pat, side, SKY_PASSES, rng)
+        other = np.zeros(n) if other is None else other
+        size = max(1, GATHER_BLOCK * 16 // len(pat))
+        blocks = [np.arange(a, min(a + size, n)) for a in range(0, n, size)]
+        out = np.zeros((n, 3))
+
+        def run(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            return self._sky_block(geo, idx, pat, levels, other[idx])
+
+        for idx, (e, c) in zip(blocks, self.pool.imap(run, blocks, check), strict=True):
+            out[idx] = e
+            self.sky_counts += c
         return out
 
-    def _sky_pass(
-        self, geo: ReceiverGeometry, rows: np.ndarray, pat: np.ndarray, hot: np.ndarray, check
-    ) -> tuple:
-        """The directions ``pat`` (S, 2) of :meth:`sky_irradiance` at the vertices ``rows`` (r,):
-        (r, 3) the sum of their sky radiance times what gets out, and (r, G) that sum's luminance
-        by the groups ``hot`` (S, G) (one-hot) of the directions."""
-        size = max(1, GATHER_BLOCK * 16 // len(pat))
-        salt = int(self.opts.seed) * 7919 + 29
+    def _sky_block(
+        self, geo: ReceiverGeometry, idx: np.ndarray, pat: np.ndarray, levels: list[SkyLevel], other
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`sky_irradiance` at the vertices ``idx`` (k,) whose other sources give ``other``
+        (k,): ((k, 3) irradiance, (SKY_PASSES, 3) int: per estimate the vertices, the rays traced
+        and the directions that took their stratum's value)."""
+        k = len(idx)
+        rot = hash_uniform(geo.key[idx], int(self.opts.seed) * 7919 + 29, 2)
+        tangent = self.patches.tangent[geo.patch[idx]]
+        frame = (tangent[:, 0], tangent[:, 1], geo.normal[idx])
+        origin, far = geo.origin32()[idx], 4.0 * self.patches.scale
         dark = not np.any(self.sky.ground)  # below the horizon nothing comes: not traced
+        counts = np.zeros((SKY_PASSES, 3), dtype=np.int64)
+        w, free = self._sky_rays(pat, rot, frame, origin, far, dark, np.arange(k), None)
+        light = self._sky_light(w, free)  # (k, S, 3): what each direction brings, its stratum's
+        total = np.einsum("ks,ksc->kc", free, light)
+        counts[0] = k, free.size - (int(np.count_nonzero(w[..., 1] < 0)) if dark else 0), 0
+        rows, out, count = np.arange(k), np.zeros((k, 3)), len(pat)
+        for est in range(SKY_PASSES):
+            out[rows] = e = np.pi * total[rows] / count
+            if est + 1 == SKY_PASSES:
+                break
+            q = np.pi * quarter_sums(free * luminance_of(light)) / (count / 4)  # the quarters' estimates
+            err = np.sqrt(q.var(axis=1, ddof=1) / 4.0)
+            keep = err > SKY_NOISE * np.maximum(luminance_of(e) + other[rows], 1e-300)
+            if not keep.any():
+                break
+            rows, free, light = rows[keep], free[keep], light[keep]
+            lv = levels[est]
+            settled = settled_strata(free, rot[rows], SKY_SETTLED)
+            # a settled stratum's 3 new directions bring what its own direction brings
+            total[rows] += 3.0 * np.einsum("ks,ksc->kc", settled * free, light)
+            given = settled[:, lv.parent]
+            vi, pj = np.nonzero(~given)
+            sub = tuple(f[rows] for f in frame)
+            wp, fp = self._sky_rays(lv.points, rot[rows], sub, origin[rows], far, dark, vi, pj)
+            lp = self._sky_light(wp, fp)
+            for c in range(3):
+                total[rows, c] += np.bincount(vi, weights=fp * lp[:, c], minlength=len(rows))
+            below = int(np.count_nonzero(wp[:, 1] < 0)) if dark else 0
+            counts[est + 1] = len(rows), len(vi) - below, given.sum()
+            count *= 4
+            if est + 2 < SKY_PASSES:  # the finer grid's strata: the old directions and the new ones
+                nf, nl = np.empty((len(rows), count)), np.empty((len(rows), count, 3))
+                nf[:, lv.old_cell], nl[:, lv.old_cell] = free, light
+                cf, cl = free[:, lv.parent], light[:, lv.parent]
+                cf[vi, pj], cl[vi, pj] = fp, lp
+                nf[:, lv.cell], nl[:, lv.cell] = cf, cl
+                free, light = nf, nl
+        return out, counts
 
-        def block(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            rot = hash_uniform(geo.key[idx], salt, 2)
-            t1, t2 = self.patches.tangent[geo.patch[idx], 0], self.patches.tangent[geo.patch[idx], 1]
-            far = 4.0 * self.patches.scale
-            traced = sky_escape(self.vis, pat, rot, t1, t2, geo.normal[idx], geo.origin32()[idx], far, dark)
-            if traced is not None:  # made and traced in one kernel (the same directions)
-                w, free = traced
-            else:
-                w = disk_to_hemisphere(*rotated_disk(pat, rot[:, :1], rot[:, 1:2]), t1, t2, geo.normal[idx])
-                free = self._escape(geo, idx, w, (w[..., 1] >= 0) if dark else None)
-            L = np.zeros(w.shape)  # looked up where a ray gets out only
-            seen = free > 0
-            L[seen] = self.sky_table.radiance(w[seen])
-            return np.einsum("ks,ksc->kc", free, L), (free * luminance_of(L)) @ hot
+    def _sky_rays(self, pat, rot, frame, origin, far: float, dark: bool, vi, pj):
+        """The sky's directions and what of each leaves the scene, below the horizon 0 when ``dark``:
+        pattern ``pat`` (S, 2) rotated by ``rot`` (k, 2) in the frames ``frame`` (t1, t2, normal:
+        (k, 3) each) from ``origin`` (k, 3) float32: at every vertex and direction when ``pj`` is
+        None (``(w (k, S, 3), free (k, S))``), else direction ``pj`` (m,) of vertex ``vi`` (m,)
+        (``(w (m, 3), free (m,))``). Traced in one kernel (:func:`.traced.sky_escape`,
+        :func:`.traced.sky_pair_escape`), or numpy's directions and embreex, to the same bits."""
+        t1, t2, normal = frame
+        if pj is None:
+            traced = sky_escape(self.vis, pat, rot, t1, t2, normal, origin, far, dark)
+            if traced is not None:
+                return traced
+            w = disk_to_hemisphere(*rotated_disk(pat, rot[:, :1], rot[:, 1:2]), t1, t2, normal)
+            o = np.broadcast_to(origin[:, None], w.shape)
+        else:
+            traced = sky_pair_escape(self.vis, pat, rot, t1, t2, normal, origin, far, dark, vi, pj)
+            if traced is not None:
+                return traced
+            dx, dy = rotated_disk(pat, rot[:, :1], rot[:, 1:2])
+            w = disk_to_hemisphere(dx[vi, pj][:, None], dy[vi, pj][:, None], t1[vi], t2[vi], normal[vi])[:, 0]
+            o = origin[vi]
+        free = np.zeros(w.shape[:-1])
+        todo = w[..., 1] >= 0 if dark else np.ones(free.shape, dtype=bool)
+        free[todo] = self.vis.visible(
+            np.ascontiguousarray(o[todo]), w[todo], np.full(int(todo.sum()), far, dtype=np.float32)
+        )
+        return w, free
 
-        blocks = [rows[a : a + size] for a in range(0, len(rows), size)]
-        out, grouped = np.zeros((len(rows), 3)), np.zeros((len(rows), hot.shape[1]))
-        for j, (e, g) in zip(range(0, len(rows), size), self.pool.imap(block, blocks, check), strict=True):
-            out[j : j + len(e)], grouped[j : j + len(e)] = e, g
-        return out, grouped
+    def _sky_light(self, w: np.ndarray, free: np.ndarray) -> np.ndarray:
+        """(..., 3) the sky's radiance along directions ``w`` (..., 3), looked up only where some of
+        it gets in (``free`` (...) not 0), else 0."""
+        light = np.zeros(w.shape)
+        seen = free != 0
+        light[seen] = self.sky_table.radiance(w[seen])
+        return light
 
     def max_mean_reflected(self) -> float:
         """Upper bound of the scene's area-mean reflected luminance radiance: all the emitted power

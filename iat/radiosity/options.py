@@ -114,6 +114,9 @@ SUN_SAMPLES = 64
 #: estimates (benchmarks/window_room.py: noise 1.45 -> 0.32 %, elements 17.7 k -> 5.7 k)
 SKY_NOISE = 0.01
 SKY_PASSES = 2
+#: a later sky estimate traces its new directions only in the strata whose value differs from one
+#: within this many strata on the grid before it; the others take their stratum's (:mod:`.sky_passes`)
+SKY_SETTLED = 2
 
 
 @dataclass

@@ -548,6 +548,7 @@ class SolveRun:
             "shots": int(self.shots),
             "rays": int(vis.rays),
             "rays_per_s": float(vis.rays / vis.seconds) if vis.seconds > 0 else 0.0,
+            "sky_counts": ctx.light.sky_counts.tolist(),
             "time_s": float(elapsed),
             **{k: float(v) for k, v in self.timings.items()},
             "unshot_fraction": unshot_fraction,

@@ -34,6 +34,8 @@ from iat.radiosity.kernels import (
 
 #: receivers per parallel task (one set of scratch arrays each)
 ROWS = 32
+#: (vertex, direction) pairs per parallel task of :func:`sky_pair_rays`
+PAIRS = 256
 
 
 @njit(cache=True, parallel=True, nogil=True, error_model="numpy")
@@ -193,6 +195,59 @@ def _escape(direction, dir_args, occ, isect, scene, glass, glass_tau, pat, rot, 
                     through[i] += 1
             i = fetch_add(nxt, 0, 1)
     return through.sum()
+
+
+@njit(cache=True, parallel=True, nogil=True, error_model="numpy")
+def sky_pair_rays(occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, origin32, tfar, min_y,
+                  vi, pj, w, free):  # fmt: skip
+    """:func:`sky_rays` for m (vertex, direction) pairs: direction ``pj[m]`` of pattern pat (S, 2)
+    at vertex ``vi[m]`` of rot, t1, t2, normal, origin32 (b, ...), into ``w`` (m, 3) and ``free``
+    (m,), by the same arithmetic. Returns the rays traced against the glass besides."""
+    m_all = vi.shape[0]
+    n_tasks = (m_all + PAIRS - 1) // PAIRS
+    through = np.zeros(n_tasks, dtype=np.int64)
+    nw, nxt = workers()
+    for _ in prange(nw):
+        t = fetch_add(nxt, 0, 1)
+        if t < n_tasks:
+            rec, bits = ray_record()
+        while t < n_tasks:
+            for m in range(t * PAIRS, min((t + 1) * PAIRS, m_all)):
+                i, j = vi[m], pj[m]
+                dx, dy = concentric_unit(wrap_unit(pat[j, 0], rot[i, 0]), wrap_unit(pat[j, 1], rot[i, 1]))
+                dz = math.sqrt(max(1.0 - dx * dx - dy * dy, 0.0))
+                for c in range(3):
+                    w[m, c] = dx * t1[i, c] + dy * t2[i, c] + dz * normal[i, c]
+                wx, wy, wz = np.float32(w[m, 0]), np.float32(w[m, 1]), np.float32(w[m, 2])
+                if wy < min_y:
+                    free[m] = 0.0
+                    continue
+                v = visible1(occ, isect, scene, glass, glass_tau, rec, bits,
+                             origin32[i, 0], origin32[i, 1], origin32[i, 2], wx, wy, wz, tfar)  # fmt: skip
+                free[m] = v
+                if glass != 0 and v > 0:
+                    through[t] += 1
+            t = fetch_add(nxt, 0, 1)
+    return through.sum()
+
+
+def sky_pair_escape(vis, pat, rot, t1, t2, normal, origin32, tfar: float, dark_ground: bool, vi, pj):
+    """With the C API, :func:`sky_pair_rays` of the pairs ``vi, pj`` (m,) on the ray threads, counted
+    in ``vis``: ``(w (m, 3), free (m,))``; None with embreex."""
+    args = vis.embree_args()
+    if args is None:
+        return None
+    m = len(vi)
+    w, free = np.empty((m, 3)), np.empty(m)
+    t0 = time.perf_counter()
+    min_y = np.float32(0.0 if dark_ground else -np.inf)
+    with vis.kernel_threads():
+        through = sky_pair_rays(*args, pat, rot, _c(t1), _c(t2), _c(normal), np.ascontiguousarray(origin32),
+                                np.float32(tfar), min_y, np.ascontiguousarray(vi, dtype=np.int64),
+                                np.ascontiguousarray(pj, dtype=np.int64), w, free)  # fmt: skip
+    traced = int(np.count_nonzero(w[:, 1] >= 0)) if dark_ground else m
+    vis.count(traced + int(through), time.perf_counter() - t0)
+    return w, free
 
 
 def sky_escape(vis, pat, rot, t1, t2, normal, origin32, tfar: float, dark_ground: bool = False):
