@@ -202,33 +202,38 @@ def sky_pair_rays(occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal,
                   vi, pj, w, free):  # fmt: skip
     """:func:`sky_rays` for m (vertex, direction) pairs: direction ``pj[m]`` of pattern pat (S, 2)
     at vertex ``vi[m]`` of rot, t1, t2, normal, origin32 (b, ...), into ``w`` (m, 3) and ``free``
-    (m,), by the same arithmetic. Returns the rays traced against the glass besides."""
-    m_all = vi.shape[0]
-    n_tasks = (m_all + PAIRS - 1) // PAIRS
-    through = np.zeros(n_tasks, dtype=np.int64)
+    (m,), by the same arithmetic, in tasks of ``PAIRS``. Returns the rays traced against the glass
+    besides."""
+    tasks = (vi.shape[0] + PAIRS - 1) // PAIRS
+    through = np.zeros(tasks, dtype=np.int64)
     nw, nxt = workers()
     for _ in prange(nw):
-        t = fetch_add(nxt, 0, 1)
-        if t < n_tasks:
-            rec, bits = ray_record()
-        while t < n_tasks:
-            for m in range(t * PAIRS, min((t + 1) * PAIRS, m_all)):
-                i, j = vi[m], pj[m]
-                dx, dy = concentric_unit(wrap_unit(pat[j, 0], rot[i, 0]), wrap_unit(pat[j, 1], rot[i, 1]))
-                dz = math.sqrt(max(1.0 - dx * dx - dy * dy, 0.0))
-                for c in range(3):
-                    w[m, c] = dx * t1[i, c] + dy * t2[i, c] + dz * normal[i, c]
-                wx, wy, wz = np.float32(w[m, 0]), np.float32(w[m, 1]), np.float32(w[m, 2])
-                if wy < min_y:
-                    free[m] = 0.0
-                    continue
-                v = visible1(occ, isect, scene, glass, glass_tau, rec, bits,
-                             origin32[i, 0], origin32[i, 1], origin32[i, 2], wx, wy, wz, tfar)  # fmt: skip
-                free[m] = v
-                if glass != 0 and v > 0:
-                    through[t] += 1
-            t = fetch_add(nxt, 0, 1)
+        take_tasks(nxt, tasks, _pair_task, ray_record, (),
+                   (occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, origin32, tfar, min_y,
+                    vi, pj, w, free, through))  # fmt: skip
     return through.sum()
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _pair_task(t, scratch, occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, origin32, tfar,
+               min_y, vi, pj, w, free, through):  # fmt: skip
+    """Task t of :func:`sky_pair_rays`: its pairs ``t * PAIRS ...``."""
+    rec, bits = scratch
+    for m in range(t * PAIRS, min((t + 1) * PAIRS, vi.shape[0])):
+        i, j = vi[m], pj[m]
+        dx, dy = concentric_unit(wrap_unit(pat[j, 0], rot[i, 0]), wrap_unit(pat[j, 1], rot[i, 1]))
+        dz = math.sqrt(max(1.0 - dx * dx - dy * dy, 0.0))
+        for c in range(3):
+            w[m, c] = dx * t1[i, c] + dy * t2[i, c] + dz * normal[i, c]
+        wx, wy, wz = np.float32(w[m, 0]), np.float32(w[m, 1]), np.float32(w[m, 2])
+        if wy < min_y:
+            free[m] = 0.0
+            continue
+        v = visible1(occ, isect, scene, glass, glass_tau, rec, bits,
+                     origin32[i, 0], origin32[i, 1], origin32[i, 2], wx, wy, wz, tfar)  # fmt: skip
+        free[m] = v
+        if glass != 0 and v > 0:
+            through[t] += 1
 
 
 def sky_pair_escape(vis, pat, rot, t1, t2, normal, origin32, tfar: float, dark_ground: bool, vi, pj):
