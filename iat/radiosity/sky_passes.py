@@ -7,8 +7,8 @@ with the grid twice as fine: its old directions and 3 new ones in each old strat
 only the strata along the window's outline hold both. So a later estimate traces its new directions
 only in the strata whose value differs from a neighbour's (:func:`settled_strata`); in the others
 they take their stratum's value and light (the super-sampling of RADIANCE's ambient divisions,
-``-as``). An opening that no direction of a settled neighbourhood met is missed: the estimate errs
-dark there, never bright (docs/benchmarks.md gives how much).
+``-as``). An opening that no direction of a settled neighbourhood met is missed, so the estimate
+errs dark on the whole (docs/benchmarks.md gives how much).
 """
 
 from __future__ import annotations
