@@ -25,6 +25,7 @@ from iat.radiosity.options import (
 from iat.radiosity.patches import Patches, ReceiverGeometry
 from iat.radiosity.pointlight import lumped_light
 from iat.radiosity.sampling import (
+    concentric_disk,
     disk_to_hemisphere,
     hash_uniform,
     luminance_of,
@@ -272,7 +273,7 @@ class DirectLight:
         origin, far = geo.origin32()[idx], 4.0 * self.patches.scale
         dark = not np.any(self.sky.ground)  # below the horizon nothing comes: not traced
         counts = np.zeros((SKY_PASSES, 3), dtype=np.int64)
-        w, free = self._sky_rays(pat, rot, frame, origin, far, dark, np.arange(k), None)
+        w, free = self._sky_rays(pat, rot, frame, origin, far, dark, None, None)
         light = self._sky_light(w, free)  # (k, S, 3): what each direction brings, its stratum's
         total = np.einsum("ks,ksc->kc", free, light)
         counts[0] = k, free.size - (int(np.count_nonzero(w[..., 1] < 0)) if dark else 0), 0
@@ -328,8 +329,8 @@ class DirectLight:
             traced = sky_pair_escape(self.vis, pat, rot, t1, t2, normal, origin, far, dark, vi, pj)
             if traced is not None:
                 return traced
-            dx, dy = rotated_disk(pat, rot[:, :1], rot[:, 1:2])
-            w = disk_to_hemisphere(dx[vi, pj][:, None], dy[vi, pj][:, None], t1[vi], t2[vi], normal[vi])[:, 0]
+            dx, dy = concentric_disk((pat[pj, 0] + rot[vi, 0]) % 1.0, (pat[pj, 1] + rot[vi, 1]) % 1.0)
+            w = disk_to_hemisphere(dx[:, None], dy[:, None], t1[vi], t2[vi], normal[vi])[:, 0]
             o = origin[vi]
         free = np.zeros(w.shape[:-1])
         todo = w[..., 1] >= 0 if dark else np.ones(free.shape, dtype=bool)

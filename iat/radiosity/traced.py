@@ -139,10 +139,17 @@ def sky_rays(occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, orig
 @njit(cache=True, nogil=True, error_model="numpy")
 def _sky_direction(i, j, dx, dy, t1, t2, normal, w):
     """Direction j of vertex i of :func:`sky_rays` (float32) from its disc point dx, dy, kept in w."""
+    return _lift(dx, dy, t1, t2, normal, i, w[i, j])
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _lift(dx, dy, t1, t2, normal, i, out):
+    """Disc point dx, dy lifted to the hemisphere of vertex i's frame t1, t2, normal (b, 3): into
+    ``out`` (3,) float64 (``sampling.disk_to_hemisphere``'s arithmetic), and returned as float32."""
     dz = math.sqrt(max(1.0 - dx * dx - dy * dy, 0.0))
     for c in range(3):
-        w[i, j, c] = dx * t1[i, c] + dy * t2[i, c] + dz * normal[i, c]
-    return np.float32(w[i, j, 0]), np.float32(w[i, j, 1]), np.float32(w[i, j, 2])
+        out[c] = dx * t1[i, c] + dy * t2[i, c] + dz * normal[i, c]
+    return np.float32(out[0]), np.float32(out[1]), np.float32(out[2])
 
 
 @njit(cache=True, parallel=True, nogil=True, error_model="numpy")
@@ -222,10 +229,7 @@ def _pair_task(t, scratch, occ, isect, scene, glass, glass_tau, pat, rot, t1, t2
     for m in range(t * PAIRS, min((t + 1) * PAIRS, vi.shape[0])):
         i, j = vi[m], pj[m]
         dx, dy = concentric_unit(wrap_unit(pat[j, 0], rot[i, 0]), wrap_unit(pat[j, 1], rot[i, 1]))
-        dz = math.sqrt(max(1.0 - dx * dx - dy * dy, 0.0))
-        for c in range(3):
-            w[m, c] = dx * t1[i, c] + dy * t2[i, c] + dz * normal[i, c]
-        wx, wy, wz = np.float32(w[m, 0]), np.float32(w[m, 1]), np.float32(w[m, 2])
+        wx, wy, wz = _lift(dx, dy, t1, t2, normal, i, w[m])
         if wy < min_y:
             free[m] = 0.0
             continue
