@@ -138,7 +138,7 @@ def test_kernels_cache_across_processes(tmp_path):
             assert vis.occluded(o, d, np.full(2, 5.0)).tolist() == [True, False]
             prim, bary = vis.first_hits(o, d, np.full(2, 5.0))
             assert prim.tolist() == [0, -1] and np.allclose(bary[0], [0.2, 0.2])
-        print("hits", sum(len(k.stats.cache_hits) for k in (embree.trace_occluded, embree.trace_first_hits)))
+        print("hits", sum(len(k.stats.cache_hits) for k in (embree.trace_visible, embree.trace_first_hits)))
         """
     )
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}

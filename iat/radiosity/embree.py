@@ -6,12 +6,20 @@ The library is the one embreex bundles (``embreex.libs/libembree4*.so*``), else 
 
 :class:`EmbreeScene` builds a device and a scene of (T, 3, 3) triangles with ctypes and keeps both
 handles until :meth:`EmbreeScene.close`. The kernels take the scene's handle and the addresses of
-``rtcOccluded1`` / ``rtcIntersect1`` as int64 arguments (:class:`Entry`) and call them through
-:func:`call3`, an ``@intrinsic`` that calls a function pointer given as an integer: no address is
+the query entry points as int64 arguments (:class:`Entry`) and call them through :func:`call3` /
+:func:`call4`, ``@intrinsic`` s that call a function pointer given as an integer: no address is
 compiled into the code as a constant, so the kernels stay ``cache=True`` (an address changes from
 one process to the next).
 
-Embree 4's single-ray records (``rtcore_ray.h``), 16-byte aligned: ``RTCRay`` is 12 words, ``org``
+The solver's rays go to Embree in packets of ``PACKET`` = 8 (``rtcOccluded8``, ``rtcIntersect8``;
+:func:`visible8`, :func:`trace_first_hits`): a gather's rays from one receiver to neighbouring
+points of a shooter, a vertex's sky directions in neighbouring strata, consecutive rays of an
+array. Embree traverses a packet's rays together, 1.3-1.5x as fast a ray as one at a time on these
+rays, with the same answers ray for ray (``tests/test_embree_c.py``). ``rtcOccluded1`` stays for
+bare Embree's measure (:func:`trace_occluded`) and ``rtcIntersect1`` for the glass.
+
+Embree 4's single-ray records (``rtcore_ray.h``), 16-byte aligned (a packet's are the same words,
+each a row of 8 lanes, 32-byte aligned): ``RTCRay`` is 12 words, ``org``
 (0-2), ``tnear`` 3, ``dir`` (4-6), ``time`` 7, ``tfar`` 8, ``mask`` 9, ``id`` 10, ``flags`` 11
 (48 bytes); ``RTCRayHit`` is that ray then ``RTCHit``: ``Ng`` (12-14), ``u`` 15, ``v`` 16, ``primID``
 17, ``geomID`` 18, ``instID[1]`` 19 and, when the library is built with instance arrays,
@@ -50,6 +58,9 @@ EMBREE_C_ENV = "IAT_EMBREE_C"
 EMBREE_LIB_ENV = "IAT_EMBREE_LIB"
 #: rays per parallel task of the tracing kernels (one ray record each)
 RAY_BLOCK = 2048
+#: rays per Embree packet (``rtcOccluded8``, :func:`visible8`): rays from one point to neighbouring
+#: targets traverse the scene together, 1.5x as fast a ray as one at a time (docs/benchmarks.md)
+PACKET = 8
 #: workers of a tracing kernel's ``prange`` (:func:`workers`): at least the most threads it runs on
 WORKERS = 256
 
@@ -107,7 +118,7 @@ def _load():
         for name, (res, args) in sigs.items():
             fn = getattr(lib, name)
             fn.restype, fn.argtypes = res, args
-        lib.rtcOccluded1, lib.rtcIntersect1  # noqa: B018 (both entry points exist)
+        lib.rtcOccluded1, lib.rtcIntersect1, lib.rtcOccluded8, lib.rtcIntersect8  # noqa: B018 (the entry points exist)
     except AttributeError:
         return None
     return lib
@@ -133,14 +144,18 @@ class Entry(NamedTuple):
 
     occluded1: int
     intersect1: int
+    occluded8: int
+    intersect8: int
 
 
 def entry_points() -> Entry:
-    """The addresses of ``rtcOccluded1`` and ``rtcIntersect1`` in the loaded library."""
+    """The addresses of ``rtcOccluded1``, ``rtcIntersect1``, ``rtcOccluded8`` and ``rtcIntersect8`` in
+    the loaded library."""
     lib = library()
     if lib is None:
         raise RuntimeError("libembree4 not found")
-    addr = [ctypes.cast(getattr(lib, n), ctypes.c_void_p).value for n in ("rtcOccluded1", "rtcIntersect1")]
+    names = ("rtcOccluded1", "rtcIntersect1", "rtcOccluded8", "rtcIntersect8")
+    addr = [ctypes.cast(getattr(lib, n), ctypes.c_void_p).value for n in names]
     return Entry(*(np.int64(a) for a in addr))
 
 
@@ -230,6 +245,23 @@ def call3(typingctx, fn, a, b, c):
 
 
 @intrinsic
+def call4(typingctx, fn, a, b, c, d):
+    """``fn(a, b, c, d)`` for a C function ``void fn(void *, void *, void *, void *)``, as :func:`call3`."""
+    if not all(isinstance(x, types.Integer) for x in (fn, a, b, c, d)):
+        return None
+    sig = types.void(fn, a, b, c, d)
+
+    def codegen(context, builder, signature, args):
+        ptr = ir.IntType(8).as_pointer()
+        fnty = ir.FunctionType(ir.VoidType(), [ptr, ptr, ptr, ptr])
+        f = builder.inttoptr(args[0], fnty.as_pointer())
+        builder.call(f, [builder.inttoptr(x, ptr) for x in args[1:]])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
 def fetch_add(typingctx, arr, idx, val):
     """Atomically ``arr[idx] += val`` (arr an int64 array); returns the value before."""
     if not (isinstance(arr, types.Array) and arr.dtype == types.int64 and isinstance(idx, types.Integer)):
@@ -302,16 +334,78 @@ def intersect1(fn, scene, rec, bits, ox, oy, oz, dx, dy, dz, tfar):
 
 
 @njit(cache=True, nogil=True)
-def visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, dx, dy, dz, tfar):
-    """What of a ray's light gets through before tfar (float64): 0 when something opaque in
+def packet_record():
+    """An 8-ray packet's scratch, ``(rec, bits, valid, vis, rec1, bits1)``: ``RTCRayHit8`` (structure
+    of arrays: the 24 words of a :func:`ray_record` as rows of 8 lanes, 64-byte aligned; its first 12
+    rows are ``RTCRay8``) as (24, 8) float32 and the same memory as uint32; its valid mask (8,) int32
+    (64-byte aligned); ``vis`` (8,) float64, what of each lane's ray gets through (:func:`visible8`);
+    a :func:`ray_record` for the glass."""
+    buf = np.empty(192 + 16, np.float32)
+    a = ((64 - buf.ctypes.data % 64) % 64) // 4
+    rec = buf[a : a + 192].reshape(24, 8)
+    vbuf = np.empty(8 + 16, np.int32)
+    av = ((64 - vbuf.ctypes.data % 64) % 64) // 4
+    rec1, bits1 = ray_record()
+    return rec, rec.view(np.uint32), vbuf[av : av + 8], np.empty(PACKET), rec1, bits1
+
+
+@njit(cache=True, nogil=True, inline="always")
+def set_lane(pk, lane, ox, oy, oz, dx, dy, dz, tfar):
+    """Lane ``lane`` of the packet pk (:func:`packet_record`) the ray from (ox, oy, oz) along (dx, dy,
+    dz) before tfar (float32), as :func:`occluded1` sets its record."""
+    rec, bits = pk[0], pk[1]
+    rec[0, lane], rec[1, lane], rec[2, lane], rec[3, lane] = ox, oy, oz, 0.0
+    rec[4, lane], rec[5, lane], rec[6, lane], rec[7, lane] = dx, dy, dz, 0.0
+    rec[8, lane] = tfar
+    bits[9, lane], bits[10, lane], bits[11, lane] = _INVALID, 0, 0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _valid(pk, n):
+    """The packet pk's valid mask with lanes 0 .. n-1 on."""
+    valid = pk[2]
+    for lane in range(PACKET):
+        valid[lane] = -1 if lane < n else 0
+    return valid
+
+
+@njit(cache=True, nogil=True)
+def intersect8(fn8, scene, pk, n):
+    """``rtcIntersect8`` (address ``fn8``) of the rays in lanes 0 .. n-1 of the packet pk
+    (:func:`set_lane`): lane l's first hit in ``scene`` is then triangle ``bits[17, l]`` at ``u, v =
+    rec[15, l], rec[16, l]``, none where ``bits[18, l]`` (geomID) is ``RTC_INVALID_GEOMETRY_ID``."""
+    rec, bits = pk[0], pk[1]
+    for lane in range(PACKET):
+        bits[17, lane], bits[18, lane], bits[19, lane] = _INVALID, _INVALID, _INVALID
+    valid = _valid(pk, n)
+    if scene != 0:
+        call4(fn8, valid.ctypes.data, scene, rec.ctypes.data, 0)
+
+
+@njit(cache=True, nogil=True)
+def visible8(occ8, isect, scene, glass, glass_tau, pk, n):
+    """What of the light of each ray in lanes 0 .. n-1 of the packet pk (:func:`set_lane`) gets
+    through before its tfar, into pk's ``vis`` (``pk[3]``, float64): 0 when something opaque in
     ``scene`` lies on it, else the transmittance ``glass_tau`` of the first triangle of ``glass`` it
-    crosses (1 if none)."""
-    if occluded1(occ, scene, rec, bits, ox, oy, oz, dx, dy, dz, tfar):
-        return 0.0
-    if glass == 0:
-        return 1.0
-    p = intersect1(isect, glass, rec, bits, ox, oy, oz, dx, dy, dz, tfar)
-    return 1.0 if p < 0 else glass_tau[p]
+    crosses (1 if none). The lanes are traced together by ``rtcOccluded8`` (address ``occ8``; the
+    answers of ``rtcOccluded1`` ray for ray), the free ones then one by one against the glass.
+    Returns how many were traced against the glass."""
+    rec, vis, rec1, bits1 = pk[0], pk[3], pk[4], pk[5]
+    valid = _valid(pk, n)
+    if scene != 0:
+        call4(occ8, valid.ctypes.data, scene, rec.ctypes.data, 0)
+    through = 0
+    for lane in range(n):
+        if scene != 0 and rec[8, lane] < 0:  # tfar is -inf after a hit
+            vis[lane] = 0.0
+        elif glass == 0:
+            vis[lane] = 1.0
+        else:
+            p = intersect1(isect, glass, rec1, bits1, rec[0, lane], rec[1, lane], rec[2, lane],
+                           rec[4, lane], rec[5, lane], rec[6, lane], rec[8, lane])  # fmt: skip
+            vis[lane] = 1.0 if p < 0 else glass_tau[p]
+            through += 1
+    return through
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -339,7 +433,7 @@ def ray_blocks(n):
 @njit(cache=True, parallel=True, nogil=True)
 def trace_occluded(fn, scene, o, d, t, out):
     """``out[i]`` (n,) bool: whether ``rtcOccluded1`` finds a hit on ray i (o, d (n, 3), t (n,)
-    float32) before t[i]."""
+    float32) before t[i], one ray at a time (bare Embree, ``benchmarks/ray_budget.py``'s measure)."""
     nw, nxt = workers()
     for _ in prange(nw):
         take_tasks(nxt, ray_blocks(o.shape[0]), _occluded_block, ray_record, (), (fn, scene, o, d, t, out))
@@ -353,46 +447,61 @@ def _occluded_block(b, s, fn, scene, o, d, t, out):
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def trace_visible(occ, isect, scene, glass, glass_tau, o, d, t, out):
-    """``out[i]`` (n,) float64: :func:`visible1` of ray i. Returns how many rays were traced against
-    the glass (those that nothing opaque stops, when there is glass)."""
+def trace_visible(occ8, isect, scene, glass, glass_tau, o, d, t, out):
+    """``out[i]`` (n,) float64: what of ray i gets through (:func:`visible8`), in packets of
+    consecutive rays. Returns how many rays were traced against the glass."""
     nb = ray_blocks(o.shape[0])
     through = np.zeros(nb, dtype=np.int64)
     nw, nxt = workers()
     for _ in prange(nw):
-        take_tasks(nxt, nb, _visible_block, ray_record, (),
-                   (occ, isect, scene, glass, glass_tau, o, d, t, out, through))  # fmt: skip
+        take_tasks(nxt, nb, _visible_block, packet_record, (),
+                   (occ8, isect, scene, glass, glass_tau, o, d, t, out, through))  # fmt: skip
     return through.sum()
 
 
 @njit(cache=True, nogil=True)
-def _visible_block(b, s, occ, isect, scene, glass, glass_tau, o, d, t, out, through):
-    rec, bits = s
-    for i in range(b * RAY_BLOCK, min(o.shape[0], (b + 1) * RAY_BLOCK)):
-        v = visible1(occ, isect, scene, glass, glass_tau, rec, bits,
-                     o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i])  # fmt: skip
-        out[i] = v
-        if glass != 0 and v > 0:
-            through[b] += 1
+def _visible_block(b, pk, occ8, isect, scene, glass, glass_tau, o, d, t, out, through):
+    """Block b of :func:`trace_visible`."""
+    end = min(o.shape[0], (b + 1) * RAY_BLOCK)
+    vis = pk[3]
+    for a in range(b * RAY_BLOCK, end, PACKET):
+        n = min(PACKET, end - a)
+        for lane in range(n):
+            i = a + lane
+            set_lane(pk, lane, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i])
+        th = visible8(occ8, isect, scene, glass, glass_tau, pk, n)
+        if glass != 0:
+            through[b] += th
+        for lane in range(n):
+            out[a + lane] = vis[lane]
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def trace_first_hits(fn, scene, o, d, t, prim, bary):
+def trace_first_hits(fn8, scene, o, d, t, prim, bary):
     """``prim[i]`` (n,) int64 the triangle ray i meets first before t[i] (-1: none) and ``bary[i]``
-    (n, 2) float64 the hit's (u, v) (0 where none), by ``rtcIntersect1``."""
+    (n, 2) float64 the hit's (u, v) (0 where none), by ``rtcIntersect8`` (address ``fn8``) in packets
+    of consecutive rays."""
     nw, nxt = workers()
     for _ in prange(nw):
-        take_tasks(nxt, ray_blocks(o.shape[0]), _first_hit_block, ray_record, (),
-                   (fn, scene, o, d, t, prim, bary))  # fmt: skip
+        take_tasks(nxt, ray_blocks(o.shape[0]), _first_hit_block, packet_record, (),
+                   (fn8, scene, o, d, t, prim, bary))  # fmt: skip
 
 
 @njit(cache=True, nogil=True)
-def _first_hit_block(b, s, fn, scene, o, d, t, prim, bary):
-    rec, bits = s
-    for i in range(b * RAY_BLOCK, min(o.shape[0], (b + 1) * RAY_BLOCK)):
-        p = intersect1(fn, scene, rec, bits, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i])
-        prim[i] = p
-        if p >= 0:
-            bary[i, 0], bary[i, 1] = rec[15], rec[16]
-        else:
-            bary[i, 0], bary[i, 1] = 0.0, 0.0
+def _first_hit_block(b, pk, fn8, scene, o, d, t, prim, bary):
+    rec, bits = pk[0], pk[1]
+    end = min(o.shape[0], (b + 1) * RAY_BLOCK)
+    for a in range(b * RAY_BLOCK, end, PACKET):
+        n = min(PACKET, end - a)
+        for lane in range(n):
+            i = a + lane
+            set_lane(pk, lane, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i])
+        intersect8(fn8, scene, pk, n)
+        for lane in range(n):
+            i = a + lane
+            if scene != 0 and bits[18, lane] != _INVALID:
+                prim[i] = np.int64(bits[17, lane])
+                bary[i, 0], bary[i, 1] = rec[15, lane], rec[16, lane]
+            else:
+                prim[i] = -1
+                bary[i, 0], bary[i, 1] = 0.0, 0.0

@@ -7,7 +7,7 @@ directions of a block of vertices made and traced in one call (:func:`sky_escape
 :func:`~iat.radiosity.kernels.gather_rays`, :meth:`~iat.radiosity.visibility.Visibility.visible` and
 :func:`~iat.radiosity.kernels.gather_finish` row by row: the same samples (:func:`.row_weights`), the
 same float32 rays (:func:`.kernels.sample_ray`), traced by the same Embree calls
-(:func:`.embree.visible1`), summed in the same order (:func:`.kernels.field_terms`,
+(:func:`.embree.visible8`), summed in the same order (:func:`.kernels.field_terms`,
 :func:`.kernels.finish_row`), so its rows are those of the three-step path to the bit
 (``tests/test_embree_c.py``). Rows are spread over the calling thread's numba threads in tasks of
 ``ROWS`` (``prange``); each row is one task's, in a fixed order, so the thread count changes nothing.
@@ -21,7 +21,7 @@ import time
 import numpy as np
 from numba import njit, prange
 
-from iat.radiosity.embree import fetch_add, ray_record, take_tasks, visible1, workers
+from iat.radiosity.embree import PACKET, fetch_add, packet_record, set_lane, take_tasks, visible8, workers
 from iat.radiosity.kernels import (
     concentric_unit,
     field_terms,
@@ -76,8 +76,7 @@ def _gather_scratch(S):
     t1, t2 = np.empty((ROWS, 3)), np.empty((ROWS, 3))
     o32 = np.empty((ROWS, 3), dtype=np.float32)
     sw, su, sv = np.empty(2 * S), np.empty(2 * S), np.empty(2 * S)
-    rec, bits = ray_record()
-    return rot, x, nr, t1, t2, o32, sw, su, sv, rec, bits
+    return rot, x, nr, t1, t2, o32, sw, su, sv, packet_record()
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -87,7 +86,8 @@ def _gather_task(task, scratch, b, S, n_s, occ, isect, scene, glass, glass_tau, 
                  field_mean, clamp_lo, clamp_hi, out, seen, rays, through):  # fmt: skip
     """Rows ``task * ROWS ...`` of :func:`gather_traced` (scratch: :func:`_gather_scratch`'s; the
     rest: its arguments and outputs)."""
-    rot, x, nr, t1, t2, o32, sw, su, sv, rec, bits = scratch
+    rot, x, nr, t1, t2, o32, sw, su, sv, pk = scratch
+    free = pk[3]
     lo = task * ROWS
     m = min(b, lo + ROWS) - lo
     for j in range(m):  # block_inputs' rows
@@ -103,19 +103,22 @@ def _gather_task(task, scratch, b, S, n_s, occ, isect, scene, glass, glass_tau, 
         wvis = 0.0
         sv_sum = 0.0
         res0 = res1 = res2 = 0.0
-        for q in range(cnt):
-            dx, dy, dz, tfar = sample_ray(su[q], sv[q], t32, para, o32[j], half_eps)
-            vis = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, dx, dy, dz, tfar)
-            if glass != 0 and vis > 0:
-                through[task] += 1
-            wr = sw[q] * vis  # as gather_finish sums them
-            wvis += wr
-            sv_sum += vis
-            if has_field:
-                v0, v1, v2 = field_terms(flat, nl, su[q], sv[q], wr)
-                res0 += v0
-                res1 += v1
-                res2 += v2
+        for q0 in range(0, cnt, PACKET):  # a packet of neighbouring samples, then their sums in order
+            n = min(PACKET, cnt - q0)
+            for lane in range(n):
+                dx, dy, dz, tfar = sample_ray(su[q0 + lane], sv[q0 + lane], t32, para, o32[j], half_eps)
+                set_lane(pk, lane, ox, oy, oz, dx, dy, dz, tfar)
+            through[task] += visible8(occ, isect, scene, glass, glass_tau, pk, n)
+            for lane in range(n):
+                q, vis = q0 + lane, free[lane]
+                wr = sw[q] * vis  # as gather_finish sums them
+                wvis += wr
+                sv_sum += vis
+                if has_field:
+                    v0, v1, v2 = field_terms(flat, nl, su[q], sv[q], wr)
+                    res0 += v0
+                    res1 += v1
+                    res2 += v2
         rays[i] = cnt
         seen[i] = sv_sum
         finish_row(out, i, f[i], wsum, wvis, res0, res1, res2, x[j], has_field, flat, nl, geom, uvc,
@@ -129,7 +132,7 @@ def sky_rays(occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, orig
     rot (b, 2) per vertex, mapped to the disc and lifted to the hemisphere of the frame t1, t2,
     normal (b, 3) (``sampling.rotated_disk`` then ``sampling.disk_to_hemisphere``, the same
     arithmetic) into ``w`` (b, S, 3) float64; traced from origin32 (b, 3) float32 as far as tfar
-    (float32) into ``free`` (b, S) (:func:`.embree.visible1`); a direction whose y is below min_y
+    (float32) into ``free`` (b, S) (:func:`.embree.visible8`); a direction whose y is below min_y
     (float32: 0 for a sky whose ground is black) is not traced and gets 0. Returns the rays traced
     against the glass besides."""
     return _escape(_sky_direction, (t1, t2, normal, w), occ, isect, scene, glass, glass_tau, pat, rot,
@@ -187,21 +190,36 @@ def _escape(direction, dir_args, occ, isect, scene, glass, glass_tau, pat, rot, 
     for _ in prange(nw):
         i = fetch_add(nxt, 0, 1)
         if i < b:
-            rec, bits = ray_record()
+            pk, lanes = packet_record(), np.empty(PACKET, dtype=np.int64)
         while i < b:
             ox, oy, oz = origin32[i, 0], origin32[i, 1], origin32[i, 2]
+            n = 0
             for j in range(pat.shape[0]):
                 dx, dy = concentric_unit(wrap_unit(pat[j, 0], rot[i, 0]), wrap_unit(pat[j, 1], rot[i, 1]))
                 wx, wy, wz = direction(i, j, dx, dy, *dir_args)
                 if wy < min_y:
                     free[i, j] = 0.0
                     continue
-                v = visible1(occ, isect, scene, glass, glass_tau, rec, bits, ox, oy, oz, wx, wy, wz, tfar)
-                free[i, j] = v
-                if glass != 0 and v > 0:
-                    through[i] += 1
+                set_lane(pk, n, ox, oy, oz, wx, wy, wz, tfar)
+                lanes[n] = j
+                n += 1
+                if n == PACKET:
+                    through[i] += _flush(occ, isect, scene, glass, glass_tau, pk, n, lanes, free[i])
+                    n = 0
+            if n:
+                through[i] += _flush(occ, isect, scene, glass, glass_tau, pk, n, lanes, free[i])
             i = fetch_add(nxt, 0, 1)
     return through.sum()
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _flush(occ, isect, scene, glass, glass_tau, pk, n, lanes, free):
+    """Trace the packet pk's n lanes (:func:`.embree.visible8`) and put what of each gets through at
+    ``free[lanes[lane]]``; returns the rays traced against the glass."""
+    through = visible8(occ, isect, scene, glass, glass_tau, pk, n)
+    for lane in range(n):
+        free[lanes[lane]] = pk[3][lane]
+    return through
 
 
 @njit(cache=True, parallel=True, nogil=True, error_model="numpy")
@@ -215,7 +233,7 @@ def sky_pair_rays(occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal,
     through = np.zeros(tasks, dtype=np.int64)
     nw, nxt = workers()
     for _ in prange(nw):
-        take_tasks(nxt, tasks, _pair_task, ray_record, (),
+        take_tasks(nxt, tasks, _pair_task, _pair_scratch, (),
                    (occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, origin32, tfar, min_y,
                     vi, pj, w, free, through))  # fmt: skip
     return through.sum()
@@ -224,20 +242,29 @@ def sky_pair_rays(occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal,
 @njit(cache=True, nogil=True, error_model="numpy")
 def _pair_task(t, scratch, occ, isect, scene, glass, glass_tau, pat, rot, t1, t2, normal, origin32, tfar,
                min_y, vi, pj, w, free, through):  # fmt: skip
-    """Task t of :func:`sky_pair_rays`: its pairs ``t * PAIRS ...``."""
-    rec, bits = scratch
-    for m in range(t * PAIRS, min((t + 1) * PAIRS, vi.shape[0])):
+    """Task t of :func:`sky_pair_rays`: its pairs ``t * PAIRS ...``, in packets."""
+    pk, lanes = scratch
+    n = 0
+    end = min((t + 1) * PAIRS, vi.shape[0])
+    for m in range(t * PAIRS, end):
         i, j = vi[m], pj[m]
         dx, dy = concentric_unit(wrap_unit(pat[j, 0], rot[i, 0]), wrap_unit(pat[j, 1], rot[i, 1]))
         wx, wy, wz = _lift(dx, dy, t1, t2, normal, i, w[m])
         if wy < min_y:
             free[m] = 0.0
-            continue
-        v = visible1(occ, isect, scene, glass, glass_tau, rec, bits,
-                     origin32[i, 0], origin32[i, 1], origin32[i, 2], wx, wy, wz, tfar)  # fmt: skip
-        free[m] = v
-        if glass != 0 and v > 0:
-            through[t] += 1
+        else:
+            set_lane(pk, n, origin32[i, 0], origin32[i, 1], origin32[i, 2], wx, wy, wz, tfar)
+            lanes[n] = m
+            n += 1
+        if n == PACKET or (n and m == end - 1):
+            through[t] += _flush(occ, isect, scene, glass, glass_tau, pk, n, lanes, free)
+            n = 0
+
+
+@njit(cache=True, nogil=True)
+def _pair_scratch():
+    """A worker's scratch of :func:`_pair_task`: a packet and its lanes' pairs."""
+    return packet_record(), np.empty(PACKET, dtype=np.int64)
 
 
 def sky_pair_escape(vis, pat, rot, t1, t2, normal, origin32, tfar: float, dark_ground: bool, vi, pj):

@@ -160,13 +160,13 @@ class Visibility:
 
     def embree_args(self) -> tuple | None:
         """With the ``"c"`` backend, what a kernel that traces its own rays takes
-        (:func:`.embree.visible1`): ``(occluded1, intersect1, scene, glass, glass_tau)``, the entry
+        (:func:`.embree.visible8`): ``(occluded8, intersect1, scene, glass, glass_tau)``, the entry
         points' addresses and the scenes' handles as int64 (glass 0 when there is none) and the
         glass triangles' transmittances (float64); None with embreex."""
         if self._c is None:
             return None
         glass = self._c_glass.handle if self._c_glass is not None else np.int64(0)
-        return (*self._c.entry, self._c.handle, glass, self._glass_tau)
+        return (self._c.entry.occluded8, self._c.entry.intersect1, self._c.handle, glass, self._glass_tau)
 
     def count(self, rays: int, seconds: float) -> None:
         """Add rays traced elsewhere (a kernel given :meth:`embree_args`) to ``rays`` and ``seconds``."""
@@ -180,14 +180,14 @@ class Visibility:
         (n, 3) float32 contiguous; t : (n,) float32."""
         if self._c is None:
             return self._scene.run(o, d, dists=t, query="OCCLUDED")
-        out = np.empty(len(o), dtype=np.bool_)
+        out = np.empty(len(o))
         before = get_num_threads()
         set_num_threads(1)
         try:
-            embree.trace_occluded(self._c.entry.occluded1, self._c.handle, o, d, t, out)
+            embree.trace_visible(self._c.entry.occluded8, 0, self._c.handle, 0, self._glass_tau, o, d, t, out)
         finally:
             set_num_threads(before)
-        return (~out).astype(np.int32)
+        return (out > 0).astype(np.int32)
 
     @staticmethod
     def _rays(origins, dirs, tfar) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -238,9 +238,12 @@ class Visibility:
         if self._c is None:
             return self._traced(self.occluded_chunk, origins, dirs, tfar, 1) == 0
         o, d, t = self._rays(origins, dirs, tfar)
-        out = np.zeros(len(o), dtype=np.bool_)
-        self._kernel(embree.trace_occluded, self._c.entry.occluded1, self._c.handle, o, d, t, out, n=len(o))
-        return out
+        out = np.empty(len(o))
+        entry, handle = self._c.entry, self._c.handle
+        self._kernel(
+            embree.trace_visible, entry.occluded8, 0, handle, 0, self._glass_tau, o, d, t, out, n=len(o)
+        )
+        return out == 0
 
     def first_hit(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray) -> np.ndarray:
         """(n,) int64 the opaque triangle each ray meets first before ``tfar`` (an index into
@@ -256,7 +259,7 @@ class Visibility:
         if self._c is not None:
             o, d, t = self._rays(origins, dirs, tfar)
             prim, bary = np.empty(len(o), dtype=np.int64), np.empty((len(o), 2))
-            entry, handle = self._c.entry.intersect1, self._c.handle
+            entry, handle = self._c.entry.intersect8, self._c.handle
             self._kernel(embree.trace_first_hits, entry, handle, o, d, t, prim, bary, n=len(o))
             return prim, bary
 
