@@ -7,7 +7,15 @@ import numpy as np
 import pytest
 
 from iat.radiosity import bundles, kernels
-from iat.radiosity.sampling import GAUSS_QUAD, Shooter, concentric_disk, disk_to_hemisphere, sample_lattice
+from iat.radiosity.sampling import (
+    GAUSS_QUAD,
+    NO_IMPORTANCE,
+    Shooter,
+    concentric_disk,
+    disk_to_hemisphere,
+    field_importance,
+    sample_lattice,
+)
 
 SQUARE = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
 UP = np.array([0.0, 0.0, 1.0])
@@ -64,7 +72,7 @@ def block(sh, n=200, m=6, near_share=0.5, seed=5):
     return pat, rot, x, nr, t1, t2, near, o32
 
 
-def rays(sh, inputs):
+def rays(sh, inputs, imp=NO_IMPORTANCE):
     ka = sh.kernel_args()
     pat, rot, x, nr, t1, t2, near, o32 = inputs
     n = 2 * len(x) * len(pat)
@@ -75,7 +83,7 @@ def rays(sh, inputs):
         np.empty(n, np.float32),
     )
     rows = bundles.ReceiverRows(rot, x, nr, t1, t2, near, o32, np.zeros(len(x), np.int64))
-    out = bundles.sample_rays(pat, rows, ka, buf)
+    out = bundles.sample_rays(pat, rows, ka, imp, buf)
     return [np.array(a) for a in out]
 
 
@@ -87,7 +95,7 @@ def finish(sh, inputs, r, vis, fb, flat=None, mean=None):
     nl = int(round(np.sqrt(len(flat)))) - 1
     rows = bundles.ReceiverRows(*inputs[1:], np.zeros(len(inputs[2]), np.int64))
     smp = bundles.Samples(off, wsum, w, u, v, *r[5:])
-    fld = bundles.ShotField(flat, nl, np.zeros(3) if mean is None else mean, has, False, False)
+    fld = bundles.ShotField(flat, nl, np.zeros(3) if mean is None else mean, has, False, False, NO_IMPORTANCE)
     return bundles.finish_rows(smp, vis, fb, rows, ka, fld)
 
 
@@ -150,6 +158,61 @@ def test_field_integral_of_a_linear_field():
     # sample_lattice (numpy) and the kernel read the same field
     u = np.random.default_rng(0).random(50)
     np.testing.assert_allclose(sample_lattice(flat, n, u, 0 * u)[:, 0], 1.0 + u, rtol=1e-12)
+
+
+def test_importance_warp_draws_by_the_density():
+    """Uniform points warped by :func:`field_importance`'s tables fall in each cell in proportion to
+    its density, and the density returned is the cell's."""
+    n = 8
+    field = np.ones((n + 1, n + 1, 3))
+    field[6:, :3] = 40.0  # a bright corner
+    imp = field_importance(field, True, 16, 0.5)
+    g = (imp.shape[0] - 1) // 2
+    assert g == n and np.mean(imp[g + 1 :, :g]) == pytest.approx(1.0)
+    rng = np.random.default_rng(1)
+    out = np.array([kernels.importance_warp(a, b, imp) for a, b in rng.random((40_000, 2))])
+    cells = np.minimum((out[:, :2] * g).astype(int), g - 1)
+    np.testing.assert_array_equal(out[:, 2], imp[g + 1 + cells[:, 0], cells[:, 1]])
+    share = np.bincount(cells[:, 0] * g + cells[:, 1], minlength=g * g).reshape(g, g) / len(out)
+    np.testing.assert_allclose(share, imp[g + 1 :, :g] / g**2, atol=0.004)
+    assert share[7, 0] > 5 * share[0, 7]  # the bright corner drew its points
+    for u, v in rng.random((50, 2)) * 0.5:  # the density at a triangle's point is its square point's
+        s, t = (u + v) ** 2, v / (u + v)
+        i, j = int(s * g), int(t * g)
+        assert kernels.importance_density(u, v, False, imp) == imp[g + 1 + i, j]
+
+
+@pytest.mark.parametrize("is_quad", [True, False])
+def test_importance_gather_of_a_peaked_field(is_quad):
+    """A field 60x brighter on a corner sixteenth of the shooter (a sun patch): drawn by its light
+    (:func:`field_importance`), a gather of 8 x 8 samples keeps the estimate unbiased and comes
+    closer to uniform 64 x 64 gathers (the mean of 4) than uniform 8 x 8 samples do."""
+    sh = shooter(SQUARE, is_quad)
+    n = 16
+    field = np.ones((n + 1, n + 1, 3))
+    field[12:, :4] = 60.0
+    flat = field.reshape(-1, 3)
+    mean = flat.mean(axis=0)
+    x, nr = receivers(120, 7)
+    fb = kernels.point_polygon(x, nr, SQUARE if is_quad else SQUARE[[0, 1, 3]])
+
+    def gathered(m, imp, seed):
+        inputs = block(sh, n=120, m=m, seed=seed)
+        inputs = (*inputs[:2], x, nr, *inputs[4:])
+        r = rays(sh, inputs, imp)
+        return finish(sh, inputs, r, np.ones(len(r[2])), fb, flat, mean)[0][:, 0]
+
+    ref = np.mean([gathered(64, NO_IMPORTANCE, seed) for seed in (100, 200, 300, 400)], axis=0)
+    imp = field_importance(field, is_quad, 16, 0.5)
+    ok = fb > 1e-3
+    err = {}
+    for name, tables in (("uniform", NO_IMPORTANCE), ("drawn", imp)):
+        runs = np.array([gathered(8, tables, seed) for seed in range(2, 26)])
+        rel = (runs[:, ok] - ref[ok]) / ref[ok]
+        err[name] = float(np.sqrt(np.mean(rel**2)))
+        bias = float(np.mean(runs[:, ok].sum(axis=1) / ref[ok].sum() - 1))  # seeds' spread ~0.4 %
+        assert abs(bias) < 0.015, (name, bias)
+    assert err["drawn"] < 0.75 * err["uniform"], err  # 0.14 against 0.20 (quad), 0.12 against 0.22
 
 
 def test_results_do_not_depend_on_the_thread_count():

@@ -69,7 +69,9 @@ class Samples(NamedTuple):
 class ShotField(NamedTuple):
     """What a gather weighs its samples with: ``flat`` ((nl+1)**2, 3) the shooter's radiance on
     its lattice of ``nl`` cells a side and its area mean ``mean`` (3,) when ``has_field`` (else a
-    (1, 3) zero placeholder), and whether results are clamped to >= 0 / <= 0."""
+    (1, 3) zero placeholder), whether results are clamped to >= 0 / <= 0, and ``imp`` the tables
+    its area samples are drawn by (:func:`~iat.radiosity.sampling.field_importance`; one row:
+    uniformly)."""
 
     flat: np.ndarray
     nl: int
@@ -77,6 +79,7 @@ class ShotField(NamedTuple):
     has_field: bool
     clamp_lo: bool
     clamp_hi: bool
+    imp: np.ndarray
 
 
 def receiver_rows(
@@ -88,9 +91,10 @@ def receiver_rows(
     )
 
 
-def sample_rays(pat, rows: ReceiverRows, sh: ShooterArrays, scratch) -> Samples:
+def sample_rays(pat, rows: ReceiverRows, sh: ShooterArrays, imp, scratch) -> Samples:
     """:func:`~iat.radiosity.kernels.gather_rays` of a block: pattern ``pat`` (S, 2), the block's
-    ``rows``, the shooter ``sh`` and the thread's ``scratch`` (buf, ro, rd, rt)."""
+    ``rows``, the shooter ``sh``, the importance tables ``imp`` (:class:`ShotField`'s) and the
+    thread's ``scratch`` (buf, ro, rd, rt)."""
     return Samples(
         *kernels.gather_rays(
             pat,
@@ -112,6 +116,7 @@ def sample_rays(pat, rows: ReceiverRows, sh: ShooterArrays, scratch) -> Samples:
             sh.area,
             sh.mask,
             sh.has_mask,
+            imp,
             sh.t32,
             sh.half_eps,
             *scratch,
@@ -139,6 +144,6 @@ def traced_rows(
     return traced.gather_traced(
         *embree_args, ii, key, salt, correlated, ff, normal, patch, tangent, f, f_direction, origin32,
         pat, sh.geom, sh.uvc, sh.poly_n, sh.poly_o, sh.tol, sh.is_quad, sh.para, sh.linear_uv, sh.area,
-        sh.mask, sh.has_mask, sh.t32, sh.half_eps, fld.has_field, fld.flat, fld.nl, fld.mean, fld.clamp_lo,
-        fld.clamp_hi,
+        sh.mask, sh.has_mask, fld.imp, sh.t32, sh.half_eps, fld.has_field, fld.flat, fld.nl, fld.mean,
+        fld.clamp_lo, fld.clamp_hi,
     )  # fmt: skip

@@ -32,7 +32,7 @@ from iat.radiosity.options import (
     SolveOptions,
 )
 from iat.radiosity.patches import Patches, ReceiverGeometry, ranges_of
-from iat.radiosity.sampling import GAUSS_QUAD, GAUSS_TRI, Shooter
+from iat.radiosity.sampling import GAUSS_QUAD, GAUSS_TRI, NO_IMPORTANCE, Shooter
 from iat.radiosity.tasks import TaskPool, no_check
 from iat.radiosity.visibility import Visibility
 
@@ -239,6 +239,7 @@ class Gathers:
         correlated: bool = False,
         cull: bool = False,
         patches: np.ndarray | None = None,
+        importance: np.ndarray | None = None,
     ) -> np.ndarray:
         """Form factor x visible fraction from every vertex of ``geo`` to patch s.
 
@@ -252,6 +253,8 @@ class Gathers:
         independent per receiver: penumbrae become noise instead of banding).
         cull : skip receiver patches that earlier gathers from s found fully occluded.
         patches : (P,) bool, receive only on these patches (None: all).
+        importance : the tables the area samples are drawn by, by the field's light
+        (:func:`~iat.radiosity.sampling.field_importance`; None: uniformly on the shooter).
 
         ``F`` is the analytic form factor and ``vis`` the ratio of two estimates of the
         kernel integral (with and without visibility) from the same samples, so it is
@@ -267,8 +270,9 @@ class Gathers:
         far receivers use the area samples alone. All kernel terms are computed from
         per-receiver scalars (no (n, samples, 3) arrays).
         """
+        parts = [(geo, patches)]
         idx, val = self.gathers(
-            s, [(geo, patches)], m, shot, field, field_mean, correlated=correlated, cull=cull
+            s, parts, m, shot, field, field_mean, correlated=correlated, cull=cull, importance=importance
         )[0]
         out = np.zeros((len(geo.key), *val.shape[1:]))
         out[idx] = val
@@ -286,6 +290,7 @@ class Gathers:
         correlated: bool = False,
         cull: bool = False,
         with_ff: bool = False,
+        importance: np.ndarray | None = None,
     ) -> list[tuple]:
         """:meth:`gather` from s to several receiver sets at once: ``parts`` is a list of ``(geo,
         patches)`` on disjoint patches (a shot's mesh vertices and its coarse grids), and their
@@ -293,7 +298,8 @@ class Gathers:
         ``geo`` of its receivers (k,) (distinct) and their values (k,) or (k, 3), the rows of what one
         :meth:`gather` per part in order returns that can be nonzero (so that a shot costs its
         receivers, not the mesh); each part's culling sees only its own patches. ``with_ff``: per part
-        ``(idx, val, f)``, with the receivers' analytic form factors (k,)."""
+        ``(idx, val, f)``, with the receivers' analytic form factors (k,). ``importance``: as
+        :meth:`gather`."""
         pat = self.pattern(s, m, shot)
         salt = np.uint64(((int(self.opts.seed) * 1_000_003 + int(s)) * 1_000_003 + int(shot)) & _MASK64)
         has_field = field is not None
@@ -305,6 +311,7 @@ class Gathers:
             has_field,
             has_field and float(flat.min()) >= 0,  # a field of one sign gives results of that sign
             has_field and float(flat.max()) <= 0,
+            NO_IMPORTANCE if importance is None else np.ascontiguousarray(importance, dtype=np.float64),
         )
         sets = [(geo, *self.form_factors(s, geo, cull, patches)) for geo, patches in parts]
         shot_job = _Shot(self.shooter(s).kernel_args(), pat, salt, correlated, fld, sets)
@@ -382,7 +389,8 @@ class Gathers:
         )  # fmt: skip
         # the samples' weights and rays (float32, as embreex takes them: origins and targets
         # are off the surfaces by at least 32 float32 steps, so the rounding never crosses one)
-        smp = sample_rays(shot.pat, rows, shot.shooter, self._scratch(2 * len(fb) * len(shot.pat)))
+        scratch = self._scratch(2 * len(fb) * len(shot.pat))
+        smp = sample_rays(shot.pat, rows, shot.shooter, shot.field.imp, scratch)
         if len(smp.w) == 0:
             return None
         vis = self.vis.visible(smp.o, smp.d, smp.tfar)

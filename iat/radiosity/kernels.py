@@ -36,6 +36,7 @@ from numba import get_num_threads, njit, prange, set_num_threads  # noqa: E402
 from iat.radiosity import blas  # noqa: E402, F401 (numpy's OpenBLAS on one thread)
 
 _PI = math.pi
+_BELOW_ONE = 1.0 - 2.0**-53  # the largest float64 below 1
 #: receivers per parallel task of the form-factor kernels (one set of scratch arrays each)
 _CHUNK = 256
 
@@ -290,12 +291,56 @@ def _dot3(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
+@njit(cache=True, error_model="numpy", inline="always")
+def _cell(row, x, g):
+    """The cell i < g of the cumulative row (g + 1,) with ``row[i] <= x < row[i + 1]`` (binary search)."""
+    lo, hi = 0, g - 1
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if row[mid] <= x:
+            lo = mid
+        else:
+            hi = mid - 1
+    return lo
+
+
+@njit(cache=True, error_model="numpy")
+def importance_warp(a, b, imp):
+    """(s, t, r): the point (a, b) of the unit square drawn by the importance tables ``imp``
+    (:func:`iat.radiosity.sampling.field_importance`: the inverse of its cumulative densities,
+    column then cell) and the density r there relative to uniform."""
+    g = (imp.shape[0] - 1) // 2
+    i = _cell(imp[0], a, g)
+    c0, c1 = imp[0, i], imp[0, i + 1]
+    s = (i + (a - c0) / (c1 - c0)) / g
+    j = _cell(imp[1 + i], b, g)
+    d0, d1 = imp[1 + i, j], imp[1 + i, j + 1]
+    t = (j + (b - d0) / (d1 - d0)) / g
+    return min(s, _BELOW_ONE), min(t, _BELOW_ONE), imp[1 + g + i, j]
+
+
+@njit(cache=True, error_model="numpy")
+def importance_density(u, v, is_quad, imp):
+    """The density relative to uniform of the importance tables ``imp`` at the shooter's lattice
+    parameters (u, v) (on a triangle, the square's point the square-root warp takes there)."""
+    g = (imp.shape[0] - 1) // 2
+    if not is_quad:
+        sq = u + v
+        u, v = sq * sq, v / sq if sq > 0 else 0.0
+    i = min(max(np.int64(u * g), 0), g - 1)
+    j = min(max(np.int64(v * g), 0), g - 1)
+    return imp[1 + g + i, j]
+
+
 @njit(cache=True, error_model="numpy")
 def row_weights(i, pat, rot, x, nr, t1, t2, near, n_s, geom, uvc, poly_n, poly_o, tol,
-                 is_quad, para, linear_uv, area, mask, has_mask, sw, su, sv, base):  # fmt: skip
+                 is_quad, para, linear_uv, area, mask, has_mask, imp, sw, su, sv, base):  # fmt: skip
     """The samples of weight > 0 of receiver row i (its S area samples, then its S cosine-direction
     samples when ``near``): their MIS weights sw and lattice parameters su, sv, written from
-    ``base`` on; returns their count and the sum of their weights."""
+    ``base`` on; returns their count and the sum of their weights. With importance tables ``imp``
+    (more than one row: :func:`iat.radiosity.sampling.field_importance`) the area samples are drawn
+    by them, and both kinds weighted by that density."""
+    drawn = imp.shape[0] > 1
     S = pat.shape[0]
     xi, ni = x[i], nr[i]
     d0n, dd, de0, de1, de2, en0, en1, en2, h = _receiver_scalars(xi, ni, geom)
@@ -303,6 +348,9 @@ def row_weights(i, pat, rot, x, nr, t1, t2, near, n_s, geom, uvc, poly_n, poly_o
     for j in range(S):  # area samples: the stratified pattern shifted by the row's rotation
         ua = wrap_unit(pat[j, 0], rot[i, 0])
         va = wrap_unit(pat[j, 1], rot[i, 1])
+        r = 1.0
+        if drawn:
+            ua, va, r = importance_warp(ua, va, imp)
         if not is_quad:  # area-uniform square -> triangle warp
             sq = math.sqrt(ua)
             ua, va = sq * (1 - va), sq * va
@@ -310,7 +358,7 @@ def row_weights(i, pat, rot, x, nr, t1, t2, near, n_s, geom, uvc, poly_n, poly_o
         ja = _jacobian(ua, va, geom, para, area)
         if has_mask and not _on_surface(ua, va, mask):
             ka = 0.0
-        wa = ka / (n_s / ja + (n_s * ka if near else 0.0) + 1e-300)
+        wa = ka / (n_s * r / ja + (n_s * ka if near else 0.0) + 1e-300)
         if wa > 0:
             sw[q], su[q], sv[q] = wa, ua, va
             wsum += wa
@@ -357,7 +405,8 @@ def row_weights(i, pat, rot, x, nr, t1, t2, near, n_s, geom, uvc, poly_n, poly_o
         wd = 0.0
         if hit:
             kd = dz * -den / (_PI * max(t * t, 1e-300))
-            wd = kd / (n_s / jd + n_s * kd + 1e-300)
+            r = importance_density(ud, vd, is_quad, imp) if drawn else 1.0
+            wd = kd / (n_s * r / jd + n_s * kd + 1e-300)
         if wd > 0:
             sw[q], su[q], sv[q] = wd, ud, vd
             wsum += wd
@@ -366,8 +415,8 @@ def row_weights(i, pat, rot, x, nr, t1, t2, near, n_s, geom, uvc, poly_n, poly_o
 
 
 @njit(cache=True, parallel=True, nogil=True, error_model="numpy")
-def gather_rays(pat, rot, x, nr, t1, t2, near, origin32, geom, uvc, poly_n, poly_o, tol,
-                is_quad, para, linear_uv, area, mask, has_mask, t32, half_eps, buf, ro, rd, rt):  # fmt: skip
+def gather_rays(pat, rot, x, nr, t1, t2, near, origin32, geom, uvc, poly_n, poly_o, tol, is_quad,
+                para, linear_uv, area, mask, has_mask, imp, t32, half_eps, buf, ro, rd, rt):  # fmt: skip
     """The samples of a block of b receivers of a gather from one shooter, and their shadow rays.
 
     pat (S, 2) stratified pattern in [0, 1)^2; rot (b, 4) per-row rotations (area, direction);
@@ -375,9 +424,10 @@ def gather_rays(pat, rot, x, nr, t1, t2, near, origin32, geom, uvc, poly_n, poly
     (direction samples too); origin32 (b, 3) float32 ray origins; geom, uvc the shooter (module
     docstring); poly_n, poly_o (k, 3) its edges' outward normals and points; tol the inside
     test's slack; is_quad, para (a parallelogram), linear_uv (the (u, v) inverse is linear);
-    area its lattice area; mask (r, r) bool coverage of a panel cell (used when has_mask);
-    t32 (4, 3) float32 ``base, e1, e2, e3`` of the ray targets (:meth:`Shooter.kernel_args`);
-    half_eps float32, taken off the targets' distance. buf (6, n) float64, ro, rd (n, 3) and rt
+    area its lattice area; mask (r, r) bool coverage of a panel cell (used when has_mask); imp
+    the importance tables the area samples are drawn by (:func:`row_weights`); t32 (4, 3) float32
+    ``base, e1, e2, e3`` of the ray targets (:meth:`Shooter.kernel_args`); half_eps float32, taken
+    off the targets' distance. buf (6, n) float64, ro, rd (n, 3) and rt
     (n,) float32, n >= 2 b S: scratch and outputs, reused between calls (fresh memory would
     cost a page fault per 4 KiB).
 
@@ -394,7 +444,7 @@ def gather_rays(pat, rot, x, nr, t1, t2, near, origin32, geom, uvc, poly_n, poly
     for i in prange(b):
         cnt[i], wsum[i] = row_weights(i, pat, rot, x, nr, t1, t2, near[i], n_s, geom, uvc, poly_n,
                                        poly_o, tol, is_quad, para, linear_uv, area, mask, has_mask,
-                                       sw, su, sv, i * 2 * S)  # fmt: skip
+                                       imp, sw, su, sv, i * 2 * S)  # fmt: skip
     off = np.zeros(b + 1, dtype=np.int64)
     for i in range(b):
         off[i + 1] = off[i] + cnt[i]

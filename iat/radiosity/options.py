@@ -79,10 +79,15 @@ FF_SUM_LIMIT = 1.25
 ENERGY_SLACK = 1.25
 #: changed sources' power, fraction of the new emitted power, above which ``resolve`` solves afresh (noise)
 RESOLVE_MAX_CHANGE = 1.0
-#: a shooter whose field peaks above this times its mean gets more samples per side, up to
-#: PEAK_SAMPLE_LIMIT times (:func:`iat.radiosity.sampling.peak_factor`; the daylit room's sunlit floor)
+#: a shooter whose field peaks above this times its mean (:func:`iat.radiosity.sampling.peak_factor`:
+#: a sun patch on a floor) has its area samples drawn by its light
+#: (:func:`iat.radiosity.sampling.field_importance`): a density piecewise constant on IMPORTANCE_SIDE x
+#: IMPORTANCE_SIDE cells of its square, IMPORTANCE_MIX of it uniform, the rest by the field's luminance;
+#: and its samples per side are raised by ``peak_factor`` up to IMPORTANCE_PEAK_LIMIT
 PEAK_RATIO = 4.0
-PEAK_SAMPLE_LIMIT = 3.0
+IMPORTANCE_SIDE = 16
+IMPORTANCE_MIX = 0.5
+IMPORTANCE_PEAK_LIMIT = 1.5
 #: rays of the ambient term traced and read at a time, a count (their buffers stay in the caches)
 AMBIENT_BLOCK_RAYS = 1 << 17
 #: side of the grid, a power of 2, on which the ambient term reads a patch's unshot light where its rays

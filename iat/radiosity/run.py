@@ -28,9 +28,11 @@ from iat.radiosity.options import (
     COARSE_SIZE,
     ENERGY_SLACK,
     FF_SUM_LIMIT,
+    IMPORTANCE_MIX,
+    IMPORTANCE_PEAK_LIMIT,
+    IMPORTANCE_SIDE,
     MAX_REFLECTANCE,
     PEAK_RATIO,
-    PEAK_SAMPLE_LIMIT,
     REFINE_SAMPLE_FACTOR,
     SHOT_FULL_SHARE,
     SHOT_GROUP,
@@ -41,7 +43,7 @@ from iat.radiosity.options import (
 from iat.radiosity.patches import ranges_of
 from iat.radiosity.progress import SolveCancelled, SolveProgress
 from iat.radiosity.remainder import ambient_term
-from iat.radiosity.sampling import luminance_of, pattern_side, peak_factor
+from iat.radiosity.sampling import field_importance, luminance_of, pattern_side, peak_factor
 from iat.radiosity.solution import Solution
 from iat.radiosity.sources import sources_record
 from iat.radiosity.state import CoarseGrid, Mesh, Radiance, Refine, Shoot
@@ -319,19 +321,28 @@ class SolveRun:
                 "see docs/stability.md"
             )
 
-    def samples_by_power(self, m_hi: int, power: float, field: np.ndarray) -> int:
-        """Samples per side of a gather of a shooter's ``field`` ((N+1, N+1, 3) lattice radiance)
-        of luminance ``power``: ``m_hi`` x sqrt(power / (``SHOT_FULL_SHARE`` x the received
-        power that stays in the scene, ``power_kept``)), 1 to ``m_hi`` (a faint shot's noise matters
-        less), times :func:`peak_factor` (a concentrated field, a sunlit patch on a floor, needs its
-        points to land in it). One pattern serves all of a shot's receivers, so a shot from one
-        point throws its light from there to the whole scene: measured against all the received
-        power, which an open scene's sunlit outside dominates, a room's own shots were faint, made
-        from one point, and their errors added up with more shots instead of averaging (the
-        window-lit room at convergence 0.0005: 12-15 % error, bias +9 / -4 / +9 % by seed)."""
+    def samples_by_power(
+        self, m_hi: int, power: float, field: np.ndarray, s: int
+    ) -> tuple[int, np.ndarray | None]:
+        """How a gather samples the ``field`` ((N+1, N+1, 3) lattice radiance) of shooter s, of
+        luminance ``power``: ``(m, importance)``, its samples per side and the tables its area
+        samples are drawn by (None: uniformly). m is ``m_hi`` x sqrt(power / (``SHOT_FULL_SHARE`` x
+        the received power that stays in the scene, ``power_kept``)), 1 to ``m_hi`` (a faint shot's
+        noise matters less). One pattern serves all of a shot's receivers, so a shot from one point
+        throws its light from there to the whole scene: measured against all the received power,
+        which an open scene's sunlit outside dominates, a room's own shots were faint, made from one
+        point, and their errors added up with more shots instead of averaging (the window-lit room
+        at convergence 0.0005: 12-15 % error, bias +9 / -4 / +9 % by seed). A concentrated field (a
+        sunlit patch on a floor: :func:`peak_factor` above 1) has its points drawn by its light
+        (:func:`field_importance`), so that they land in its bright part, and m times
+        :func:`peak_factor` up to ``IMPORTANCE_PEAK_LIMIT``."""
         share = power / max(SHOT_FULL_SHARE * self.power_kept, 1e-300)
         m = max(1, min(m_hi, round(m_hi * math.sqrt(share))))
-        return round(m * peak_factor(field, PEAK_RATIO, PEAK_SAMPLE_LIMIT))
+        peak = peak_factor(field, PEAK_RATIO, math.inf)
+        if peak <= 1.0:
+            return round(m), None
+        imp = field_importance(field, bool(self.ctx.patches.is_quad[s]), IMPORTANCE_SIDE, IMPORTANCE_MIX)
+        return round(m * min(peak, IMPORTANCE_PEAK_LIMIT)), imp
 
     def shot_group(self, power: np.ndarray, left: int) -> list[int]:
         """The patches that shoot next, at once (their gathers share the threads, and each one's
@@ -399,14 +410,14 @@ class SolveRun:
         field = mesh.lattice.grid(s, self.rad.unshot) * self.rad.gain[s]
         field_mean = rows_product(avg.indptr, avg.indices, avg.data, self.rad.unshot, np.array([s]), False)[0]
         field_mean = field_mean * self.rad.gain[s]
-        m = self.samples_by_power(SHOT_SAMPLE_FACTOR * self.m_side, power, field)
+        m, imp = self.samples_by_power(SHOT_SAMPLE_FACTOR * self.m_side, power, field, s)
         shot = int(self.shot_index[s])
         lvl = self.receiver_levels(s, field_mean)
         # the vertices of the patches it lights noticeably, and a coarse grid per level of the others
         levels = [k for k in range(len(self.coarse or [])) if (lvl == k).any()]
         parts = [(mesh.geo, lvl < 0)] + [(self.coarse[k].geo, lvl == k) for k in levels]
         (idx, g), *got = ctx.gathers.gathers(
-            s, parts, m, shot, field, field_mean, correlated=False, cull=True
+            s, parts, m, shot, field, field_mean, correlated=False, cull=True, importance=imp
         )
         rows, dv, acc = [idx], [mesh.rho[idx] * g], []
         for k, (ci, g) in zip(levels, got, strict=True):
@@ -599,7 +610,9 @@ class TotalLight:
         self.means = (mesh.M @ shot_field) * rad.gain[:, None]
         self.cache = VertexCache(mesh.keys, rad.reflected.copy())
         m_ref = REFINE_SAMPLE_FACTOR * run.m_side
-        self.m_src = {p: run.samples_by_power(m_ref, run.shot_power[p], self.grids[p]) for p in self.sources}
+        self.m_src = {  # per source: its samples a side and importance tables
+            p: run.samples_by_power(m_ref, run.shot_power[p], self.grids[p], p) for p in self.sources
+        }
         self.n_pass = run.stats["refine_passes"]
 
     def evaluate(self, new: np.ndarray) -> np.ndarray:
@@ -633,11 +646,12 @@ class TotalLight:
         return self.run.ctx.gathers.gather(
             p,
             geo,
-            self.m_src[p],
+            self.m_src[p][0],
             jitter,
             self.grids[p],
             self.means[p],
             correlated=True,
             cull=True,
             patches=fine,
+            importance=self.m_src[p][1],
         )

@@ -243,6 +243,43 @@ def luminance_of(x: np.ndarray) -> np.ndarray:
     return np.asarray(x) @ LUMINANCE_WEIGHTS
 
 
+#: no importance: the gather kernels' placeholder for :func:`field_importance`'s tables
+NO_IMPORTANCE = np.zeros((1, 2))
+
+
+def field_importance(field: np.ndarray, is_quad: bool, side: int, mix: float) -> np.ndarray:
+    """The tables by which a gather draws its area samples by a shooter's light
+    (:func:`iat.radiosity.kernels.importance_warp`), ``(2 G + 1, G + 1)`` float64, G = min(side, N):
+    row 0 the cumulative density over the G columns of the unit square (``a``), rows ``1 + i`` the
+    cumulative density over the G cells of column i (``b``), rows ``1 + G + i`` (first G entries) the
+    density of column i's cells relative to uniform (mean 1). The density is ``mix`` uniform and
+    ``1 - mix`` by the field's luminance (absolute) on each cell, read at 2 x 2 points of it, where
+    the square maps to the shooter as the pattern does (onto a triangle by the square-root warp).
+    field : the shooter's lattice radiance (N+1, N+1, 3)."""
+    n = field.shape[0] - 1
+    g = max(1, min(side, n))
+    k = 2 * g
+    c = (np.arange(k) + 0.5) / k
+    a, b = (x.ravel() for x in np.meshgrid(c, c, indexing="ij"))
+    if not is_quad:
+        sq = np.sqrt(a)
+        a, b = sq * (1.0 - b), sq * b
+    flat = np.asarray(field, dtype=np.float64).reshape(-1, 3)
+    lum = np.abs(luminance_of(sample_lattice(flat, n, a, b))).reshape(g, 2, g, 2).sum(axis=(1, 3))
+    total = float(lum.sum())
+    p = np.full((g, g), 1.0 / (g * g))
+    if total > 0:
+        p = mix * p + (1.0 - mix) * lum / total
+    out = np.zeros((2 * g + 1, g + 1))
+    col = p.sum(axis=1)
+    out[0, 1:] = np.cumsum(col) / col.sum()
+    out[1 : g + 1, 1:] = np.cumsum(p, axis=1) / col[:, None]
+    out[0, g] = 1.0
+    out[1 : g + 1, g] = 1.0
+    out[g + 1 :, :g] = p * (g * g)
+    return out
+
+
 def peak_factor(grid: np.ndarray, ratio: float, limit: float) -> float:
     """How much more finely per side a shooter's field must be sampled than a smooth one:
     ``sqrt(peak / mean / ratio)`` of its luminance, between 1 and ``limit`` (a sun patch on a floor

@@ -41,8 +41,8 @@ PAIRS = 256
 @njit(cache=True, parallel=True, nogil=True, error_model="numpy")
 def gather_traced(occ, isect, scene, glass, glass_tau,
                   ii, key, salt, correlated, ff, normal, patch, tangent, f, f_direction, origin32,
-                  pat, geom, uvc, poly_n, poly_o, tol, is_quad, para, linear_uv, area, mask, has_mask, t32,
-                  half_eps, has_field, flat, nl, field_mean, clamp_lo, clamp_hi):  # fmt: skip
+                  pat, geom, uvc, poly_n, poly_o, tol, is_quad, para, linear_uv, area, mask, has_mask, imp,
+                  t32, half_eps, has_field, flat, nl, field_mean, clamp_lo, clamp_hi):  # fmt: skip
     """What the receivers ``ii`` (b,) of a receiver set gather from one shooter, their rays traced here.
 
     occ, isect, scene, glass, glass_tau : :meth:`Visibility.embree_args`; ii ... origin32 as
@@ -64,8 +64,8 @@ def gather_traced(occ, isect, scene, glass, glass_tau,
         take_tasks(nxt, tasks, _gather_task, _gather_scratch, (S,),
                    (b, S, n_s, occ, isect, scene, glass, glass_tau, ii, key, salt, correlated, ff, normal,
                     patch, tangent, f, f_direction, origin32, pat, geom, uvc, poly_n, poly_o, tol, is_quad,
-                    para, linear_uv, area, mask, has_mask, t32, half_eps, has_field, flat, nl, field_mean,
-                    clamp_lo, clamp_hi, out, seen, rays, through))  # fmt: skip
+                    para, linear_uv, area, mask, has_mask, imp, t32, half_eps, has_field, flat, nl,
+                    field_mean, clamp_lo, clamp_hi, out, seen, rays, through))  # fmt: skip
     return out, seen, rays, through.sum()
 
 
@@ -82,7 +82,7 @@ def _gather_scratch(S):
 @njit(cache=True, nogil=True, error_model="numpy")
 def _gather_task(task, scratch, b, S, n_s, occ, isect, scene, glass, glass_tau, ii, key, salt, correlated,
                  ff, normal, patch, tangent, f, f_direction, origin32, pat, geom, uvc, poly_n, poly_o, tol,
-                 is_quad, para, linear_uv, area, mask, has_mask, t32, half_eps, has_field, flat, nl,
+                 is_quad, para, linear_uv, area, mask, has_mask, imp, t32, half_eps, has_field, flat, nl,
                  field_mean, clamp_lo, clamp_hi, out, seen, rays, through):  # fmt: skip
     """Rows ``task * ROWS ...`` of :func:`gather_traced` (scratch: :func:`_gather_scratch`'s; the
     rest: its arguments and outputs)."""
@@ -97,8 +97,8 @@ def _gather_task(task, scratch, b, S, n_s, occ, isect, scene, glass, glass_tau, 
     for j in range(m):
         i = lo + j
         cnt, wsum = row_weights(j, pat, rot, x, nr, t1, t2, f[i] >= f_direction, n_s, geom, uvc, poly_n,
-                                 poly_o, tol, is_quad, para, linear_uv, area, mask, has_mask, sw, su, sv,
-                                 0)  # fmt: skip
+                                 poly_o, tol, is_quad, para, linear_uv, area, mask, has_mask, imp, sw, su,
+                                 sv, 0)  # fmt: skip
         ox, oy, oz = o32[j, 0], o32[j, 1], o32[j, 2]
         wvis = 0.0
         sv_sum = 0.0
