@@ -112,7 +112,8 @@ def rates(path: Path, rounds: int) -> list[tuple]:
     tri = tris[rng.choice(len(tris), 3000)]
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     n /= np.linalg.norm(n, axis=1)[:, None] + 1e-30
-    o = np.ascontiguousarray(tri.mean(axis=1) + 1e-3 * scene.scale * n, dtype=np.float32)
+    size = float(np.ptp(tris.reshape(-1, 3), axis=0).max())
+    o = np.ascontiguousarray(tri.mean(axis=1) + 1e-5 * size * n, dtype=np.float32)
     a = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
     t1 = np.cross(n, a)
     t1 /= np.linalg.norm(t1, axis=1)[:, None]

@@ -274,7 +274,7 @@ class DirectLight:
         dark = not np.any(self.sky.ground)  # below the horizon nothing comes: not traced
         counts = np.zeros((SKY_PASSES, 3), dtype=np.int64)
         w, free = self._sky_rays(pat, rot, frame, origin, far, dark, None, None)
-        light = self._sky_light(w, free)  # (k, S, 3): what each direction brings, its stratum's
+        light = self.sky_table.light(w, free)  # (k, S, 3): what each direction brings, its stratum's
         total = np.einsum("ks,ksc->kc", free, light)
         counts[0] = k, free.size - (int(np.count_nonzero(w[..., 1] < 0)) if dark else 0), 0
         rows, out, count = np.arange(k), np.zeros((k, 3)), len(pat)
@@ -296,7 +296,7 @@ class DirectLight:
             vi, pj = np.nonzero(~given)
             sub = tuple(f[rows] for f in frame)
             wp, fp = self._sky_rays(lv.points, rot[rows], sub, origin[rows], far, dark, vi, pj)
-            lp = self._sky_light(wp, fp)
+            lp = self.sky_table.light(wp, fp)
             for c in range(3):
                 total[rows, c] += np.bincount(vi, weights=fp * lp[:, c], minlength=len(rows))
             below = int(np.count_nonzero(wp[:, 1] < 0)) if dark else 0
@@ -338,14 +338,6 @@ class DirectLight:
             np.ascontiguousarray(o[todo]), w[todo], np.full(int(todo.sum()), far, dtype=np.float32)
         )
         return w, free
-
-    def _sky_light(self, w: np.ndarray, free: np.ndarray) -> np.ndarray:
-        """(..., 3) the sky's radiance along directions ``w`` (..., 3), looked up only where some of
-        it gets in (``free`` (...) not 0), else 0."""
-        light = np.zeros(w.shape)
-        seen = free != 0
-        light[seen] = self.sky_table.radiance(w[seen])
-        return light
 
     def max_mean_reflected(self) -> float:
         """Upper bound of the scene's area-mean reflected luminance radiance: all the emitted power

@@ -178,28 +178,66 @@ class SkyTable:
         _table_radiance(self.table, self.sky.ground, np.ascontiguousarray(dirs, dtype=np.float64), out)
         return out
 
+    def light(self, dirs: np.ndarray, free: np.ndarray) -> np.ndarray:
+        """(..., 3) :meth:`radiance` along the unit directions ``dirs`` (..., 3) where ``free`` (...)
+        is not 0 (some of the light gets in), else 0: the same values, the others not looked up. A
+        uniform or a tabled sky in one compiled pass, without gathering the seen directions."""
+        out = np.zeros(dirs.shape)
+        if self.table is None and self.sky.kind != "uniform":
+            seen = free != 0
+            out[seen] = self.radiance(dirs[seen])
+            return out
+        table = self.table if self.table is not None else np.zeros((2, 2, 3))
+        d = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
+        f = np.ascontiguousarray(free).reshape(-1)
+        up, ground = (np.asarray(x, dtype=np.float64) for x in (self.sky.radiance, self.sky.ground))
+        _seen_light(table, self.table is None, up, ground, d, f, out.reshape(-1, 3))
+        return out
+
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _table_radiance(table, ground, dirs, out):
     """:meth:`SkyTable.radiance`: bilinear in ``table`` (m, m, 3) over ``(d_x, d_z) / sqrt(1 + d_y)``
     in [-1, 1]^2."""
-    cells = table.shape[0] - 1
     for i in range(dirs.shape[0]):
-        if dirs[i, 1] < 0.0:
-            for c in range(3):
-                out[i, c] = ground[c]
+        _table_one(table, ground, dirs, i, out)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _seen_light(table, uniform, up, ground, dirs, free, out):
+    """:meth:`SkyTable.light` into ``out`` (n, 3) (zeros): at each direction of ``dirs`` (n, 3) whose
+    ``free`` (n,) is not 0, ``up`` (3,) or ``ground`` by its side of the horizon when ``uniform``,
+    else :func:`_table_radiance`'s value."""
+    for i in range(dirs.shape[0]):
+        if free[i] == 0:
             continue
-        s = 1.0 / math.sqrt(1.0 + dirs[i, 1])
-        u = (dirs[i, 0] * s + 1.0) * 0.5 * cells
-        v = (dirs[i, 2] * s + 1.0) * 0.5 * cells
-        a = min(max(int(u), 0), cells - 1)
-        b = min(max(int(v), 0), cells - 1)
-        fu = min(max(u - a, 0.0), 1.0)
-        fv = min(max(v - b, 0.0), 1.0)
+        if uniform:
+            src = ground if dirs[i, 1] < 0.0 else up
+            for c in range(3):
+                out[i, c] = src[c]
+        else:
+            _table_one(table, ground, dirs, i, out)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _table_one(table, ground, dirs, i, out):
+    """Direction i of :func:`_table_radiance`."""
+    cells = table.shape[0] - 1
+    if dirs[i, 1] < 0.0:
         for c in range(3):
-            lo = table[a, b, c] + fv * (table[a, b + 1, c] - table[a, b, c])
-            hi = table[a + 1, b, c] + fv * (table[a + 1, b + 1, c] - table[a + 1, b, c])
-            out[i, c] = lo + fu * (hi - lo)
+            out[i, c] = ground[c]
+        return
+    s = 1.0 / math.sqrt(1.0 + dirs[i, 1])
+    u = (dirs[i, 0] * s + 1.0) * 0.5 * cells
+    v = (dirs[i, 2] * s + 1.0) * 0.5 * cells
+    a = min(max(int(u), 0), cells - 1)
+    b = min(max(int(v), 0), cells - 1)
+    fu = min(max(u - a, 0.0), 1.0)
+    fv = min(max(v - b, 0.0), 1.0)
+    for c in range(3):
+        lo = table[a, b, c] + fv * (table[a, b + 1, c] - table[a, b, c])
+        hi = table[a + 1, b, c] + fv * (table[a + 1, b + 1, c] - table[a + 1, b, c])
+        out[i, c] = lo + fu * (hi - lo)
 
 
 def cie_overcast_irradiance(zenith_radiance) -> np.ndarray:

@@ -65,11 +65,12 @@ def settled_strata(grid: np.ndarray, rot: np.ndarray, radius: int) -> np.ndarray
     k, gg = grid.shape
     g = int(round(np.sqrt(gg)))
     v = grid.reshape(k, g, g)
-    same = np.ones(v.shape, dtype=bool)
-    for da in range(-radius, radius + 1):
-        for db in range(-radius, radius + 1):
-            if da or db:
-                same &= np.roll(v, (da, db), axis=(1, 2)) == v
+    row = np.ones(v.shape, dtype=bool)  # the stratum's row within radius shares its value
+    for db in range(1, radius + 1):
+        row &= (np.roll(v, db, axis=2) == v) & (np.roll(v, -db, axis=2) == v)
+    same = row.copy()  # and so does each row within radius above and below, all of it
+    for da in (d for a in range(1, radius + 1) for d in (a, -a)):
+        same &= np.roll(row, da, axis=1) & (np.roll(v, da, axis=1) == v)
     cut = np.floor(g * (1.0 - rot)).astype(np.int64)  # (k, 2); g where nothing is cut
     a = np.arange(g)
     same &= (a[None, :, None] != cut[:, 0, None, None]) & (a[None, None, :] != cut[:, 1, None, None])

@@ -87,7 +87,7 @@ def _gather_task(task, scratch, b, S, n_s, occ, isect, scene, glass, glass_tau, 
     """Rows ``task * ROWS ...`` of :func:`gather_traced` (scratch: :func:`_gather_scratch`'s; the
     rest: its arguments and outputs)."""
     rot, x, nr, t1, t2, o32, sw, su, sv, pk = scratch
-    free = pk[3]
+    lane_vis = pk[3]
     lo = task * ROWS
     m = min(b, lo + ROWS) - lo
     for j in range(m):  # block_inputs' rows
@@ -110,7 +110,7 @@ def _gather_task(task, scratch, b, S, n_s, occ, isect, scene, glass, glass_tau, 
                 set_lane(pk, lane, ox, oy, oz, dx, dy, dz, tfar)
             through[task] += visible8(occ, isect, scene, glass, glass_tau, pk, n)
             for lane in range(n):
-                q, vis = q0 + lane, free[lane]
+                q, vis = q0 + lane, lane_vis[lane]
                 wr = sw[q] * vis  # as gather_finish sums them
                 wvis += wr
                 sv_sum += vis
