@@ -226,22 +226,27 @@ class EmbreeScene:
 
 
 # -- calling the entry points from numba ------------------------------------------------------
+def _pointer_call(n: int):
+    """The codegen of :func:`call3` / :func:`call4`: ``args[0]`` called as ``void f(void *, ...)`` with
+    the n other arguments (integers) as its pointers."""
+
+    def codegen(context, builder, signature, args):
+        ptr = ir.IntType(8).as_pointer()
+        fnty = ir.FunctionType(ir.VoidType(), [ptr] * n)
+        f = builder.inttoptr(args[0], fnty.as_pointer())
+        builder.call(f, [builder.inttoptr(x, ptr) for x in args[1:]])
+        return context.get_dummy_value()
+
+    return codegen
+
+
 @intrinsic
 def call3(typingctx, fn, a, b, c):
     """``fn(a, b, c)`` for a C function ``void fn(void *, void *, void *)`` whose address is the
     integer ``fn``, the three pointers given as integers (0: NULL)."""
     if not all(isinstance(x, types.Integer) for x in (fn, a, b, c)):
         return None
-    sig = types.void(fn, a, b, c)
-
-    def codegen(context, builder, signature, args):
-        ptr = ir.IntType(8).as_pointer()
-        fnty = ir.FunctionType(ir.VoidType(), [ptr, ptr, ptr])
-        f = builder.inttoptr(args[0], fnty.as_pointer())
-        builder.call(f, [builder.inttoptr(x, ptr) for x in args[1:]])
-        return context.get_dummy_value()
-
-    return sig, codegen
+    return types.void(fn, a, b, c), _pointer_call(3)
 
 
 @intrinsic
@@ -249,16 +254,7 @@ def call4(typingctx, fn, a, b, c, d):
     """``fn(a, b, c, d)`` for a C function ``void fn(void *, void *, void *, void *)``, as :func:`call3`."""
     if not all(isinstance(x, types.Integer) for x in (fn, a, b, c, d)):
         return None
-    sig = types.void(fn, a, b, c, d)
-
-    def codegen(context, builder, signature, args):
-        ptr = ir.IntType(8).as_pointer()
-        fnty = ir.FunctionType(ir.VoidType(), [ptr, ptr, ptr, ptr])
-        f = builder.inttoptr(args[0], fnty.as_pointer())
-        builder.call(f, [builder.inttoptr(x, ptr) for x in args[1:]])
-        return context.get_dummy_value()
-
-    return sig, codegen
+    return types.void(fn, a, b, c, d), _pointer_call(4)
 
 
 @intrinsic
@@ -358,6 +354,14 @@ def set_lane(pk, lane, ox, oy, oz, dx, dy, dz, tfar):
     rec[4, lane], rec[5, lane], rec[6, lane], rec[7, lane] = dx, dy, dz, 0.0
     rec[8, lane] = tfar
     bits[9, lane], bits[10, lane], bits[11, lane] = _INVALID, 0, 0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _load_lanes(pk, o, d, t, a, n):
+    """Lanes 0 .. n-1 of the packet pk the rays a .. a+n-1 of the arrays o, d (m, 3), t (m,)."""
+    for lane in range(n):
+        i = a + lane
+        set_lane(pk, lane, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i])
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -466,12 +470,8 @@ def _visible_block(b, pk, occ8, isect, scene, glass, glass_tau, o, d, t, out, th
     vis = pk[3]
     for a in range(b * RAY_BLOCK, end, PACKET):
         n = min(PACKET, end - a)
-        for lane in range(n):
-            i = a + lane
-            set_lane(pk, lane, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i])
-        th = visible8(occ8, isect, scene, glass, glass_tau, pk, n)
-        if glass != 0:
-            through[b] += th
+        _load_lanes(pk, o, d, t, a, n)
+        through[b] += visible8(occ8, isect, scene, glass, glass_tau, pk, n)  # 0 without glass
         for lane in range(n):
             out[a + lane] = vis[lane]
 
@@ -493,13 +493,11 @@ def _first_hit_block(b, pk, fn8, scene, o, d, t, prim, bary):
     end = min(o.shape[0], (b + 1) * RAY_BLOCK)
     for a in range(b * RAY_BLOCK, end, PACKET):
         n = min(PACKET, end - a)
+        _load_lanes(pk, o, d, t, a, n)
+        intersect8(fn8, scene, pk, n)  # geomID left invalid when there is no scene
         for lane in range(n):
             i = a + lane
-            set_lane(pk, lane, o[i, 0], o[i, 1], o[i, 2], d[i, 0], d[i, 1], d[i, 2], t[i])
-        intersect8(fn8, scene, pk, n)
-        for lane in range(n):
-            i = a + lane
-            if scene != 0 and bits[18, lane] != _INVALID:
+            if bits[18, lane] != _INVALID:
                 prim[i] = np.int64(bits[17, lane])
                 bary[i, 0], bary[i, 1] = rec[15, lane], rec[16, lane]
             else:

@@ -168,6 +168,11 @@ class Visibility:
         glass = self._c_glass.handle if self._c_glass is not None else np.int64(0)
         return (self._c.entry.occluded8, self._c.entry.intersect1, self._c.handle, glass, self._glass_tau)
 
+    def _opaque_args(self) -> tuple:
+        """:meth:`embree_args` without the glass: what :func:`.embree.trace_visible` takes to answer
+        only whether something opaque lies on each ray (0: it does, 1: it does not)."""
+        return (self._c.entry.occluded8, np.int64(0), self._c.handle, np.int64(0), self._glass_tau)
+
     def count(self, rays: int, seconds: float) -> None:
         """Add rays traced elsewhere (a kernel given :meth:`embree_args`) to ``rays`` and ``seconds``."""
         with self._lock:
@@ -184,7 +189,7 @@ class Visibility:
         before = get_num_threads()
         set_num_threads(1)
         try:
-            embree.trace_visible(self._c.entry.occluded8, 0, self._c.handle, 0, self._glass_tau, o, d, t, out)
+            embree.trace_visible(*self._opaque_args(), o, d, t, out)
         finally:
             set_num_threads(before)
         return (out > 0).astype(np.int32)
@@ -239,10 +244,7 @@ class Visibility:
             return self._traced(self.occluded_chunk, origins, dirs, tfar, 1) == 0
         o, d, t = self._rays(origins, dirs, tfar)
         out = np.empty(len(o))
-        entry, handle = self._c.entry, self._c.handle
-        self._kernel(
-            embree.trace_visible, entry.occluded8, 0, handle, 0, self._glass_tau, o, d, t, out, n=len(o)
-        )
+        self._kernel(embree.trace_visible, *self._opaque_args(), o, d, t, out, n=len(o))
         return out == 0
 
     def first_hit(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray) -> np.ndarray:
