@@ -15,7 +15,7 @@ import pytest
 
 from iat.geometry import quadtree as qt
 from iat.io.load import load_scene
-from iat.io.scene import Material, Scene
+from iat.io.scene import Material, Scene, Sky
 from iat.radiosity import SolveOptions, embree, solve
 from iat.radiosity.context import Context
 from iat.radiosity.solver import evaluate_direct
@@ -206,7 +206,7 @@ def test_traced_gather_is_the_three_steps(field, correlated):
 
 def test_direct_daylight_same_bits(monkeypatch):
     """The sun's and the sky's rays made and traced in one kernel (:func:`.traced.sun_escape`,
-    :func:`.traced.sky_escape`) give the direct light of the numpy directions and embreex to the
+    :func:`.sky_traced.sky_estimate`) give the direct light of the numpy directions and embreex to the
     bit: house_day (Preetham sky, sun, lamps, glass) at a lattice of points of every patch."""
     scene = sample("house_day")
     n = 1 << SolveOptions().max_depth
@@ -238,10 +238,11 @@ def test_solves_same_bits(make, monkeypatch):
 
 
 def test_sky_rays_below_a_black_ground_are_not_traced():
-    """:func:`.traced.sky_escape` with ``dark_ground``: the directions below the horizon get 0 and
-    count no ray (nor any through the glass), the others are traced as before (the same
-    directions and answers)."""
-    from iat.radiosity.traced import sky_escape
+    """:func:`.sky_traced.sky_estimate` with ``dark_ground``: the directions below the horizon are
+    not traced (a black ground brings nothing there), and the first estimates are those of tracing
+    them (the same bits), with fewer rays."""
+    from iat.radiosity.sky import SkyTable
+    from iat.radiosity.sky_traced import pack_levels, sky_estimate
 
     scene = pane_scene()  # no ground: the ceiling panel sees the sky below the horizon
     with Visibility.of_scene(scene, backend="c") as vis:
@@ -252,14 +253,13 @@ def test_sky_rays_below_a_black_ground_are_not_traced():
         geo = ctx.patches.geometry(keys)
         rot = np.random.default_rng(0).random((len(p), 2))
         pat = ctx.gathers.pattern(0, 8, 2)
-        t1, t2 = ctx.patches.tangent[p, 0], ctx.patches.tangent[p, 1]
-        args = (vis, pat, rot, t1, t2, geo.normal, geo.origin32(), 4.0 * ctx.patches.scale)
+        light = SkyTable(Sky(kind="uniform", radiance=(1.0, 2.0, 3.0), ground=(0.0, 0.0, 0.0))).kernel_args()
+        frame = (ctx.patches.tangent[p, 0], ctx.patches.tangent[p, 1], geo.normal)
+        args = (vis, light, pat, 8, pack_levels([]), 1, rot, frame, geo.origin32(), 4.0 * ctx.patches.scale)
         before = vis.rays
-        w, free = sky_escape(*args)
-        every = vis.rays - before
-        w2, free2 = sky_escape(*args, dark_ground=True)
-        below = w[..., 1] < 0
-        assert 0.1 < below.mean() < 0.9 and (free[below] > 0).any() and (free[~below] > 0).any()
-        assert np.array_equal(w, w2) and np.array_equal(free2[~below], free[~below])
-        assert not free2[below].any()
-        assert vis.rays - before - every <= every - int(below.sum())  # (and the glass's extra counts)
+        every, c_every = sky_estimate(*args, False, np.zeros(len(p)), 0.0, 2)
+        traced_every = vis.rays - before
+        dark, c_dark = sky_estimate(*args, True, np.zeros(len(p)), 0.0, 2)
+        assert (every > 0).any() and np.array_equal(every, dark)
+        assert c_every[0, 1] == 64 * len(p) and c_dark[0, 1] < 0.9 * c_every[0, 1]
+        assert vis.rays - before - traced_every < traced_every

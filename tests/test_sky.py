@@ -548,7 +548,7 @@ def test_a_later_sky_estimate_traces_where_strata_differ(monkeypatch):
             return ctx.light.direct(keys, lambda: None) @ LUMINANCE, ctx.light.sky_counts.copy()
 
     got, counts = direct_light()
-    monkeypatch.setattr(direct, "settled_strata", lambda grid, rot, radius: np.zeros(grid.shape, dtype=bool))
+    monkeypatch.setattr(direct, "SKY_SETTLED", -1)  # every new direction traced
     every, all_counts = direct_light()
     assert counts[1, 0] == all_counts[1, 0] > 0.5 * len(keys)  # the same vertices estimated again
     assert counts[1, 1] < 0.2 * (counts[1, 1] + counts[1, 2]) and all_counts[1, 2] == 0

@@ -34,8 +34,9 @@ from iat.radiosity.sampling import (
 )
 from iat.radiosity.sky import SkyTable, sky_radiance
 from iat.radiosity.sky_passes import SkyLevel, quarter_sums, settled_strata, sky_levels
+from iat.radiosity.sky_traced import pack_levels, sky_estimate
 from iat.radiosity.tasks import TaskPool
-from iat.radiosity.traced import sky_escape, sky_pair_escape, sun_escape
+from iat.radiosity.traced import sun_escape
 from iat.radiosity.visibility import Visibility
 
 
@@ -247,13 +248,14 @@ class DirectLight:
         pat = self.gathers.pattern(self.patches.n_patches, side, 2)
         rng = np.random.default_rng([int(self.opts.seed), self.patches.n_patches, 2, side, 1])
         levels = sky_levels(pat, side, SKY_PASSES, rng)
+        packed = pack_levels(levels)
         other = np.zeros(n) if other is None else other
         size = max(1, GATHER_BLOCK * 16 // len(pat))
         blocks = [np.arange(a, min(a + size, n)) for a in range(0, n, size)]
         out = np.zeros((n, 3))
 
         def run(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            return self._sky_block(geo, idx, pat, levels, other[idx])
+            return self._sky_block(geo, idx, pat, side, levels, packed, other[idx])
 
         for idx, (e, c) in zip(blocks, self.pool.imap(run, blocks, check), strict=True):
             out[idx] = e
@@ -261,17 +263,24 @@ class DirectLight:
         return out
 
     def _sky_block(
-        self, geo: ReceiverGeometry, idx: np.ndarray, pat: np.ndarray, levels: list[SkyLevel], other
+        self, geo: ReceiverGeometry, idx: np.ndarray, pat, side: int, levels: list[SkyLevel], packed, other
     ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`sky_irradiance` at the vertices ``idx`` (k,) whose other sources give ``other``
         (k,): ((k, 3) irradiance, (SKY_PASSES, 3) int: per estimate the vertices, the rays traced
-        and the directions that took their stratum's value)."""
+        and the directions that took their stratum's value). In one kernel with the C API
+        (:func:`.sky_traced.sky_estimate`, ``packed``: :func:`.sky_traced.pack_levels` of
+        ``levels``), else here, in numpy and embreex, to the same bits."""
         k = len(idx)
         rot = hash_uniform(geo.key[idx], int(self.opts.seed) * 7919 + 29, 2)
         tangent = self.patches.tangent[geo.patch[idx]]
         frame = (tangent[:, 0], tangent[:, 1], geo.normal[idx])
         origin, far = geo.origin32()[idx], 4.0 * self.patches.scale
         dark = not np.any(self.sky.ground)  # below the horizon nothing comes: not traced
+        light = self.sky_table.kernel_args()
+        got = sky_estimate(self.vis, light, pat, side, packed, SKY_PASSES, rot, frame, origin, far, dark,
+                           other, SKY_NOISE, SKY_SETTLED)  # fmt: skip
+        if got is not None:
+            return got
         counts = np.zeros((SKY_PASSES, 3), dtype=np.int64)
         w, free = self._sky_rays(pat, rot, frame, origin, far, dark, None, None)
         light = self.sky_table.light(w, free)  # (k, S, 3): what each direction brings, its stratum's
@@ -316,19 +325,12 @@ class DirectLight:
         pattern ``pat`` (S, 2) rotated by ``rot`` (k, 2) in the frames ``frame`` (t1, t2, normal:
         (k, 3) each) from ``origin`` (k, 3) float32: at every vertex and direction when ``pj`` is
         None (``(w (k, S, 3), free (k, S))``), else direction ``pj`` (m,) of vertex ``vi`` (m,)
-        (``(w (m, 3), free (m,))``). Traced in one kernel (:func:`.traced.sky_escape`,
-        :func:`.traced.sky_pair_escape`), or numpy's directions and embreex, to the same bits."""
+        (``(w (m, 3), free (m,))``)."""
         t1, t2, normal = frame
         if pj is None:
-            traced = sky_escape(self.vis, pat, rot, t1, t2, normal, origin, far, dark)
-            if traced is not None:
-                return traced
             w = disk_to_hemisphere(*rotated_disk(pat, rot[:, :1], rot[:, 1:2]), t1, t2, normal)
             o = np.broadcast_to(origin[:, None], w.shape)
         else:
-            traced = sky_pair_escape(self.vis, pat, rot, t1, t2, normal, origin, far, dark, vi, pj)
-            if traced is not None:
-                return traced
             dx, dy = concentric_disk((pat[pj, 0] + rot[vi, 0]) % 1.0, (pat[pj, 1] + rot[vi, 1]) % 1.0)
             w = disk_to_hemisphere(dx[:, None], dy[:, None], t1[vi], t2[vi], normal[vi])[:, 0]
             o = origin[vi]

@@ -120,7 +120,8 @@ SUN_SAMPLES = 64
 SKY_NOISE = 0.01
 SKY_PASSES = 2
 #: a later sky estimate traces its new directions only in the strata whose value differs from one
-#: within this many strata on the grid before it; the others take their stratum's (:mod:`.sky_passes`)
+#: within this many strata on the grid before it; the others take their stratum's (:mod:`.sky_passes`);
+#: -1 traces them all
 SKY_SETTLED = 2
 
 

@@ -181,18 +181,34 @@ class SkyTable:
     def light(self, dirs: np.ndarray, free: np.ndarray) -> np.ndarray:
         """(..., 3) :meth:`radiance` along the unit directions ``dirs`` (..., 3) where ``free`` (...)
         is not 0 (some of the light gets in), else 0: the same values, the others not looked up. A
-        uniform or a tabled sky in one compiled pass, without gathering the seen directions."""
+        uniform, tabled or CIE overcast sky in one compiled pass (:func:`sky_light_one`), without
+        gathering the seen directions."""
         out = np.zeros(dirs.shape)
-        if self.table is None and self.sky.kind != "uniform":
+        args = self.kernel_args()
+        if args is None:
             seen = free != 0
             out[seen] = self.radiance(dirs[seen])
             return out
-        table = self.table if self.table is not None else np.zeros((2, 2, 3))
         d = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
         f = np.ascontiguousarray(free).reshape(-1)
-        up, ground = (np.asarray(x, dtype=np.float64) for x in (self.sky.radiance, self.sky.ground))
-        _seen_light(table, self.table is None, up, ground, d, f, out.reshape(-1, 3))
+        _seen_light(*args, d, f, out.reshape(-1, 3))
         return out
+
+    def kernel_args(self) -> tuple | None:
+        """What :func:`sky_light_one` takes to look this sky up in a kernel: ``(kind, table, up,
+        ground)`` (:data:`LIGHT_UNIFORM`, :data:`LIGHT_TABLE` or :data:`LIGHT_CIE`; the table, or a
+        (2, 2, 3) placeholder; ``sky.radiance`` and ``sky.ground`` (3,) float64); None for an
+        image (HDR) sky."""
+        kinds = {"uniform": LIGHT_UNIFORM, "preetham": LIGHT_TABLE, "cie_overcast": LIGHT_CIE}
+        if self.sky.kind not in kinds:
+            return None
+        table = self.table if self.table is not None else np.zeros((2, 2, 3))
+        up, ground = (np.asarray(x, dtype=np.float64) for x in (self.sky.radiance, self.sky.ground))
+        return kinds[self.sky.kind], table, up, ground
+
+
+#: the kinds of sky :func:`sky_light_one` looks up
+LIGHT_UNIFORM, LIGHT_TABLE, LIGHT_CIE = 0, 1, 2
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -204,19 +220,37 @@ def _table_radiance(table, ground, dirs, out):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _seen_light(table, uniform, up, ground, dirs, free, out):
-    """:meth:`SkyTable.light` into ``out`` (n, 3) (zeros): at each direction of ``dirs`` (n, 3) whose
-    ``free`` (n,) is not 0, ``up`` (3,) or ``ground`` by its side of the horizon when ``uniform``,
-    else :func:`_table_radiance`'s value."""
+def _seen_light(kind, table, up, ground, dirs, free, out):
+    """:meth:`SkyTable.light` into ``out`` (n, 3) (zeros): :func:`sky_light_one` at each direction
+    of ``dirs`` (n, 3) whose ``free`` (n,) is not 0."""
     for i in range(dirs.shape[0]):
-        if free[i] == 0:
-            continue
-        if uniform:
-            src = ground if dirs[i, 1] < 0.0 else up
-            for c in range(3):
-                out[i, c] = src[c]
-        else:
-            _table_one(table, ground, dirs, i, out)
+        if free[i] != 0:
+            sky_light_one(kind, table, up, ground, dirs, i, out)
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def sky_light_one(kind, table, up, ground, dirs, i, out):
+    """The radiance from direction i of ``dirs`` (n, 3) into ``out[i]`` (3,), :func:`sky_radiance`'s
+    arithmetic: ``ground`` (3,) below the horizon; above it ``up`` (3,) for :data:`LIGHT_UNIFORM`,
+    bilinear in ``table`` (:func:`_table_one`) for :data:`LIGHT_TABLE`, the CIE overcast sky of
+    zenith ``up`` for :data:`LIGHT_CIE`."""
+    if kind == LIGHT_TABLE:
+        _table_one(table, ground, dirs, i, out)
+        return
+    y = dirs[i, 1]
+    if kind == LIGHT_CIE:  # the unit direction's y, as numpy's norm sums it
+        n = math.sqrt(dirs[i, 0] * dirs[i, 0] + dirs[i, 1] * dirs[i, 1] + dirs[i, 2] * dirs[i, 2])
+        y = y / max(n, 1e-300)
+    if y < 0.0:
+        for c in range(3):
+            out[i, c] = ground[c]
+    elif kind == LIGHT_CIE:
+        f = (1.0 + 2.0 * min(max(y, 0.0), 1.0)) / 3.0
+        for c in range(3):
+            out[i, c] = f * up[c]
+    else:
+        for c in range(3):
+            out[i, c] = up[c]
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")

@@ -61,8 +61,11 @@ def settled_strata(grid: np.ndarray, rot: np.ndarray, radius: int) -> np.ndarray
     """(k, g * g) bool: the strata of per-vertex grids ``grid`` (k, g * g) of a g x g pattern
     rotated by ``rot`` (k, 2) whose value every stratum within ``radius`` (on the torus the rotation
     wraps) shares. The stratum row and column that the rotation's wrap cuts are never settled: its
-    two parts lie apart on the disc."""
+    two parts lie apart on the disc. A negative ``radius`` settles none (every new direction is
+    traced)."""
     k, gg = grid.shape
+    if radius < 0:
+        return np.zeros((k, gg), dtype=bool)
     g = int(round(np.sqrt(gg)))
     v = grid.reshape(k, g, g)
     row = np.ones(v.shape, dtype=bool)  # the stratum's row within radius shares its value
