@@ -6,10 +6,12 @@ distributed rays (one stratified pattern for all, so the result varies smoothly)
 each first meets a front face, the unshot radiance there (the patch's field on its ``AMBIENT_GRID``
 x ``AMBIENT_GRID`` lattice, times its shot gain): their mean times the vertex's albedo is the
 remainder's first bounce ``R1``, at the resolution of the unshot light (a sunlit patch of floor
-lights what faces it, not its whole room). The same rays, traced again, read ``R1`` where they land
-for the second bounce ``R2`` (a patch's light is uneven: the Cornell box's walls are one patch
-each), except on panel cells (clipped patches), which give their patch mean over their surface
-(their lattice square reaches past it). The bounces after are solved on the patches.
+lights what faces it, not its whole room). A second gather, with ``AMBIENT_SECOND_SHARE`` of the
+rays, reads ``R1`` where they land for the second bounce ``R2`` (a patch's light is uneven: the
+Cornell box's walls are one patch each), except on panel cells (clipped patches), which give their
+patch mean over their surface (their lattice square reaches past it); it gives only ``R2``'s shape
+within a patch, its power per patch coming from the first gather's rays (below). The bounces after
+are solved on the patches.
 
 What the vertices gather gives each bounce its shape; how much power a patch holds comes from the
 same rays read the other way. A vertex's rays, weighted by the power its radiance stands for,
@@ -40,6 +42,7 @@ from iat.radiosity.options import (
     AMBIENT_FIT_LIMIT,
     AMBIENT_GRID,
     AMBIENT_MAX_BOUNCES,
+    AMBIENT_SECOND_SHARE,
     MAX_REFLECTANCE,
 )
 from iat.radiosity.sampling import concentric_disk, pattern_side
@@ -185,7 +188,8 @@ def ambient_term(
     r1 = fit(rho * first, albedo * sent(unshot * gain[geo.patch][:, None]))
     grids = lattice.coarse_grids(r1, g)
     grids[pt.clipped] = np.asarray(avg @ r1)[pt.clipped][:, None, None, :]
-    second, _, _ = hemisphere_gather(ctx, geo, vis, *tris, grids, rays, check, False)  # the same rays again
+    few = max(1, round(rays * AMBIENT_SECOND_SHARE))
+    second, _, _ = hemisphere_gather(ctx, geo, vis, *tris, grids, few, check, False)
     power2 = albedo * sent(r1)
     r2 = fit(rho * second, power2)
     rho_p = np.minimum(albedo, MAX_REFLECTANCE)
