@@ -25,8 +25,6 @@ from iat.radiosity.options import (
 from iat.radiosity.patches import Patches, ReceiverGeometry
 from iat.radiosity.pointlight import lumped_light
 from iat.radiosity.sampling import (
-    concentric_disk,
-    disk_to_hemisphere,
     hash_uniform,
     luminance_of,
     pattern_side,
@@ -34,7 +32,7 @@ from iat.radiosity.sampling import (
 )
 from iat.radiosity.sky import SkyTable, sky_radiance
 from iat.radiosity.sky_passes import SkyLevel, quarter_sums, settled_strata, sky_levels
-from iat.radiosity.sky_traced import pack_levels, sky_estimate
+from iat.radiosity.sky_traced import pack_levels, sky_directions, sky_estimate
 from iat.radiosity.tasks import TaskPool
 from iat.radiosity.traced import sun_escape
 from iat.radiosity.visibility import Visibility
@@ -327,13 +325,15 @@ class DirectLight:
         None (``(w (k, S, 3), free (k, S))``), else direction ``pj`` (m,) of vertex ``vi`` (m,)
         (``(w (m, 3), free (m,))``)."""
         t1, t2, normal = frame
-        if pj is None:
-            w = disk_to_hemisphere(*rotated_disk(pat, rot[:, :1], rot[:, 1:2]), t1, t2, normal)
-            o = np.broadcast_to(origin[:, None], w.shape)
-        else:
-            dx, dy = concentric_disk((pat[pj, 0] + rot[vi, 0]) % 1.0, (pat[pj, 1] + rot[vi, 1]) % 1.0)
-            w = disk_to_hemisphere(dx[:, None], dy[:, None], t1[vi], t2[vi], normal[vi])[:, 0]
-            o = origin[vi]
+        k = len(rot)
+        whole = pj is None
+        if whole:
+            vi, pj = np.repeat(np.arange(k), len(pat)), np.tile(np.arange(len(pat)), k)
+        w = np.empty((len(vi), 3))
+        sky_directions(pat, rot, *(np.ascontiguousarray(f, dtype=np.float64) for f in frame), vi, pj, w)
+        o = origin[vi]
+        if whole:
+            w, o = w.reshape(k, len(pat), 3), o.reshape(k, len(pat), 3)
         free = np.zeros(w.shape[:-1])
         todo = w[..., 1] >= 0 if dark else np.ones(free.shape, dtype=bool)
         free[todo] = self.vis.visible(
