@@ -257,15 +257,19 @@ def _edge_keys(c, is_quad, patch, fr, denom, n, out):
 
 
 def balance(forest: Forest) -> Forest:
-    """Split leaves until every leaf's edge neighbours are at most one level finer (2:1)."""
+    """Split leaves until every leaf's edge neighbours are at most one level finer (2:1): a leaf of
+    size 4 or more is split when a vertex lies at a quarter of one of its edges. After a round, a
+    leaf it left is tested only against the round's new vertices (it was not split for the others)."""
     keys = vertex_keys(forest)
+    fresh, kept = keys, forest.n_leaves  # the vertices to test the first ``kept`` leaves against
     while True:
         big = forest.leaf_size >= 4
         if not big.any():
             return forest
-        quarter = _edge_points(forest.take(big), (1, 3), 4)
         bad = np.zeros(forest.n_leaves, dtype=bool)
-        bad[big] = (lookup(keys, quarter) >= 0).any(axis=(1, 2))
+        for sel, against in ((np.flatnonzero(big[:kept]), fresh), (kept + np.flatnonzero(big[kept:]), keys)):
+            if len(sel):
+                bad[sel] = (lookup(against, _edge_points(forest.take(sel), (1, 3), 4)) >= 0).any(axis=(1, 2))
         if not bad.any():
             return forest
         before = forest.n_leaves
@@ -273,7 +277,9 @@ def balance(forest: Forest) -> Forest:
         # a split leaf's corners are its children's: the new vertices are the children's corners
         # (:func:`split` puts the 4 children of each of the k split leaves last)
         children = 4 * (forest.n_leaves - before) // 3
-        keys = merge_keys(keys, leaf_corner_keys(forest.take(slice(forest.n_leaves - children, None))))
+        kept = forest.n_leaves - children
+        fresh = sorted_unique(leaf_corner_keys(forest.take(slice(kept, None))))
+        keys = merge_keys(keys, fresh)
 
 
 def merge_keys(keys: np.ndarray, more: np.ndarray) -> np.ndarray:
