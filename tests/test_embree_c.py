@@ -222,6 +222,35 @@ def test_direct_daylight_same_bits(monkeypatch):
     assert np.array_equal(ref, got)
 
 
+def test_sky_kernel_same_bits_at_three_estimates(monkeypatch):
+    """The sky's kernel (:func:`.sky_traced.sky_vertices`) is numpy's path to the bit with a third
+    estimate (``SKY_PASSES`` = 3: the finer grids built in the kernel), a CIE overcast sky (looked
+    up in the kernel) and a black ground (no direction below the horizon traced, none made under the
+    ceiling): the window-lit room at a lattice of points of every patch."""
+    import iat.radiosity.direct as direct
+    from tests.support.daylight import window_room
+
+    scene = window_room()
+    scene.sky = Sky(kind="cie_overcast", radiance=(1.0, 1.1, 1.3), ground=(0.0, 0.0, 0.0))
+    n = 1 << SolveOptions().max_depth
+    g = np.arange(1, n, n // 8)
+    p, i, j = (a.ravel() for a in np.meshgrid(np.arange(scene.n_patches), g, g, indexing="ij"))
+    keys = np.unique(qt.make_key(p, i, j, n))
+    monkeypatch.setattr(direct, "SKY_PASSES", 3)
+
+    def sky_light():
+        with Visibility.of_scene(scene) as vis:
+            ctx = Context(scene, SolveOptions().validate(), vis)
+            return ctx.light.direct(keys, lambda: None), ctx.light.sky_counts.copy()
+
+    monkeypatch.setenv(embree.EMBREE_C_ENV, "0")
+    ref, ref_counts = sky_light()
+    monkeypatch.delenv(embree.EMBREE_C_ENV)
+    got, counts = sky_light()
+    assert counts[2, 0] > 0 and (ref > 0).mean() > 0.3 and (ref == 0).any()  # a ceiling sees no sky
+    assert np.array_equal(ref, got) and np.array_equal(ref_counts, counts)
+
+
 @pytest.mark.parametrize("make", [lambda: sample("cornell_box"), glazed_room])
 def test_solves_same_bits(make, monkeypatch):
     """A solve with the C API (its gathers trace their own rays) is the embreex solve to the bit."""
