@@ -258,9 +258,10 @@ def _noisy(i, fr, lt, g, count, out, other, noise):
     ``noise`` of its direct light (this estimate's luminance plus ``other[i]``)."""
     w0, w1, w2 = LUMINANCE_WEIGHTS[0], LUMINANCE_WEIGHTS[1], LUMINANCE_WEIGHTS[2]
     q = np.zeros(4)
-    for j in range(g * g):
-        a, b = j // g, j % g
-        q[(a % 2) * 2 + b % 2] += fr[j] * (lt[j, 0] * w0 + lt[j, 1] * w1 + lt[j, 2] * w2)
+    for a in range(g):
+        for b in range(g):
+            j = a * g + b
+            q[(a & 1) * 2 + (b & 1)] += fr[j] * (lt[j, 0] * w0 + lt[j, 1] * w1 + lt[j, 2] * w2)
     for k in range(4):
         q[k] = np.pi * q[k] / (count / 4)
     mean = (q[0] + q[1] + q[2] + q[3]) / 4.0
@@ -281,7 +282,7 @@ def _settle(v, g, rot, i, radius, row, settled):
         for b in range(g):
             x, ok = v[a * g + b], True
             for d in range(1, radius + 1):
-                if v[a * g + (b + d) % g] != x or v[a * g + (b - d) % g] != x:
+                if v[a * g + _wrap(b + d, g)] != x or v[a * g + _wrap(b - d, g)] != x:
                     ok = False
                     break
             row[a * g + b] = ok
@@ -294,10 +295,16 @@ def _settle(v, g, rot, i, radius, row, settled):
             for d in range(1, radius + 1):
                 if not ok:
                     break
-                for e in ((a + d) % g, (a - d) % g):
+                for e in (_wrap(a + d, g), _wrap(a - d, g)):
                     if not row[e * g + b] or v[e * g + b] != v[j]:
                         ok = False
             settled[j] = ok
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _wrap(x, g):
+    """``x % g`` for x in [-g, 2g), without a division."""
+    return x + g if x < 0 else (x - g if x >= g else x)
 
 
 def sky_estimate(vis, light, pat, side: int, levels: tuple, passes: int, rot, frame, origin32, tfar: float,
