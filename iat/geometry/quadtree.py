@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 #: corner offsets in units of the leaf size, (4, 2); quads use all four
 QUAD_CORNERS = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
@@ -175,13 +175,29 @@ def vertex_keys(forest: Forest) -> np.ndarray:
 
 
 def lookup(keys: np.ndarray, query: np.ndarray) -> np.ndarray:
-    """Indices of ``query`` in sorted ``keys``; -1 where absent. Shapes follow ``query``."""
+    """Indices of ``query`` in sorted ``keys``; -1 where absent. Shapes follow ``query``. A binary
+    search per query, spread over the threads."""
     query = np.asarray(query, dtype=np.int64)
-    if len(keys) == 0:
-        return np.full(query.shape, -1, dtype=np.int64)
-    idx = np.searchsorted(keys, query)
-    idx_c = np.minimum(idx, len(keys) - 1)
-    return np.where(keys[idx_c] == query, idx_c, -1)
+    out = np.empty(query.shape, dtype=np.int64)
+    _lookup(
+        np.ascontiguousarray(keys, dtype=np.int64), np.ascontiguousarray(query).reshape(-1), out.reshape(-1)
+    )
+    return out
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def _lookup(keys, query, out):
+    n = keys.shape[0]
+    for i in prange(query.shape[0]):
+        x = query[i]
+        lo, hi = 0, n
+        while lo < hi:
+            mid = (lo + hi) >> 1
+            if keys[mid] < x:
+                lo = mid + 1
+            else:
+                hi = mid
+        out[i] = lo if lo < n and keys[lo] == x else -1
 
 
 def split(forest: Forest, mask: np.ndarray) -> Forest:
