@@ -88,7 +88,7 @@ def test_ambient_hits_read_the_lattice_where_the_rays_land():
     patch's grid; back hits on a patch with a twin read the twin (at (v, u) for a swapped twin, its
     mean otherwise), other back hits nothing; the vertex's mean over its rays, the fraction of its
     rays on each patch, and the fraction on a back face with no twin."""
-    from iat.radiosity.kernels import ambient_hits
+    from iat.radiosity.ambient_kernels import ambient_hits
     from iat.radiosity.sampling import sample_lattice
 
     rng = np.random.default_rng(6)

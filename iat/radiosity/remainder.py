@@ -35,7 +35,7 @@ import numpy as np
 from scipy import sparse
 
 from iat.geometry.sides import overlap_groups
-from iat.radiosity.kernels import ambient_hits, cosine_rays
+from iat.radiosity.ambient_kernels import ambient_hits, cosine_rays
 from iat.radiosity.options import (
     AMBIENT_BLOCK_RAYS,
     AMBIENT_BOUNCE_TOL,
