@@ -349,6 +349,8 @@ def test_merge_keys_is_the_sorted_union():
 
 def test_cosine_rays_are_disk_to_hemisphere_bit_for_bit():
     # the ambient term's rays: the numpy lift of the disc points, and its float32 rounding for embreex
+    from iat.radiosity.ambient_kernels import cosine_rays
+
     rng = np.random.default_rng(5)
     dx, dy = concentric_disk(rng.random(16), rng.random(16))
     normal = rng.normal(size=(7, 3))
@@ -358,7 +360,7 @@ def test_cosine_rays_are_disk_to_hemisphere_bit_for_bit():
     t2 = np.cross(normal, t1)
     origin32 = rng.normal(size=(7, 3)).astype(np.float32)
     w, o, d = np.empty((112, 3)), np.empty((112, 3), np.float32), np.empty((112, 3), np.float32)
-    kernels.cosine_rays(dx, dy, t1, t2, normal, origin32, w, o, d)
+    cosine_rays(dx, dy, t1, t2, normal, origin32, w, o, d)
     ref = disk_to_hemisphere(dx[None], dy[None], t1, t2, normal).reshape(-1, 3)
     assert np.array_equal(w, ref)
     assert np.array_equal(d, ref.astype(np.float32))
