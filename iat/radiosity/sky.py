@@ -181,21 +181,22 @@ class SkyTable:
     def light(self, dirs: np.ndarray, free: np.ndarray) -> np.ndarray:
         """(..., 3) :meth:`radiance` along the unit directions ``dirs`` (..., 3) where ``free`` (...)
         is not 0 (some of the light gets in), else 0: the same values, the others not looked up. A
-        uniform, tabled or CIE overcast sky in one compiled pass (:func:`sky_light_one`), without
+        uniform, tabled or CIE overcast sky in one compiled pass (:func:`seen_light`), without
         gathering the seen directions."""
-        out = np.zeros(dirs.shape)
         args = self.kernel_args()
         if args is None:
+            out = np.zeros(dirs.shape)
             seen = free != 0
             out[seen] = self.radiance(dirs[seen])
             return out
+        out = np.empty(dirs.shape)
         d = np.ascontiguousarray(dirs, dtype=np.float64).reshape(-1, 3)
         f = np.ascontiguousarray(free).reshape(-1)
-        _seen_light(*args, d, f, out.reshape(-1, 3))
+        seen_light(*args, d, f, len(f), out.reshape(-1, 3))
         return out
 
     def kernel_args(self) -> tuple | None:
-        """What :func:`sky_light_one` takes to look this sky up in a kernel: ``(kind, table, up,
+        """What :func:`seen_light` takes to look this sky up in a kernel: ``(kind, table, up,
         ground)`` (:data:`LIGHT_UNIFORM`, :data:`LIGHT_TABLE` or :data:`LIGHT_CIE`; the table, or a
         (2, 2, 3) placeholder; ``sky.radiance`` and ``sky.ground`` (3,) float64); None for an
         image (HDR) sky."""
@@ -207,7 +208,7 @@ class SkyTable:
         return kinds[self.sky.kind], table, up, ground
 
 
-#: the kinds of sky :func:`sky_light_one` looks up
+#: the kinds of sky :func:`seen_light` looks up
 LIGHT_UNIFORM, LIGHT_TABLE, LIGHT_CIE = 0, 1, 2
 
 
@@ -220,16 +221,19 @@ def _table_radiance(table, ground, dirs, out):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _seen_light(kind, table, up, ground, dirs, free, out):
-    """:meth:`SkyTable.light` into ``out`` (n, 3) (zeros): :func:`sky_light_one` at each direction
-    of ``dirs`` (n, 3) whose ``free`` (n,) is not 0."""
-    for i in range(dirs.shape[0]):
+def seen_light(kind, table, up, ground, dirs, free, n, out):
+    """:meth:`SkyTable.light` of the first n directions into ``out[:n]`` (3,) each: the sky's
+    radiance along ``dirs[i]`` (:func:`_light_one`) where ``free[i]`` is not 0, else 0. kind, table,
+    up, ground: :meth:`SkyTable.kernel_args`. The sky's kernel (:mod:`.sky_traced`) calls it too."""
+    for i in range(n):
         if free[i] != 0:
-            sky_light_one(kind, table, up, ground, dirs, i, out)
+            _light_one(kind, table, up, ground, dirs, i, out)
+        else:
+            out[i, 0] = out[i, 1] = out[i, 2] = 0.0
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def sky_light_one(kind, table, up, ground, dirs, i, out):
+def _light_one(kind, table, up, ground, dirs, i, out):
     """The radiance from direction i of ``dirs`` (n, 3) into ``out[i]`` (3,), :func:`sky_radiance`'s
     arithmetic: ``ground`` (3,) below the horizon; above it ``up`` (3,) for :data:`LIGHT_UNIFORM`,
     bilinear in ``table`` (:func:`_table_one`) for :data:`LIGHT_TABLE`, the CIE overcast sky of

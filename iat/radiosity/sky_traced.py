@@ -4,7 +4,7 @@
 directions, and a noisy vertex again with the grid twice as fine, tracing its new directions only
 where the light can change (:mod:`.sky_passes`). :func:`sky_vertices` does all of it for one vertex
 at a time: make and trace the directions (packets of 8, :func:`.embree.visible8`), look the sky up
-(:func:`.sky.sky_light_one`), sum, test the noise, settle the strata and trace the new directions.
+(:func:`.sky.seen_light`), sum, test the noise, settle the strata and trace the new directions.
 No (k, S, 3) array of directions, light or free fractions is made; a worker's scratch holds one
 vertex's grids.
 
@@ -27,7 +27,7 @@ from numba import njit, prange
 from iat.radiosity.embree import PACKET, packet_record, set_lane, take_tasks, workers
 from iat.radiosity.kernels import wrap_unit
 from iat.radiosity.sampling import LUMINANCE_WEIGHTS
-from iat.radiosity.sky import sky_light_one
+from iat.radiosity.sky import seen_light
 from iat.radiosity.sky_passes import SkyLevel
 from iat.radiosity.traced import flush_packet
 
@@ -91,7 +91,7 @@ def _vertex(i, sc, occ, isect, scene, glass, glass_tau, pat, side, points, paren
     for j in range(S):
         sel[j] = j
     n_ray, n_glass = _trace(i, pat, 0, sel, S, fr, ray)
-    _light(kind, table, up, ground, wd, fr, S, lt)
+    seen_light(kind, table, up, ground, wd, fr, S, lt)
     t = np.zeros(3)
     t[0], t[1], t[2] = _sum3(fr, lt, S, settled, False)
     counts[i, 0, 0], counts[i, 0, 1] = 1, n_ray
@@ -111,7 +111,7 @@ def _vertex(i, sc, occ, isect, scene, glass, glass_tau, pat, side, points, paren
                 n_sel += 1
         r, gl = _trace(i, points, at, sel, n_sel, fo, ray)
         n_glass += gl
-        _light(kind, table, up, ground, wd, fo, n_sel, lo)
+        seen_light(kind, table, up, ground, wd, fo, n_sel, lo)
         s1 = _sum3(fo, lo, n_sel, settled, False)
         for c in range(3):
             t[c] += 3.0 * s3[c]
@@ -228,17 +228,6 @@ def sky_directions(pts, rot, t1, t2, normal, vi, pj, out):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _light(kind, table, up, ground, wd, fo, n, lo):
-    """``lo[q]`` the sky's light along ``wd[q]`` where ``fo[q]`` is not 0, else 0 (q < n):
-    :meth:`.sky.SkyTable.light`."""
-    for q in range(n):
-        if fo[q] != 0:
-            sky_light_one(kind, table, up, ground, wd, q, lo)
-        else:
-            lo[q, 0] = lo[q, 1] = lo[q, 2] = 0.0
-
-
-@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _sum3(f, lo, n, settled, masked):
     """The sum over q < n of ``f[q] lo[q]`` (3,), in index order (``einsum``'s and ``bincount``'s);
     with ``masked`` only where ``settled[q]``."""
@@ -309,7 +298,7 @@ def _wrap(x, g):
 
 def sky_estimate(vis, light, pat, side: int, levels: tuple, passes: int, rot, frame, origin32, tfar: float,
                  dark_ground: bool, other, noise: float, radius: int):  # fmt: skip
-    """With the C API and a sky :func:`.sky.sky_light_one` looks up (``light``:
+    """With the C API and a sky :func:`.sky.seen_light` looks up (``light``:
     :meth:`.sky.SkyTable.kernel_args`, None for an image), :func:`sky_vertices` of a block of k
     vertices on the ray threads, counted in ``vis``: ``(out (k, 3) W/m², counts (passes, 3) int64:
     per estimate the vertices, the rays traced and the directions that took their stratum's
