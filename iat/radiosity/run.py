@@ -254,7 +254,7 @@ class SolveRun:
                 self.check()
                 group = self.shot_group(power, opts.max_shots - self.shots)
                 jobs = [(s, float(power[s])) for s in group]  # each shot's field is taken in its task
-                shots = list(ctx.pool.imap(lambda job: self.shot_gather(*job), jobs, self.check))
+                shots = list(ctx.pool.traced_map(lambda job: self.shot_gather(*job), jobs, self.check))
                 for s in group:  # (the light one shooter of the group sends another stays unshot there)
                     rad.unshot[mesh.start[s] : mesh.start[s + 1]] = 0.0
                 for s, shot in zip(group, shots, strict=True):
@@ -345,8 +345,8 @@ class SolveRun:
         return round(m * min(peak, IMPORTANCE_PEAK_LIMIT)), imp
 
     def shot_group(self, power: np.ndarray, left: int) -> list[int]:
-        """The patches that shoot next, at once (their gathers share the threads, and each one's
-        Python runs while the other's kernels and rays do): the one with the most unshot power
+        """The patches that shoot next, from the same state (with embreex their gathers run at once
+        on the gather threads, each one's Python while the other's rays): the one with the most unshot power
         (P,), then up to ``SHOT_GROUP - 1`` more with at least ``SHOT_GROUP_RATIO`` of its power;
         at most ``left``. Pieces a shadow cut made of one root (``Patches.family``) rank by their
         sum and shoot as one group: cut in pieces, a floor's sun patch would rank below the
@@ -635,7 +635,7 @@ class TotalLight:
             fine = run.levels[p] < 0 if p in run.levels else None
             if (ctx.gathers.receiver_patches(p, True, fine) & on).any():
                 calls.append((geo, p, fine))
-        for g in ctx.pool.imap(self.gather, calls, run.check):
+        for g in ctx.pool.traced_map(self.gather, calls, run.check):
             out += rho * g
         return out
 

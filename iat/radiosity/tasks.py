@@ -28,6 +28,14 @@ def no_check() -> None:
     """A poll that never cancels (for work whose caller polls itself)."""
 
 
+def in_order(fn: Callable, items: Iterable, check: Callable[[], None]) -> Iterator:
+    """``fn(item)`` for each item, in order, on the calling thread (whose kernels and rays may
+    use every thread), ``check()`` after each: :meth:`TaskPool.imap`'s results, one at a time."""
+    for item in items:
+        yield fn(item)
+        check()
+
+
 class TaskPool:
     """Runs a solve's tasks on :attr:`Visibility.threads` threads (``vis`` traces their rays)."""
 
@@ -46,10 +54,7 @@ class TaskPool:
         items = list(items)
         in_task = getattr(_IN_TASK, "active", False)
         if threads <= 1 or len(items) <= 1 or in_task:
-            for item in items:
-                yield fn(item)
-                if not in_task:  # (progress is reported from the solve's thread only)
-                    check()
+            yield from in_order(fn, items, no_check if in_task else check)  # (progress: the solve's thread)
             return
         pool, pending, queued = _pool(threads), [], items[::-1]
         try:
@@ -63,6 +68,15 @@ class TaskPool:
             for f in pending:
                 f.cancel()
             wait(pending)
+
+    def traced_map(self, fn: Callable, items: Iterable, check: Callable[[], None]) -> Iterator:
+        """:meth:`imap` of tasks whose rays are traced by kernels that spread over the threads
+        themselves (Embree's C API: :meth:`Visibility.embree_args`): one after another on the calling
+        thread (a task on one of the pool's threads traces on that thread alone, and one long task
+        beside a short one left a core idle); with embreex, :meth:`imap`."""
+        if self.vis.embree_args() is None:
+            return self.imap(fn, items, check)
+        return in_order(fn, items, check)
 
     def _task(self, fn: Callable, item):
         """``fn(item)`` on a gather thread: its kernels and rays run on this thread alone (the
