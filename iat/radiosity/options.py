@@ -38,9 +38,6 @@ CULL_RAYS = 64
 COARSE_EPS = (0.002, 0.02)
 #: ... only if the patch's radius is under this fraction of its distance to the shooter (the shot is smooth)
 COARSE_SIZE = (0.125, 0.25)
-#: a shot adding under [0] / [1] of a patch's radiance is gathered at its vertices with 1/2 / 1/4 of the
-#: samples a side (its noise there is as much smaller beside the patch's light)
-THIN_EPS = (0.01, 0.002)
 #: distance in shooter radii beyond which a form factor comes from a Gauss rule (cheaper, accurate far off)
 FF_FAR = 4.0
 #: (receiver, shooter) form factors kept for the shooters' later shots on one mesh, a count (12 bytes each)

@@ -38,7 +38,6 @@ from iat.radiosity.options import (
     SHOT_GROUP,
     SHOT_GROUP_RATIO,
     SHOT_SAMPLE_FACTOR,
-    THIN_EPS,
     SolveOptions,
 )
 from iat.radiosity.patches import ranges_of
@@ -88,7 +87,7 @@ class SolveRun:
         self.u_start = 1e-300  # the unshot power when the plan began (progress is on a log scale)
         self.mesh: Mesh | None = None
         self.coarse: list[CoarseGrid] | None = None  # made at the first mesh (they depend on none)
-        self.levels: dict[int, np.ndarray] = {}  # per shooter: receiver level of each patch (< 0: vertices)
+        self.levels: dict[int, np.ndarray] = {}  # per shooter: receiver level of each patch (-1: vertices)
         self.direct_cache = VertexCache()  # reflected direct radiance at every point evaluated
         self.rad = Radiance.zeros(0, self.P)
 
@@ -368,11 +367,10 @@ class SolveRun:
         return [first, *(s for s in rest if power[s] >= SHOT_GROUP_RATIO * power[first])]
 
     def receiver_levels(self, s: int, field_mean: np.ndarray) -> np.ndarray:
-        """(P,) int8 receiver level of each patch for the shots of s: -1 - t at every vertex with
-        1 / 2^t of the shot's samples a side (``THIN_EPS``), k on the coarse grid of level k
-        (``COARSE_EPS``). Decided at the first shot of s, from the largest form factor of a patch's
-        corners to s, the shot's radiance and the patch's radiance then (its share of the patch's
-        light, ``rel``), and kept for its later (fainter) shots, so that every shot of s reaches a
+        """(P,) int8 receiver level of each patch for the shots of s: -1 at every vertex, k on
+        the coarse grid of level k (``COARSE_EPS``). Decided at the first shot of s, from the
+        largest form factor of a patch's corners to s, the shot's radiance and the patch's
+        radiance then, and kept for its later (fainter) shots, so that every shot of s reaches a
         patch at the same level (what :meth:`refine_total` relies on)."""
         if s in self.levels:
             return self.levels[s]
@@ -382,16 +380,16 @@ class SolveRun:
             dist = np.linalg.norm(ctx.patches.centre - ctx.patches.centre[s], axis=1) - ctx.patches.radius[s]
             size = ctx.patches.radius / np.maximum(dist, 1e-300)
             size[dist <= 0] = np.inf
+            # form factors only to the corners of patches small and far enough for some level
+            may = (size < max(COARSE_SIZE)) & mesh.finer_any
             cgeo = self.coarse[0].geo  # the patches' corners
-            idx, f = ctx.gathers.form_factors(s, cgeo)
+            idx, f = ctx.gathers.form_factors(s, cgeo, patches=may)
             fmax = np.zeros(self.P)
             np.maximum.at(fmax, cgeo.patch[idx], f)
             y = mesh.M @ luminance_of(self.rad.reflected) + luminance_of(ctx.patches.emission)
             floor = ABS_FLOOR * float((y * ctx.patches.area).sum() / max(ctx.patches.area.sum(), 1e-300))
             lum_mean = float(luminance_of(np.abs(field_mean)))
             rel = fmax * lum_mean * luminance_of(ctx.patches.albedo) / (y + max(floor, 1e-30))
-            for eps in THIN_EPS:
-                lvl[rel < eps] -= 1
             for level in range(len(self.coarse) - 1, -1, -1):  # the coarsest that is fine enough
                 sel = (rel < COARSE_EPS[level]) & (size < COARSE_SIZE[level])
                 sel &= mesh.finer[level]
@@ -417,19 +415,11 @@ class SolveRun:
         lvl = self.receiver_levels(s, field_mean)
         # the vertices of the patches it lights noticeably, and a coarse grid per level of the others
         levels = [k for k in range(len(self.coarse or [])) if (lvl == k).any()]
-        parts = [(mesh.geo, lvl == -1)] + [(self.coarse[k].geo, lvl == k) for k in levels]
+        parts = [(mesh.geo, lvl < 0)] + [(self.coarse[k].geo, lvl == k) for k in levels]
         (idx, g), *got = ctx.gathers.gathers(
             s, parts, m, shot, field, field_mean, correlated=False, cull=True, importance=imp
         )
         rows, dv, acc = [idx], [mesh.rho[idx] * g], []
-        for t in range(1, len(THIN_EPS) + 1):  # the vertices it adds little to, with fewer samples
-            if (lvl == -1 - t).any():
-                ((idx, g),) = ctx.gathers.gathers(
-                    s, [(mesh.geo, lvl == -1 - t)], max(1, round(m / 2**t)), shot, field, field_mean,
-                    correlated=False, cull=True, importance=imp,
-                )  # fmt: skip
-                rows.append(idx)
-                dv.append(mesh.rho[idx] * g)
         for k, (ci, g) in zip(levels, got, strict=True):
             c, w = self.coarse[k], mesh.coarse_w[k]
             got_c = c.rho[ci] * g

@@ -52,6 +52,7 @@ class Mesh:
     rho: np.ndarray  # (V, 3) the vertices' albedo
     coarse_w: list  # per coarse level: (V, G) interpolation from its grid's points
     finer: list  # per coarse level: (P,) bool, patches with more vertices than its grid
+    finer_any: np.ndarray  # (P,) bool: finer at some level
 
     @classmethod
     def build(cls, patches: Patches, forest: qt.Forest, keys: np.ndarray, coarse: list[CoarseGrid]) -> Mesh:
@@ -75,6 +76,7 @@ class Mesh:
             rho=patches.albedo[qt.decode_key(keys, n)[0]],
             coarse_w=[coarse_weights(keys, c.keys, patches.is_quad, lv, n) for lv, c in enumerate(coarse)],
             finer=finer,
+            finer_any=np.logical_or.reduce(finer) if coarse else np.zeros(P, bool),
         )
 
 
