@@ -60,8 +60,8 @@ PENUMBRA_TOLERANCE = 0.35
 SHOT_SAMPLE_FACTOR = 2.5
 #: emitted-power share from which a shot gets all of those; share s gets sqrt(s / this) (samples by power)
 SHOT_FULL_SHARE = 0.05
-#: shooters whose shots are gathered from the same state and applied together: the strongest and up
-#: to this many - 1 more (a count; not the thread count, so that results do not depend on it) ...
+#: shooters whose shots run at once: the strongest and up to this many - 1 more (a count; not the
+#: thread count, so that results do not depend on it) ...
 SHOT_GROUP = 2
 #: ... that have at least this fraction of its unshot power (weaker ones wait for its light)
 SHOT_GROUP_RATIO = 0.5

@@ -345,8 +345,8 @@ class SolveRun:
         return round(m * min(peak, IMPORTANCE_PEAK_LIMIT)), imp
 
     def shot_group(self, power: np.ndarray, left: int) -> list[int]:
-        """The patches that shoot next, from the same state (with embreex their gathers run at once
-        on the gather threads, each one's Python while the other's rays): the one with the most unshot power
+        """The patches that shoot next, at once (their gathers share the threads, and each one's
+        Python runs while the other's kernels and rays do): the one with the most unshot power
         (P,), then up to ``SHOT_GROUP - 1`` more with at least ``SHOT_GROUP_RATIO`` of its power;
         at most ``left``. Pieces a shadow cut made of one root (``Patches.family``) rank by their
         sum and shoot as one group: cut in pieces, a floor's sun patch would rank below the
