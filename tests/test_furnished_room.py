@@ -197,9 +197,10 @@ def compare(scene: Scene, which: str, side: int = SENSOR_SIDE) -> dict:
 def test_lamp_lit_furnished_room_against_mitsuba():
     """Work-plane lux of the closed room under two lamps given in lumens: per point within 1.5 % on
     average and 4 % at worst (measured 0.49 %, 3.5 %, beside the cabinet), the room's mean within
-    2 % (-0.3 %), its minimum and uniformity within 4 % (+3.5 %, +3.8 %: near the bound; seeds 1-5
-    give +1.7 to +5.6 % and +2.1 to +5.9 %, the darkest point's own noise); the reference's own
-    noise is 0.4 % on average (1.15 % at worst)."""
+    2 % (-0.3 %), its minimum and uniformity within 4 % (+3.5 %, +3.8 %: near the bound; over seeds
+    0-5 the minimum is +1.7 to +5.6 %, +3.6 % on average: the darkest point, beside the cabinet, reads
+    high; the uniformity +2.1 to +5.9 %); the reference's own noise is 0.4 % on average (1.15 % at
+    worst)."""
     pytest.importorskip("mitsuba", reason="mitsuba (Mitsuba 3) not installed: no path-traced reference")
     f = compare(lamp_room(), "lux")
     print(f)

@@ -73,9 +73,7 @@ class TaskPool:
         sources): two at once, each kernel on every thread (numba's OpenMP layer runs a team per
         calling thread, and the cores are shared), so that one task's Python still runs while the
         other's rays do, and a long task beside a short one keeps both cores once the short one is
-        done. On the task's thread alone, a long shot left a core idle (Madrid's shooting 65.7 s,
-        now 42.0 s); one after another, the Python of a building's 2 116 small shots did (174 ->
-        217 s, now 162 s). With embreex, :meth:`imap`."""
+        done (docs/benchmarks.md, "Each shot's kernel on every thread"). With embreex, :meth:`imap`."""
         return self.imap(fn, items, check, spread=self.vis.embree_args() is not None)
 
     def _task(self, fn: Callable, item, spread: bool = False):
