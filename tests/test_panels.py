@@ -11,7 +11,7 @@ from iat.bake.baker import bake
 from iat.bake.policy import BakePolicy
 from iat.camera import Camera
 from iat.color import LUMINANCE_WEIGHTS
-from iat.geometry.clip import clamp_into, clip_mesh, clip_to_boxes, fan, triangle_area
+from iat.geometry.clip import clamp_into, clip_mesh, clip_to_boxes, coverage_grid, fan, triangle_area
 from iat.geometry.panels import find_panels
 from iat.io.load import load_scene
 from iat.radiosity import SolveOptions, solve
@@ -78,6 +78,26 @@ def test_clamp_into_moves_outside_points_to_the_surface():
     np.testing.assert_array_equal(out[0], pts[0])  # inside: unchanged
     assert out[1, 0] + out[1, 1] < 0.5 and np.hypot(*(out[1] - [0.25, 0.25])) < 0.02
     assert out[2, 0] > 0 and out[2, 1] == pytest.approx(0.2, abs=0.02)
+
+
+def test_coverage_grid_marks_the_cell_centres_inside_its_triangles():
+    """Every cell centre of a 64 x 64 grid tested against the clip triangles (either winding), those
+    on an edge included; the covered share is the triangles' area to a cell's rim."""
+    clip = np.array([[[0.0, 0.0], [0.75, 0.0], [0.0, 0.5]], [[1.0, 1.0], [0.25, 1.0], [1.0, 0.5]]])
+    res = 64
+    c = (np.arange(res) + 0.5) / res
+    u, v = np.meshgrid(c, c)  # grid[b, a]: u = c[a], v = c[b]
+    want = np.zeros((res, res), dtype=bool)
+    for t in clip:
+        d = [
+            (t[k1, 0] - t[k, 0]) * (v - t[k, 1]) - (t[k1, 1] - t[k, 1]) * (u - t[k, 0])
+            for k, k1 in ((0, 1), (1, 2), (2, 0))
+        ]
+        want |= (np.min(d, axis=0) >= 0) | (np.max(d, axis=0) <= 0)
+    got = coverage_grid(clip, res)
+    np.testing.assert_array_equal(got, want)
+    assert got[0, 0] and got[-1, -1] and not got[0, -1] and not got[-1, 0]
+    assert abs(got.mean() - triangle_area(clip).sum()) < 4 / res
 
 
 def test_clip_mesh_interpolates_a_linear_field_exactly():

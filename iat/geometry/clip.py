@@ -8,7 +8,10 @@ optional attributes ``(n, K, m)`` interpolated along clipped edges.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 #: corners a clipped triangle can have (a triangle cut by four half-planes has at most 7)
 MAX_CORNERS = 8
@@ -185,23 +188,34 @@ def clamp_into(
     return out
 
 
+@njit(cache=True, nogil=True)
 def coverage_grid(clip: np.ndarray, res: int) -> np.ndarray:
     """(res, res) bool ``grid[b, a]``: cell centre ``((a + 0.5) / res, (b + 0.5) / res)`` lies in
-    one of the clip triangles (C, 3, 2) (lattice coordinates in [0, 1]^2)."""
-    grid = np.zeros((res, res), dtype=bool)
-    for tri in np.asarray(clip, dtype=np.float64):
-        lo = np.clip(np.floor(tri.min(axis=0) * res - 0.5).astype(int), 0, res - 1)
-        hi = np.clip(np.ceil(tri.max(axis=0) * res - 0.5).astype(int), 0, res - 1)
-        a = np.arange(lo[0], hi[0] + 1)
-        b = np.arange(lo[1], hi[1] + 1)
-        u = (a[None, :] + 0.5) / res
-        v = (b[:, None] + 0.5) / res
-        p = np.stack(np.broadcast_arrays(u, v), axis=-1)
-        d0 = _cross(tri[1] - tri[0], p - tri[0])
-        d1 = _cross(tri[2] - tri[1], p - tri[1])
-        d2 = _cross(tri[0] - tri[2], p - tri[2])
-        inside = ((d0 >= 0) & (d1 >= 0) & (d2 >= 0)) | ((d0 <= 0) & (d1 <= 0) & (d2 <= 0))
-        grid[lo[1] : hi[1] + 1, lo[0] : hi[0] + 1] |= inside
+    one of the clip triangles (C, 3, 2) float64 (lattice coordinates in [0, 1]^2), on its edge
+    included."""
+    grid = np.zeros((res, res), dtype=np.bool_)
+    for t in range(clip.shape[0]):
+        x0, y0, x1, y1, x2, y2 = (
+            clip[t, 0, 0],
+            clip[t, 0, 1],
+            clip[t, 1, 0],
+            clip[t, 1, 1],
+            clip[t, 2, 0],
+            clip[t, 2, 1],
+        )
+        lo_a = min(max(math.floor(min(x0, x1, x2) * res - 0.5), 0), res - 1)
+        hi_a = min(max(math.ceil(max(x0, x1, x2) * res - 0.5), 0), res - 1)
+        lo_b = min(max(math.floor(min(y0, y1, y2) * res - 0.5), 0), res - 1)
+        hi_b = min(max(math.ceil(max(y0, y1, y2) * res - 0.5), 0), res - 1)
+        for b in range(lo_b, hi_b + 1):
+            v = (b + 0.5) / res
+            for a in range(lo_a, hi_a + 1):
+                u = (a + 0.5) / res
+                d0 = (x1 - x0) * (v - y0) - (y1 - y0) * (u - x0)
+                d1 = (x2 - x1) * (v - y1) - (y2 - y1) * (u - x1)
+                d2 = (x0 - x2) * (v - y2) - (y0 - y2) * (u - x2)
+                if (d0 >= 0 and d1 >= 0 and d2 >= 0) or (d0 <= 0 and d1 <= 0 and d2 <= 0):
+                    grid[b, a] = True
     return grid
 
 

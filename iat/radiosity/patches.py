@@ -266,17 +266,34 @@ class Patches:
         surface: 1 on patches that are not panel cells."""
         out = np.ones(forest.n_leaves)
         lp = np.asarray(forest.leaf_patch, dtype=np.int64)
-        leaves = np.flatnonzero(self.clipped[lp])  # the panel cells' leaves, grouped by patch
+        leaves = np.flatnonzero(self.clipped[lp])  # the panel cells' leaves
         if len(leaves) == 0:
             return out
-        leaves = leaves[np.argsort(lp[leaves], kind="stable")]
-        cells, first = np.unique(lp[leaves], return_index=True)
-        for p, sel in zip(cells, np.split(leaves, first[1:]), strict=True):
-            sat = np.zeros((self.n + 1, self.n + 1))
-            sat[1:, 1:] = self.coverage(p, self.n).cumsum(axis=0).cumsum(axis=1)
-            size = self.n >> np.asarray(forest.leaf_level[sel], dtype=np.int64)
-            i0 = np.asarray(forest.leaf_i[sel], dtype=np.int64)
-            j0 = np.asarray(forest.leaf_j[sel], dtype=np.int64)
-            i1, j1 = i0 + size, j0 + size
-            out[sel] = (sat[j1, i1] - sat[j0, i1] - sat[j1, i0] + sat[j0, i0]) / (size * size)
+        sat, row = self.coverage_tables()
+        r = row[lp[leaves]]
+        size = self.n >> np.asarray(forest.leaf_level[leaves], dtype=np.int64)
+        i0 = np.asarray(forest.leaf_i[leaves], dtype=np.int64)
+        j0 = np.asarray(forest.leaf_j[leaves], dtype=np.int64)
+        i1, j1 = i0 + size, j0 + size
+
+        def at(j, i):
+            return sat[r, j, i].astype(np.int64)
+
+        out[leaves] = (at(j1, i1) - at(j0, i1) - at(j1, i0) + at(j0, i0)) / (size * size)
         return out
+
+    def coverage_tables(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(sat, row)``: the summed-area tables of the panel cells' coverage on the finest lattice
+        (:meth:`coverage` at ``n``), (C, n+1, n+1) unsigned ints, ``sat[r, j, i]`` the cells (a, b)
+        with a < i, b < j on the surface of the cell in row r; row (P,) int64 each clipped patch's
+        row (-1 elsewhere). Made once (n = 64: 8.3 kB a panel cell)."""
+        if "sat" not in self._coverage:
+            cells = np.flatnonzero(self.clipped)
+            row = np.full(self.n_patches, -1, dtype=np.int64)
+            row[cells] = np.arange(len(cells))
+            sat = np.zeros((len(cells), self.n + 1, self.n + 1), dtype=np.min_scalar_type(self.n * self.n))
+            for r, p in enumerate(cells):
+                a, b = self.clip_start[p], self.clip_start[p + 1]
+                sat[r, 1:, 1:] = coverage_grid(self.clip_uv[a:b], self.n).cumsum(axis=0).cumsum(axis=1)
+            self._coverage["sat"] = sat, row
+        return self._coverage["sat"]
