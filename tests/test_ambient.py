@@ -154,12 +154,14 @@ def test_ambient_term_keeps_a_near_white_rooms_energy(shots):
 
 def test_seen_average_weighs_out_buried_vertices():
     """A patch's mean over the part of it that can be seen: a vertex whose rays all met back faces
-    counts for nothing, a half-buried one for half, and a patch buried whole keeps its row."""
+    counts for nothing, a half-buried one for half, and a patch buried whole keeps its row; that
+    part's share of the patch's area (a patch buried whole counts whole)."""
     from scipy import sparse
 
     from iat.radiosity.remainder import seen_average
 
     avg = sparse.csr_matrix(np.array([[0.25, 0.25, 0.25, 0.25, 0, 0], [0, 0, 0, 0, 0.5, 0.5]]))
-    got = seen_average(avg, np.array([1.0, 0.5, 0.0, 0.0, 1.0, 1.0])).toarray()
+    got, seen = seen_average(avg, np.array([1.0, 0.5, 0.0, 0.0, 1.0, 1.0]))
     want = [[0, 0.125 / 0.625, 0.25 / 0.625, 0.25 / 0.625, 0, 0], [0, 0, 0, 0, 0.5, 0.5]]
-    np.testing.assert_allclose(got, want)
+    np.testing.assert_allclose(got.toarray(), want)
+    np.testing.assert_allclose(seen, [0.625, 1.0])

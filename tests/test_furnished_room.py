@@ -196,19 +196,20 @@ def compare(scene: Scene, which: str, side: int = SENSOR_SIDE) -> dict:
 
 def test_lamp_lit_furnished_room_against_mitsuba():
     """Work-plane lux of the closed room under two lamps given in lumens: per point within 1.5 % on
-    average and 4 % at worst (measured 0.49 %, 3.5 %, beside the cabinet), the room's mean within
-    2 % (-0.3 %), its minimum and uniformity within 4 % (+3.5 %, +3.8 %: near the bound; over seeds
-    0-5 the minimum is +1.7 to +5.6 %, +3.6 % on average: the darkest point, beside the cabinet, reads
-    high; the uniformity +2.1 to +5.9 %); the reference's own noise is 0.4 % on average (1.15 % at
-    worst)."""
+    average and 3 % at worst (measured 0.59 %, 2.0 %), the room's mean within 2 % (-0.5 %), its
+    minimum and uniformity within 3 % (-0.3 %, +0.3 %; over seeds 0-5 the minimum -2.0 to +1.2 %,
+    the uniformity -1.4 to +1.7 %). The darkest point stands in the 30 cm slot between the cabinet
+    and the wall, lit only by bounces: it read +4.7 % on average over seeds while the ambient term
+    counted partly buried patches (the wall behind the cabinet) over their whole area. The
+    reference's own noise is 0.4 % on average (1.15 % at worst)."""
     pytest.importorskip("mitsuba", reason="mitsuba (Mitsuba 3) not installed: no path-traced reference")
     f = compare(lamp_room(), "lux")
     print(f)
     assert f["points"] > 60 and 100 < f["ref_mean"] < 200  # lux: 4000 lm in 20 m² of darkish finishes
     assert f["noise"] < 0.01
-    assert f["error"] < 0.015 and f["error_max"] < 0.04
+    assert f["error"] < 0.015 and f["error_max"] < 0.03
     assert abs(f["mean"]) < 0.02
-    assert abs(f["min"]) < 0.04 and abs(f["uniformity"]) < 0.04
+    assert abs(f["min"]) < 0.03 and abs(f["uniformity"]) < 0.03
 
 
 @pytest.mark.slow

@@ -23,9 +23,10 @@ wall lit by a sun patch on the floor is dark at its foot and bright above) would
 bounce, 3.5 % of the first in a near-white box, and a room of albedo 0.97 multiplies that by ~30.
 The later bounces' power ``Phi`` (P, 3) is the series ``Phi = rho T (Phi2 + Phi)``, ``T`` the same
 rays' patch-to-patch transfer of uniform light, and each vertex adds ``rho F_v`` of the bounces'
-radiance, fitted to it. A patch's mean and the power its vertices send count only the vertices
-that can be seen (:func:`seen_average`: the floor under a cupboard is not lit), and patches that
-overlap in a plane hold and send their light as one surface (:func:`overlap_shares`). Rays that
+radiance, fitted to it. A patch's mean counts only the vertices that can be seen, and only the
+part of its area that can be seen holds and sends its light (:func:`seen_average`: the floor under
+a cupboard is not lit, and the wall behind it sends nothing), and patches that overlap in a plane
+hold and send their light as one surface (:func:`overlap_shares`). Rays that
 leave the scene or meet a back face bring nothing, so an open scene's remainder escapes as it would.
 """
 
@@ -118,38 +119,40 @@ def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, rays:
     return mean, fv, buried
 
 
-def seen_average(avg: sparse.csr_matrix, buried: np.ndarray) -> sparse.csr_matrix:
-    """The patch-mean matrix ``avg`` (P, V) with each vertex weighted by the fraction of its
-    hemisphere that is not inside a solid (1 - ``buried`` (V,)), rows summed to 1 again: the mean
-    over the part of a patch that can be seen (a floor under a cupboard, a wall's foot in a slab
-    hold no light, and would dilute the patch's mean and its rows of F at every later bounce).
-    A patch buried whole keeps its row."""
+def seen_average(avg: sparse.csr_matrix, buried: np.ndarray) -> tuple[sparse.csr_matrix, np.ndarray]:
+    """``(seen_avg, seen)``: the patch-mean matrix ``avg`` (P, V) with each vertex weighted by the
+    fraction of its hemisphere that is not inside a solid (1 - ``buried`` (V,)), rows summed to 1
+    again: the mean over the part of a patch that can be seen (a floor under a cupboard, a wall's
+    foot in a slab hold no light, and would dilute the patch's mean and its rows of F at every later
+    bounce); and (P,) that part's share of each patch's area. A patch buried whole keeps its row
+    and counts whole."""
     w = avg @ sparse.diags(np.clip(1.0 - buried, 0.0, 1.0))
     s = np.asarray(w.sum(axis=1)).ravel()
     keep = s > 1e-9
     w = sparse.diags(np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)) @ w
-    return sparse.csr_matrix(w + sparse.diags(~keep * 1.0) @ avg)
+    return sparse.csr_matrix(w + sparse.diags(~keep * 1.0) @ avg), np.where(keep, np.minimum(s, 1.0), 1.0)
 
 
-def overlap_shares(pt):
-    """``(share, pooled)`` of the patches ``pt`` for the ambient term's powers: where patches overlap
-    in a plane (:func:`iat.geometry.sides.overlap_groups`: a cladding panel on its wall) the rays
-    that land there meet one or the other by chance, so such a group holds and sends its light as
-    one surface of its largest member's area. share (P,): the part of its area a patch sends from
-    (that area over the group's summed area; 1 elsewhere); pooled(power (P, 3)) -> (P, 3) the power
-    per unit area of each patch, of its group's summed power over that area where grouped."""
+def overlap_shares(pt, area: np.ndarray):
+    """``(share, pooled)`` of the patches ``pt`` for the ambient term's powers, ``area`` (P,) the
+    area of each that holds light (m²): where patches overlap in a plane
+    (:func:`iat.geometry.sides.overlap_groups`: a cladding panel on its wall) the rays that land
+    there meet one or the other by chance, so such a group holds and sends its light as one surface
+    of its largest member's area. share (P,): the part of its area a patch sends from (that area
+    over the group's summed area; 1 elsewhere); pooled(power (P, 3)) -> (P, 3) the power per unit
+    area of each patch, of its group's summed power over that area where grouped."""
     group = overlap_groups(pt.corners, pt.is_quad, pt.normal, pt.eps_ray)
     grouped = group >= 0
     share = np.ones(len(group))
     if not grouped.any():
-        return share, lambda power: power / pt.area[:, None]
+        return share, lambda power: power / area[:, None]
     g = group[grouped]
     span = np.zeros(g.max() + 1)
-    np.maximum.at(span, g, pt.area[grouped])
-    share[grouped] = span[g] / np.bincount(g, weights=pt.area[grouped])[g]
+    np.maximum.at(span, g, area[grouped])
+    share[grouped] = span[g] / np.bincount(g, weights=area[grouped])[g]
 
     def pooled(power):
-        out = power / pt.area[:, None]
+        out = power / area[:, None]
         sums = np.stack([np.bincount(g, weights=power[grouped, c]) for c in range(3)], axis=1)
         out[grouped] = sums[g] / span[g][:, None]
         return out
@@ -169,10 +172,11 @@ def ambient_term(
     tris = scene.world_triangle_patch()[vis.opaque], scene.world_triangle_uv()[vis.opaque]
     grids = lattice.coarse_grids(unshot, g) * gain[:, None, None, None]
     first, fv, buried = hemisphere_gather(ctx, geo, vis, *tris, grids, rays, check, True)
-    avg = seen_average(mesh.M, buried)
-    share, pooled = overlap_shares(pt)
+    avg, seen = seen_average(mesh.M, buried)
+    area = pt.area * seen  # (P,) what of each patch can be seen: it holds and sends the light
+    share, pooled = overlap_shares(pt, area)
     unfit = share < 1.0
-    vp = np.pi * np.asarray(avg.T @ (pt.area * share))  # (V,) the power (W) of unit radiance at each
+    vp = np.pi * np.asarray(avg.T @ (area * share))  # (V,) the power (W) of unit radiance at each
     albedo = np.asarray(pt.albedo, dtype=np.float64)
     fvt = fv.T  # (P, V), CSC: no copy
 
@@ -180,7 +184,7 @@ def ambient_term(
         return np.asarray(fvt @ (vp[:, None] * field))
 
     def fit(r, power):  # r (V, 3) scaled patch by patch to hold the power (P, 3) its patch receives
-        held = np.pi * pt.area[:, None] * np.asarray(avg @ r)
+        held = np.pi * area[:, None] * np.asarray(avg @ r)
         ok = held > 1e-300
         c = np.where(ok & ~unfit[:, None], power / np.where(ok, held, 1.0), 1.0)
         return r * np.clip(c, 1.0 / AMBIENT_FIT_LIMIT, AMBIENT_FIT_LIMIT)[geo.patch]
