@@ -155,13 +155,18 @@ def test_ambient_term_keeps_a_near_white_rooms_energy(shots):
 def test_seen_average_weighs_out_buried_vertices():
     """A patch's mean over the part of it that can be seen: a vertex whose rays all met back faces
     counts for nothing, a half-buried one for half, and a patch buried whole keeps its row; that
-    part's share of the patch's area (a patch buried whole counts whole)."""
+    part's share of the patch's area, at least ``AMBIENT_SEEN_FLOOR`` (a patch buried whole counts
+    whole)."""
     from scipy import sparse
 
+    from iat.radiosity.options import AMBIENT_SEEN_FLOOR
     from iat.radiosity.remainder import seen_average
 
-    avg = sparse.csr_matrix(np.array([[0.25, 0.25, 0.25, 0.25, 0, 0], [0, 0, 0, 0, 0.5, 0.5]]))
-    got, seen = seen_average(avg, np.array([1.0, 0.5, 0.0, 0.0, 1.0, 1.0]))
-    want = [[0, 0.125 / 0.625, 0.25 / 0.625, 0.25 / 0.625, 0, 0], [0, 0, 0, 0, 0.5, 0.5]]
+    avg = np.zeros((3, 8))
+    avg[0, :4], avg[1, 4:6], avg[2, 6:] = 0.25, 0.5, 0.5
+    got, seen = seen_average(sparse.csr_matrix(avg), np.array([1.0, 0.5, 0.0, 0.0, 1.0, 1.0, 0.9, 1.0]))
+    want = np.zeros((3, 8))
+    want[0, 1:4] = np.array([0.125, 0.25, 0.25]) / 0.625
+    want[1, 4:6], want[2, 6] = 0.5, 1.0
     np.testing.assert_allclose(got.toarray(), want)
-    np.testing.assert_allclose(seen, [0.625, 1.0])
+    np.testing.assert_allclose(seen, [0.625, 1.0, AMBIENT_SEEN_FLOOR])  # (the third: 0.05 seen)

@@ -107,6 +107,11 @@ AMBIENT_MAX_BOUNCES = 500
 #: 2.8 / 2.1 % off Mitsuba against 3.75 / 2.1 % at 1.5, its coincident faces 4.5 / 3.9 % against
 #: 4.3 / 3.6 %
 AMBIENT_FIT_LIMIT = 1.5
+#: the ambient term counts at least this share of a partly buried patch's area as seen
+#: (``remainder.seen_average``): its seen share comes from its vertices, and a sliver whose few
+#: vertices all stand in walls while rays still land on it would read its light over a seen area
+#: far too small (Madrid: a few vertices 0.3 -> 250 cd/m²-like luminance with no floor)
+AMBIENT_SEEN_FLOOR = 0.25
 #: upper bound of the albedo in the ambient term's later bounces and of the measured reflected
 #: fraction r (keeps their sum finite in an albedo-1 room; at 0.95 a room of albedo 0.97 was 16 % dark)
 MAX_REFLECTANCE = 0.99

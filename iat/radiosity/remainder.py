@@ -44,6 +44,7 @@ from iat.radiosity.options import (
     AMBIENT_GRID,
     AMBIENT_MAX_BOUNCES,
     AMBIENT_SECOND_SHARE,
+    AMBIENT_SEEN_FLOOR,
     MAX_REFLECTANCE,
 )
 from iat.radiosity.sampling import concentric_disk, pattern_side
@@ -124,13 +125,15 @@ def seen_average(avg: sparse.csr_matrix, buried: np.ndarray) -> tuple[sparse.csr
     fraction of its hemisphere that is not inside a solid (1 - ``buried`` (V,)), rows summed to 1
     again: the mean over the part of a patch that can be seen (a floor under a cupboard, a wall's
     foot in a slab hold no light, and would dilute the patch's mean and its rows of F at every later
-    bounce); and (P,) that part's share of each patch's area. A patch buried whole keeps its row
-    and counts whole."""
+    bounce); and (P,) that part's share of each patch's area, at least ``AMBIENT_SEEN_FLOOR``. A
+    patch buried whole keeps its row and counts whole."""
     w = avg @ sparse.diags(np.clip(1.0 - buried, 0.0, 1.0))
     s = np.asarray(w.sum(axis=1)).ravel()
     keep = s > 1e-9
     w = sparse.diags(np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)) @ w
-    return sparse.csr_matrix(w + sparse.diags(~keep * 1.0) @ avg), np.where(keep, np.minimum(s, 1.0), 1.0)
+    return sparse.csr_matrix(w + sparse.diags(~keep * 1.0) @ avg), np.where(
+        keep, np.clip(s, AMBIENT_SEEN_FLOOR, 1.0), 1.0
+    )
 
 
 def overlap_shares(pt, area: np.ndarray):
