@@ -131,9 +131,8 @@ def seen_average(avg: sparse.csr_matrix, buried: np.ndarray) -> tuple[sparse.csr
     s = np.asarray(w.sum(axis=1)).ravel()
     keep = s > 1e-9
     w = sparse.diags(np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)) @ w
-    return sparse.csr_matrix(w + sparse.diags(~keep * 1.0) @ avg), np.where(
-        keep, np.clip(s, AMBIENT_SEEN_FLOOR, 1.0), 1.0
-    )
+    seen = np.where(keep, np.clip(s, AMBIENT_SEEN_FLOOR, 1.0), 1.0)
+    return sparse.csr_matrix(w + sparse.diags(~keep * 1.0) @ avg), seen
 
 
 def overlap_shares(pt, area: np.ndarray):
