@@ -32,7 +32,7 @@ from iat.radiosity.sampling import (
 )
 from iat.radiosity.sky import SkyTable, sky_radiance
 from iat.radiosity.sky_passes import SkyLevel, quarter_sums, settled_strata, sky_levels
-from iat.radiosity.sky_traced import pack_levels, sky_directions, sky_estimate
+from iat.radiosity.sky_traced import REFINED_ERROR, pack_levels, sky_directions, sky_estimate
 from iat.radiosity.tasks import TaskPool
 from iat.radiosity.traced import sun_escape
 from iat.radiosity.visibility import Visibility
@@ -149,9 +149,15 @@ class DirectLight:
         return self.gathers.gather(int(e), geo, side)
 
     def direct(
-        self, keys: np.ndarray, check: Callable[[], None], geo: ReceiverGeometry | None = None
+        self,
+        keys: np.ndarray,
+        check: Callable[[], None],
+        geo: ReceiverGeometry | None = None,
+        noise: np.ndarray | None = None,
     ) -> np.ndarray:
-        """(n, 3) reflected direct radiance (emission excluded) at vertex keys."""
+        """(n, 3) reflected direct radiance (emission excluded) at vertex keys. ``noise`` (n,), if
+        given, receives the standard error of its luminance (W/(m² sr)): the sky's estimate's (the
+        other sources' are taken as exact), times the albedo's luminance over pi."""
         out = np.zeros((len(keys), 3))
         if len(keys) == 0:
             return out
@@ -173,7 +179,12 @@ class DirectLight:
         for sun in self.suns:
             incoming += self.sun_irradiance(sun, geo, check) / np.pi
         if self.sky is not None:
-            incoming += self.sky_irradiance(geo, check, np.pi * luminance_of(incoming)) / np.pi
+            err = np.zeros(len(keys))
+            incoming += self.sky_irradiance(geo, check, np.pi * luminance_of(incoming), err) / np.pi
+            if noise is not None:
+                noise[:] = luminance_of(self.patches.albedo[geo.patch]) * err / np.pi
+        elif noise is not None:
+            noise[:] = 0.0
         return self.patches.albedo[geo.patch] * incoming
 
     def add_penumbra(self, keys: np.ndarray, seen: np.ndarray, free: np.ndarray) -> None:
@@ -230,7 +241,11 @@ class DirectLight:
         return out
 
     def sky_irradiance(
-        self, geo: ReceiverGeometry, check: Callable[[], None], other: np.ndarray | None = None
+        self,
+        geo: ReceiverGeometry,
+        check: Callable[[], None],
+        other: np.ndarray | None = None,
+        noise: np.ndarray | None = None,
     ) -> np.ndarray:
         """(n, 3) irradiance from the sky through whatever of each vertex's hemisphere is open:
         ``pi`` times the mean sky radiance over cosine-distributed directions that leave the scene,
@@ -240,7 +255,9 @@ class DirectLight:
         of its other sources, W/m²) is estimated again with 4 x the directions (twice as many strata
         a side: its old directions and 3 new ones in each old stratum, traced where the light can
         change: :mod:`.sky_passes`), up to ``SKY_PASSES`` estimates: through a window most of the
-        hemisphere is wall, and the refinement would split on that noise and multiply it."""
+        hemisphere is wall, and the refinement would split on that noise and multiply it. ``noise``
+        (n,), if given, receives each estimate's standard error (luminance, W/m²: the quarters' of
+        the last grid tested, times ``REFINED_ERROR`` for each estimate after it)."""
         n = len(geo.key)
         side = pattern_side(self.opts.sky_samples)
         pat = self.gathers.pattern(self.patches.n_patches, side, 2)
@@ -252,20 +269,22 @@ class DirectLight:
         blocks = [np.arange(a, min(a + size, n)) for a in range(0, n, size)]
         out = np.zeros((n, 3))
 
-        def run(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        def run(idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             return self._sky_block(geo, idx, pat, side, levels, packed, other[idx])
 
-        for idx, (e, c) in zip(blocks, self.pool.imap(run, blocks, check), strict=True):
+        for idx, (e, c, err) in zip(blocks, self.pool.imap(run, blocks, check), strict=True):
             out[idx] = e
             self.sky_counts += c
+            if noise is not None:
+                noise[idx] = err
         return out
 
     def _sky_block(
         self, geo: ReceiverGeometry, idx: np.ndarray, pat, side: int, levels: list[SkyLevel], packed, other
-    ) -> tuple[np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`sky_irradiance` at the vertices ``idx`` (k,) whose other sources give ``other``
         (k,): ((k, 3) irradiance, (SKY_PASSES, 3) int: per estimate the vertices, the rays traced
-        and the directions that took their stratum's value). In one kernel with the C API
+        and the directions that took their stratum's value, (k,) the standard error). In one kernel with the C API
         (:func:`.sky_traced.sky_estimate`, ``packed``: :func:`.sky_traced.pack_levels` of
         ``levels``), else here, in numpy and embreex, to the same bits."""
         k = len(idx)
@@ -284,17 +303,18 @@ class DirectLight:
         light = self.sky_table.light(w, free)  # (k, S, 3): what each direction brings, its stratum's
         total = np.einsum("ks,ksc->kc", free, light)
         counts[0] = k, free.size - (int(np.count_nonzero(w[..., 1] < 0)) if dark else 0), 0
-        rows, out, count = np.arange(k), np.zeros((k, 3)), len(pat)
+        rows, out, count, std = np.arange(k), np.zeros((k, 3)), len(pat), np.zeros(k)
         for est in range(SKY_PASSES):
             out[rows] = e = np.pi * total[rows] / count
-            if est + 1 == SKY_PASSES:
+            if est + 1 == SKY_PASSES and est > 0:
                 break
             q = np.pi * quarter_sums(free * luminance_of(light)) / (count / 4)  # the quarters' estimates
-            err = np.sqrt(q.var(axis=1, ddof=1) / 4.0)
+            std[rows] = err = np.sqrt(q.var(axis=1, ddof=1) / 4.0)
             keep = err > SKY_NOISE * np.maximum(luminance_of(e) + other[rows], 1e-300)
-            if not keep.any():
+            if est + 1 == SKY_PASSES or not keep.any():
                 break
             rows, free, light = rows[keep], free[keep], light[keep]
+            std[rows] *= REFINED_ERROR
             lv = levels[est]
             settled = settled_strata(free, rot[rows], SKY_SETTLED)
             # a settled stratum's 3 new directions bring what its own direction brings
@@ -316,7 +336,7 @@ class DirectLight:
                 cf[vi, pj], cl[vi, pj] = fp, lp
                 nf[:, lv.cell], nl[:, lv.cell] = cf, cl
                 free, light = nf, nl
-        return out, counts
+        return out, counts, std
 
     def _sky_rays(self, pat, rot, frame, origin, far: float, dark: bool, vi, pj):
         """The sky's directions and what of each leaves the scene, below the horizon 0 when ``dark``:

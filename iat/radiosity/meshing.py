@@ -10,7 +10,14 @@ from scipy import sparse
 from iat.errors import SolveError
 from iat.geometry import quadtree as qt
 from iat.radiosity.context import Context
-from iat.radiosity.options import ABS_FLOOR, BIG_LEVELS, BIG_TOLERANCE, GAIN_LIMIT, PENUMBRA_TOLERANCE
+from iat.radiosity.options import (
+    ABS_FLOOR,
+    BIG_LEVELS,
+    BIG_TOLERANCE,
+    GAIN_LIMIT,
+    PENUMBRA_TOLERANCE,
+    SPLIT_NOISE,
+)
 from iat.radiosity.patches import Patches
 from iat.radiosity.progress import SolveCancelled
 from iat.radiosity.sampling import luminance_of
@@ -170,11 +177,13 @@ def averaging_matrix(
 
 
 class VertexCache:
-    """Values (n, 3) at sorted vertex keys (n,), grown by :meth:`add`."""
+    """Values (n, 3) at sorted vertex keys (n,) and the standard error of their luminance (n,),
+    grown by :meth:`add`."""
 
-    def __init__(self, keys=None, vals=None):
+    def __init__(self, keys=None, vals=None, noise=None):
         self.keys = np.zeros(0, dtype=np.int64) if keys is None else np.asarray(keys, dtype=np.int64)
         self.vals = np.zeros((0, 3)) if vals is None else np.asarray(vals, dtype=np.float64)
+        self.noise = np.zeros(len(self.keys)) if noise is None else np.asarray(noise, dtype=np.float64)
 
     def find(self, keys: np.ndarray) -> np.ndarray:
         return qt.lookup(self.keys, keys)
@@ -186,17 +195,26 @@ class VertexCache:
         out[i >= 0] = self.vals[i[i >= 0]]
         return out
 
-    def add(self, keys: np.ndarray, vals: np.ndarray) -> None:
+    def noise_at(self, keys: np.ndarray) -> np.ndarray:
+        """(n,) the standard error at ``keys``; 0 where unknown."""
+        i = self.find(keys)
+        return np.where(i >= 0, self.noise[np.maximum(i, 0)], 0.0) if len(self.noise) else np.zeros(len(keys))
+
+    def add(self, keys: np.ndarray, vals: np.ndarray, noise: np.ndarray) -> None:
         k = np.concatenate([self.keys, keys])
-        v = np.concatenate([self.vals, vals])
         order = np.argsort(k, kind="stable")
-        self.keys, self.vals = k[order], v[order]
+        self.keys = k[order]
+        self.vals = np.concatenate([self.vals, vals])[order]
+        self.noise = np.concatenate([self.noise, noise])[order]
 
 
 def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, report, label: str, span):
     """Split elements until nothing deviates by more than the tolerance (see the module docstring).
 
-    cache : reflected radiance (n, 3) at vertex keys, extended with ``evaluate(new_keys)``.
+    cache : reflected radiance (n, 3) at vertex keys, extended with ``evaluate(new_keys)``, which
+    returns it with the standard error of its luminance (n,). A probe splits its element where it
+    deviates from the interpolation by more than the tolerance plus ``SPLIT_NOISE`` times the
+    deviation's standard error (the sky's noise is not light to resolve).
     Returns (forest, passes, cancelled); on cancel the last forest whose vertices are all
     evaluated (or the given one) is returned.
     """
@@ -221,12 +239,12 @@ def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, re
                 span[0] + (span[1] - span[0]) * passes / (D + 1),
                 f"{label}: pass {passes + 1}, {forest.n_leaves} elements, {len(new)} new points",
             )
-            vals = evaluate(new)
+            vals, noise = evaluate(new)
             if not np.isfinite(vals).all():  # never refine on a blown-up value
                 raise SolveError(
                     f"{label}: non-finite radiance at {int((~np.isfinite(vals)).any(axis=1).sum())} points"
                 )
-            cache.add(new, vals)
+            cache.add(new, vals, noise)
             good, passes = forest, passes + 1
             if not cand.any():
                 break
@@ -250,13 +268,12 @@ def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, re
                 score = hi - lo
             else:
                 slots = probe_interp(sub)
-                ck = vy[:, :4]
-                interp = (
-                    np.take_along_axis(ck, slots.reshape(len(ck), -1), axis=1)
-                    .reshape(slots.shape)
-                    .mean(axis=2)
-                )
-                score = np.where(pvalid, np.abs(vy[:, 4:] - interp), 0.0).max(axis=1)
+                weights = (slots[..., None] == np.arange(4)).mean(axis=2)  # (L, 5, 4) of each corner
+                interp = np.einsum("lpc,lc->lp", weights, vy[:, :4])
+                var = cache.noise[cache.find(np.concatenate([qt.leaf_corner_keys(sub), pk], axis=1))] ** 2
+                sd = np.sqrt(var[:, 4:] + np.einsum("lpc,lc->lp", weights**2, var[:, :4]))
+                dev = np.abs(vy[:, 4:] - interp) - SPLIT_NOISE * sd
+                score = np.where(pvalid, np.maximum(dev, 0.0), 0.0).max(axis=1)
             tol = np.full(sub.n_leaves, opts.tolerance)
             if len(ctx.light.penumbra):  # an emitter's penumbra: its real structure, finer
                 pen = (

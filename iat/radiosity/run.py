@@ -117,6 +117,12 @@ class SolveRun:
         self.rad = Radiance(reflected, unshot, offset, self.rad.gain)
         self.timings["meshing_s"] = seconds
 
+    def direct_with_noise(self, keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 3) the reflected direct radiance at vertex keys (n,), and (n,) its standard error
+        (:meth:`.direct.DirectLight.direct`)."""
+        noise = np.zeros(len(keys))
+        return self.ctx.light.direct(keys, self.check, noise=noise), noise
+
     def mesh_by_direct_light(self) -> None:
         """Stage A."""
         ctx, pg = self.ctx, self.progress
@@ -126,7 +132,7 @@ class SolveRun:
             ctx,
             roots,
             self.direct_cache,
-            lambda k: ctx.light.direct(k, self.check),
+            self.direct_with_noise,
             pg.report,
             "meshing",
             (0.0, 0.2),
@@ -608,22 +614,23 @@ class TotalLight:
         self.sources = [int(p) for p in np.flatnonzero(run.shot_index > 1)]
         self.grids = {p: mesh.lattice.grid(p, shot_field) * rad.gain[p] for p in self.sources}
         self.means = (mesh.M @ shot_field) * rad.gain[:, None]
-        self.cache = VertexCache(mesh.keys, rad.reflected.copy())
+        self.cache = VertexCache(mesh.keys, rad.reflected.copy(), run.direct_cache.noise_at(mesh.keys))
         m_ref = REFINE_SAMPLE_FACTOR * run.m_side
         self.m_src = {  # per source: its samples a side and importance tables
             p: run.samples_by_power(m_ref, run.shot_power[p], self.grids[p], p) for p in self.sources
         }
         self.n_pass = run.stats["refine_passes"]
 
-    def evaluate(self, new: np.ndarray) -> np.ndarray:
-        """(n, 3) the total reflected radiance at the new vertex keys (n,)."""
+    def evaluate(self, new: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 3) the total reflected radiance at the new vertex keys (n,), and (n,) the standard
+        error of its direct light (the shots' gathers are correlated between vertices: smooth)."""
         run, ctx = self.run, self.run.ctx
-        out = run.direct_cache.get(new)
+        out, noise = run.direct_cache.get(new), run.direct_cache.noise_at(new)
         missing = run.direct_cache.find(new) < 0
         if missing.any():
-            out[missing] = ctx.light.direct(new[missing], run.check)
+            out[missing], noise[missing] = run.direct_with_noise(new[missing])
         if not len(new):
-            return out
+            return out, noise
         geo = ctx.patches.geometry(new)
         rho = ctx.patches.albedo[geo.patch]
         on = np.zeros(run.P, dtype=bool)
@@ -637,7 +644,7 @@ class TotalLight:
                 calls.append((geo, p, fine))
         for g in ctx.pool.traced_map(self.gather, calls, run.check):
             out += rho * g
-        return out
+        return out, noise
 
     def gather(self, call: tuple) -> np.ndarray:
         """(n, 3) what source p shot, gathered at ``geo`` (on its ``fine`` patches, None: all)."""
