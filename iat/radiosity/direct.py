@@ -284,9 +284,9 @@ class DirectLight:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`sky_irradiance` at the vertices ``idx`` (k,) whose other sources give ``other``
         (k,): ((k, 3) irradiance, (SKY_PASSES, 3) int: per estimate the vertices, the rays traced
-        and the directions that took their stratum's value, (k,) the standard error). In one kernel with the C API
-        (:func:`.sky_traced.sky_estimate`, ``packed``: :func:`.sky_traced.pack_levels` of
-        ``levels``), else here, in numpy and embreex, to the same bits."""
+        and the directions that took their stratum's value, (k,) the standard error). In one kernel
+        with the C API (:func:`.sky_traced.sky_estimate`, ``packed``: :func:`.sky_traced.pack_levels`
+        of ``levels``), else here, in numpy and embreex, to the same bits."""
         k = len(idx)
         rot = hash_uniform(geo.key[idx], int(self.opts.seed) * 7919 + 29, 2)
         tangent = self.patches.tangent[geo.patch[idx]]

@@ -31,7 +31,6 @@ from iat.radiosity.sky import seen_light
 from iat.radiosity.sky_passes import SkyLevel
 from iat.radiosity.traced import flush_packet
 
-
 #: what a later estimate (4 x the directions, one a stratum) leaves of the standard error of the one
 #: before: a stratified estimate of light cut by edges (a window's outline) errs as N^(-3/4), not
 #: N^(-1/2). The window-lit room's back wall, 8 seeds: the seeds' spread fell 2.8x (0.030 -> 0.011), and
@@ -64,8 +63,8 @@ def sky_vertices(occ, isect, scene, glass, glass_tau, pat, side, points, parent,
     ``SKY_SETTLED``, ``SKY_PASSES``. Writes ``out`` (b, 3) W/m², ``counts`` (b, passes, 3) int64:
     per estimate whether the vertex had it, the rays traced and the directions that took their
     stratum's value, and ``err`` (b,): the standard error of the last estimate's luminance (W/m²;
-    :func:`_std_error` of the last grid tested, times ``REFINED_ERROR`` for each estimate after it). Returns the
-    rays traced against the glass besides."""
+    :func:`_std_error` of the last grid tested, times ``REFINED_ERROR`` for each estimate after
+    it). Returns the rays traced against the glass besides."""
     b = rot.shape[0]
     grid = pat.shape[0] << (2 * (passes - 1))  # the finest grid's strata
     through = np.zeros(b, dtype=np.int64)
