@@ -170,37 +170,3 @@ def test_seen_average_weighs_out_buried_vertices():
     want[1, 4:6], want[2, 6] = 0.5, 1.0
     np.testing.assert_allclose(got.toarray(), want)
     np.testing.assert_allclose(seen, [0.625, 1.0, AMBIENT_SEEN_FLOOR])  # (the third: 0.05 seen)
-
-
-def test_the_second_gather_reads_the_first_gathers_hits():
-    """The ambient term's second gather traces nothing: the first gather keeps the first hits of the
-    checkerboard half of each vertex's rays met (:class:`.remainder.KeptHits`) and finds the hits'
-    barycentrics again on them: the hits of that half's own rays, traced (the same triangles; the
-    barycentrics to 2e-6 at 99 % of the rays and 1e-3 at worst: Embree's are float32), on the
-    lamp-lit furnished room's mesh at the defaults (a closed room: every ray meets something)."""
-    from iat.radiosity.remainder import KeptHits, checkerboard, hemisphere_gather, hemisphere_rays
-    from iat.radiosity.run import SolveRun
-    from tests.test_furnished_room import lamp_room
-
-    scene = lamp_room()
-    with Visibility(scene.world_triangles()) as vis:
-        run = SolveRun(scene, SolveOptions(), None, vis, 0.0)
-        run.mesh_by_direct_light()
-        ctx, geo, rays = run.ctx, run.mesh.geo, 256
-        tris = (scene.world_triangle_patch()[vis.opaque], scene.world_triangle_uv()[vis.opaque],
-                scene.world_triangles()[vis.opaque])  # fmt: skip
-        grids = np.ones((scene.n_patches, 9, 9, 3))
-        kept = KeptHits.empty(len(geo.key), rays)
-        first, _, _ = hemisphere_gather(ctx, geo, vis, *tris, grids, rays, lambda: None, True, kept)
-        off = []
-        for sl, o, d, w, k in hemisphere_rays(ctx, geo, rays, half=True):
-            tri, bary = vis.first_hits(o, d, np.full(len(o), 4.0 * ctx.patches.scale, dtype=np.float32))
-            got_tri, got_bary = kept.hits(sl, tris[2], o, w)
-            assert k == len(checkerboard(16)) == 128
-            assert np.array_equal(got_tri, tri)
-            off.append(np.abs(got_bary - bary).max(axis=1))
-        off = np.concatenate(off)
-        assert np.percentile(off, 99) < 2e-6 and off.max() < 1e-3  # measured 9e-7, 2e-4
-        second, _, _ = hemisphere_gather(ctx, geo, vis, *tris, grids, rays, lambda: None, False, kept)
-    assert len(geo.key) > 1000 and (kept.tri >= 0).all()
-    np.testing.assert_allclose(second, first, atol=0.1)  # uniform light: the share of rays that meet it

@@ -122,33 +122,3 @@ def _vertex_hits(v, tri, bary, dirs, tri_patch, tri_uv, normal, twin, twin_swap,
             nf += 1
         tally[at + slot[p]] += 1
     return nf
-
-
-@njit(cache=True, parallel=True, nogil=True, error_model="numpy")
-def hit_barycentrics(tri, corners, o, w, bary):
-    """The barycentric (u, v) (``bary`` (n, 2), as Embree gives them: the hit is ``(1 - u - v) a +
-    u b + v c``) where rays ``o`` (n, 3) float32 + t ``w`` (n, 3) float64 meet the triangles ``tri``
-    (n,) int64 of ``corners`` (T, 3, 3) that they are known to meet first (Moller-Trumbore in
-    float64, clamped into the triangle; 0 where ``tri`` < 0)."""
-    for q in prange(tri.shape[0]):
-        t = tri[q]
-        bary[q, 0] = bary[q, 1] = 0.0
-        if t < 0:
-            continue
-        e1 = corners[t, 1] - corners[t, 0]
-        e2 = corners[t, 2] - corners[t, 0]
-        d = w[q]
-        p = np.cross(d, e2)
-        det = e1[0] * p[0] + e1[1] * p[1] + e1[2] * p[2]
-        if abs(det) < 1e-300:
-            continue
-        s = np.empty(3)
-        for c in range(3):
-            s[c] = np.float64(o[q, c]) - corners[t, 0, c]
-        qv = np.cross(s, e1)
-        u = (s[0] * p[0] + s[1] * p[1] + s[2] * p[2]) / det
-        v = (d[0] * qv[0] + d[1] * qv[1] + d[2] * qv[2]) / det
-        u, v = min(max(u, 0.0), 1.0), min(max(v, 0.0), 1.0)
-        if u + v > 1.0:
-            u, v = u / (u + v), v / (u + v)
-        bary[q, 0], bary[q, 1] = u, v

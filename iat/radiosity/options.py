@@ -93,6 +93,9 @@ AMBIENT_BLOCK_RAYS = 1 << 17
 #: side of the grid, a power of 2, on which the ambient term reads a patch's unshot light where its rays
 #: land (each point the tent-weighted mean around it: :meth:`iat.radiosity.sampling.Lattice.coarse_grids`)
 AMBIENT_GRID = 8
+#: the ambient term's second bounce gathers with this share of ``ambient_rays`` (its power per patch
+#: comes from the first gather's rays: the second's give only its shape within a patch)
+AMBIENT_SECOND_SHARE = 0.5
 #: the ambient term's later bounces are summed until a bounce adds under this fraction of the first
 AMBIENT_BOUNCE_TOL = 1e-4
 #: ... or this many bounces, a count

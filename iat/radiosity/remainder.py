@@ -6,9 +6,8 @@ distributed rays (one stratified pattern for all, so the result varies smoothly)
 each first meets a front face, the unshot radiance there (the patch's field on its ``AMBIENT_GRID``
 x ``AMBIENT_GRID`` lattice, times its shot gain): their mean times the vertex's albedo is the
 remainder's first bounce ``R1``, at the resolution of the unshot light (a sunlit patch of floor
-lights what faces it, not its whole room). A second gather reads ``R1`` where half of the same rays
-landed (a checkerboard of the pattern's strata, their first hits kept by the first gather:
-:class:`KeptHits`, no ray traced again) for the second bounce ``R2`` (a patch's light is uneven: the
+lights what faces it, not its whole room). A second gather, with ``AMBIENT_SECOND_SHARE`` of the
+rays, reads ``R1`` where they land for the second bounce ``R2`` (a patch's light is uneven: the
 Cornell box's walls are one patch each), except on panel cells (clipped patches), which give their
 patch mean over their surface (their lattice square reaches past it); it gives only ``R2``'s shape
 within a patch, its power per patch coming from the first gather's rays (below). The bounces after
@@ -33,19 +32,18 @@ leave the scene or meet a back face bring nothing, so an open scene's remainder 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from scipy import sparse
 
 from iat.geometry.sides import overlap_groups
-from iat.radiosity.ambient_kernels import ambient_hits, cosine_rays, hit_barycentrics
+from iat.radiosity.ambient_kernels import ambient_hits, cosine_rays
 from iat.radiosity.options import (
     AMBIENT_BLOCK_RAYS,
     AMBIENT_BOUNCE_TOL,
     AMBIENT_FIT_LIMIT,
     AMBIENT_GRID,
     AMBIENT_MAX_BOUNCES,
+    AMBIENT_SECOND_SHARE,
     AMBIENT_SEEN_FLOOR,
     MAX_REFLECTANCE,
 )
@@ -53,49 +51,13 @@ from iat.radiosity.sampling import concentric_disk, pattern_side
 from iat.radiosity.state import Mesh
 
 
-def checkerboard(m: int) -> np.ndarray:
-    """(h,) the indices, in a row-major m x m pattern, of the strata whose row plus column is even."""
-    a, b = np.divmod(np.arange(m * m), m)
-    return np.flatnonzero((a + b) % 2 == 0)
-
-
-@dataclass(frozen=True)
-class KeptHits:
-    """The triangles that the :func:`checkerboard` half of every vertex's ambient rays met first,
-    kept by the first gather for the second: tri (V, h) int32, indices into the opaque triangles
-    (-1: none). The second gather finds the hits' barycentrics again on those triangles alone."""
-
-    tri: np.ndarray
-
-    @classmethod
-    def empty(cls, n_vertices: int, rays: int) -> KeptHits:
-        return cls(np.empty((n_vertices, len(checkerboard(pattern_side(rays)))), np.int32))
-
-    def keep(self, sl: slice, tri: np.ndarray, m: int) -> None:
-        """Keep the checkerboard half of the first hits ``tri`` (b k,) of the vertices ``sl`` (an
-        m x m pattern, k = m²)."""
-        self.tri[sl] = tri.reshape(-1, m * m)[:, checkerboard(m)]
-
-    def hits(self, sl: slice, corners: np.ndarray, o: np.ndarray, w: np.ndarray):
-        """((b h,) int64, (b h, 2) float64): the first hits of the half's rays ``o`` (b h, 3)
-        float32 + t ``w`` (b h, 3) of the vertices ``sl``, as Embree gives them; ``corners``
-        (T, 3, 3): the opaque triangles."""
-        tri = self.tri[sl].reshape(-1).astype(np.int64)
-        bary = np.empty((len(tri), 2))
-        hit_barycentrics(tri, corners, o, w, bary)
-        return tri, bary
-
-
-def hemisphere_rays(ctx, geo, rays: int, half: bool = False):
+def hemisphere_rays(ctx, geo, rays: int):
     """Per block of vertices (``AMBIENT_BLOCK_RAYS`` rays at most, or one vertex): their slice,
-    their ``rays`` (rounded up to a square; with ``half`` only its :func:`checkerboard`)
-    cosine-distributed rays in vertex order (the same pattern at every vertex) as embreex takes
-    them, origins and directions (b k, 3) float32, the directions (b k, 3) float64, and k. The
-    arrays are reused for the next block."""
+    their ``rays`` (rounded up to a square) cosine-distributed rays in vertex order (the same pattern at every
+    vertex) as embreex takes them, origins and directions (b k, 3) float32, the directions (b k, 3)
+    float64, and k. The arrays are reused for the next block."""
     m = pattern_side(rays)
     pat = ctx.gathers.pattern(ctx.patches.n_patches, m, 0)  # (a patch index no shooter has)
-    if half:
-        pat = pat[checkerboard(m)]
     dx, dy = concentric_disk(pat[:, 0], pat[:, 1])
     k = pat.shape[0]
     size = max(1, AMBIENT_BLOCK_RAYS // k)  # vertices a block
@@ -110,30 +72,21 @@ def hemisphere_rays(ctx, geo, rays: int, half: bool = False):
         yield sl, o[:b], d[:b], w[:b], k
 
 
-def hemisphere_gather(
-    ctx, geo, vis, tri_patch, tri_uv, corners, grids: np.ndarray, rays: int, check, tally: bool,
-    kept: KeptHits,
-):  # fmt: skip
+def hemisphere_gather(ctx, geo, vis, tri_patch, tri_uv, grids: np.ndarray, rays: int, check, tally: bool):
     """``(mean, fv, buried)``: (V, 3) each vertex's mean, over its :func:`hemisphere_rays`, of the
     radiance ``grids`` ((P, g+1, g+1, 3): each patch's field on a g x g lattice) where they meet a
     front face; when ``tally``, the (V, P) CSR fraction of each vertex's rays that meet each patch
     (else None); (V,) the fraction of its rays that meet a back face (a vertex inside a solid).
     geo : the vertices' :class:`~iat.radiosity.patches.ReceiverGeometry`; tri_patch (T,), tri_uv
-    (T, 3, 2), corners (T, 3, 3): the patch, lattice (u, v) and corners of each of ``vis``'s opaque
-    triangles. With ``tally`` the rays are traced and the triangles that their checkerboard half
-    met go into ``kept``; without, only that half is read, from ``kept`` (nothing traced)."""
+    (T, 3, 2): the patch and lattice (u, v) of each of ``vis``'s opaque triangles."""
     g = grids.shape[1] - 1
     pt = ctx.patches
     flat = np.ascontiguousarray(grids.reshape(-1, 3))
     means = np.ascontiguousarray(grids.reshape(len(grids), -1, 3).mean(axis=1))  # (P, 3), for twins
     mean, buried = np.zeros((len(geo.key), 3)), np.zeros(len(geo.key))
     per_vertex, cols, counts = [], [], []  # (V, P) CSR by rows: the kernel writes them in vertex order
-    for sl, o, d, w, k in hemisphere_rays(ctx, geo, rays, half=not tally):
-        if tally:
-            tri, bary = vis.first_hits(o, d, np.full(len(o), 4.0 * ctx.patches.scale, dtype=np.float32))
-            kept.keep(sl, tri, pattern_side(rays))
-        else:
-            tri, bary = kept.hits(sl, corners, o, w)
+    for sl, o, d, w, k in hemisphere_rays(ctx, geo, rays):
+        tri, bary = vis.first_hits(o, d, np.full(len(o), 4.0 * ctx.patches.scale, dtype=np.float32))
         r, c, f = np.empty(len(o), np.int64), np.empty(len(o), np.int64), np.empty(len(o))
         m = ambient_hits(
             tri,
@@ -218,11 +171,9 @@ def ambient_term(
     unshot : (V, 3) unshot radiance; gain : (P,) each patch's shot gain; rays : per vertex."""
     geo, rho, lattice, pt = mesh.geo, mesh.rho, mesh.lattice, ctx.patches
     g = min(AMBIENT_GRID, pt.n)
-    tris = (scene.world_triangle_patch()[vis.opaque], scene.world_triangle_uv()[vis.opaque],
-            scene.world_triangles()[vis.opaque])  # fmt: skip
+    tris = scene.world_triangle_patch()[vis.opaque], scene.world_triangle_uv()[vis.opaque]
     grids = lattice.coarse_grids(unshot, g) * gain[:, None, None, None]
-    kept = KeptHits.empty(len(geo.key), rays)
-    first, fv, buried = hemisphere_gather(ctx, geo, vis, *tris, grids, rays, check, True, kept)
+    first, fv, buried = hemisphere_gather(ctx, geo, vis, *tris, grids, rays, check, True)
     avg, seen = seen_average(mesh.M, buried)
     area = pt.area * seen  # (P,) what of each patch can be seen: it holds and sends the light
     share, pooled = overlap_shares(pt, area)
@@ -243,8 +194,8 @@ def ambient_term(
     r1 = fit(rho * first, albedo * sent(unshot * gain[geo.patch][:, None]))
     grids = lattice.coarse_grids(r1, g)
     grids[pt.clipped] = np.asarray(avg @ r1)[pt.clipped][:, None, None, :]
-    second, _, _ = hemisphere_gather(ctx, geo, vis, *tris, grids, rays, check, False, kept)
-    del kept
+    few = max(1, round(rays * AMBIENT_SECOND_SHARE))
+    second, _, _ = hemisphere_gather(ctx, geo, vis, *tris, grids, few, check, False)
     power2 = albedo * sent(r1)
     r2 = fit(rho * second, power2)
     rho_p = np.minimum(albedo, MAX_REFLECTANCE)
