@@ -123,16 +123,16 @@ REFINE_UNSHOT = 2.0
 SHOOTER_COVERAGE = 256
 #: directions per vertex on the sun's disc (soft shadow edges), a count
 SUN_SAMPLES = 64
-#: a vertex's sky estimate whose standard error, as its four interleaved quarters tell it (they
-#: understate it), is above this fraction of the vertex's direct light (the sky's and the other
+#: a vertex's sky estimate whose standard error, as its four interleaved quarters tell it (on the
+#: window-lit room's back wall 1.2x the spread between seeds), is above this fraction of the vertex's direct light (the sky's and the other
 #: sources') is estimated again with 4 x the directions (the old ones kept), up to SKY_PASSES
 #: estimates (benchmarks/window_room.py: noise 1.45 -> 0.32 %, elements 17.7 k -> 5.7 k)
 SKY_NOISE = 0.01
+SKY_PASSES = 2
 #: the split test asks a probe's deviation from the interpolation to exceed the tolerance by this many
 #: of the deviation's standard errors (the sky's estimates', :func:`.meshing.split_test`): noise is not
 #: light to resolve, and elements split on it only multiply it
 SPLIT_NOISE = 1.0
-SKY_PASSES = 2
 #: a later sky estimate traces its new directions only in the strata whose value differs from one
 #: within this many strata on the grid before it; the others take their stratum's (:mod:`.sky_passes`);
 #: -1 traces them all
