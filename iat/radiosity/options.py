@@ -124,9 +124,10 @@ SHOOTER_COVERAGE = 256
 #: directions per vertex on the sun's disc (soft shadow edges), a count
 SUN_SAMPLES = 64
 #: a vertex's sky estimate whose standard error, as its four interleaved quarters tell it (on the
-#: window-lit room's back wall 1.2x the spread between seeds), is above this fraction of the vertex's direct light (the sky's and the other
-#: sources') is estimated again with 4 x the directions (the old ones kept), up to SKY_PASSES
-#: estimates (benchmarks/window_room.py: noise 1.45 -> 0.32 %, elements 17.7 k -> 5.7 k)
+#: window-lit room's back wall 1.2x the spread between seeds), is above this fraction of the vertex's
+#: direct light (the sky's and the other sources') is estimated again with 4 x the directions (the old
+#: ones kept), up to SKY_PASSES estimates (benchmarks/window_room.py: noise 1.45 -> 0.32 %, elements
+#: 17.7 k -> 5.7 k)
 SKY_NOISE = 0.01
 SKY_PASSES = 2
 #: the split test asks a probe's deviation from the interpolation to exceed the tolerance by this many
