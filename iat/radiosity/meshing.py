@@ -198,7 +198,9 @@ class VertexCache:
     def noise_at(self, keys: np.ndarray) -> np.ndarray:
         """(n,) the standard error at ``keys``; 0 where unknown."""
         i = self.find(keys)
-        return np.where(i >= 0, self.noise[np.maximum(i, 0)], 0.0) if len(self.noise) else np.zeros(len(keys))
+        out = np.zeros(len(keys))
+        out[i >= 0] = self.noise[i[i >= 0]]
+        return out
 
     def add(self, keys: np.ndarray, vals: np.ndarray, noise: np.ndarray) -> None:
         k = np.concatenate([self.keys, keys])
@@ -257,7 +259,9 @@ def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, re
             )
             eps_abs = max(ABS_FLOOR * mean_y, 1e-30)
             y = refl_y + emission_y[qt.decode_key(cache.keys, pt.n)[0]]
-            vy = np.concatenate([y[cache.find(qt.leaf_corner_keys(sub))], y[cache.find(pk)]], axis=1)
+            at = np.concatenate([qt.leaf_corner_keys(sub), pk], axis=1)  # (L, 9) corners, then probes
+            idx = cache.find(at)
+            vy = y[idx]
             vm = np.concatenate([np.ones((sub.n_leaves, 4), dtype=bool), pvalid], axis=1)
             mean = (vy * vm).sum(axis=1) / vm.sum(axis=1)
             if opts.criterion == "uniform":
@@ -270,16 +274,13 @@ def split_test(ctx: Context, forest: qt.Forest, cache: VertexCache, evaluate, re
                 slots = probe_interp(sub)
                 weights = (slots[..., None] == np.arange(4)).mean(axis=2)  # (L, 5, 4) of each corner
                 interp = np.einsum("lpc,lc->lp", weights, vy[:, :4])
-                var = cache.noise[cache.find(np.concatenate([qt.leaf_corner_keys(sub), pk], axis=1))] ** 2
+                var = cache.noise[idx] ** 2
                 sd = np.sqrt(var[:, 4:] + np.einsum("lpc,lc->lp", weights**2, var[:, :4]))
                 dev = np.abs(vy[:, 4:] - interp) - SPLIT_NOISE * sd
                 score = np.where(pvalid, np.maximum(dev, 0.0), 0.0).max(axis=1)
             tol = np.full(sub.n_leaves, opts.tolerance)
             if len(ctx.light.penumbra):  # an emitter's penumbra: its real structure, finer
-                pen = (
-                    qt.lookup(ctx.light.penumbra, np.concatenate([qt.leaf_corner_keys(sub), pk], axis=1)) >= 0
-                )
-                tol[(pen & vm).any(axis=1)] *= PENUMBRA_TOLERANCE
+                tol[((qt.lookup(ctx.light.penumbra, at) >= 0) & vm).any(axis=1)] *= PENUMBRA_TOLERANCE
             if big is not None:  # an element larger than max_size must interpolate more closely
                 tol[big] *= BIG_TOLERANCE
             split = score > tol * (mean + eps_abs)
