@@ -100,44 +100,132 @@ class Cornell:
         return reference_errors(self.image(sol), self.ref if ref is None else ref, self.mask)
 
 
-def surface_values(sol, n_out: int = 256) -> np.ndarray:
-    """Luminance of the solution's mesh (piecewise linear in its leaves) at the centres of an
-    n_out x n_out grid of cells in each patch's (u, v) (no lattice point of any depth, so no
-    solution is sampled only at its own vertices), concatenated over the patches, and (same
-    length) the area each point stands for and its patch."""
+def surface_points(sol, n_out: int = 256) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The centres of an n_out x n_out grid of cells in each patch's (u, v) (no lattice point of any
+    depth, so no solution is sampled only at its own vertices; on triangles those with u + v <= 1):
+    (k,) patch, u, v and the area (m^2) each point stands for, concatenated over the patches."""
+    g = (np.arange(n_out) + 0.5) / n_out
+    uu, vv = (x.ravel() for x in np.meshgrid(g, g, indexing="ij"))
+    tri = uu + vv <= 1.0 + 1e-12
+    corners, quad = np.asarray(sol.patch_corners), np.asarray(sol.patch_is_quad)
+    area = 0.5 * np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
+    area += np.where(
+        quad,
+        0.5 * np.linalg.norm(np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 0]), axis=1),
+        0.0,
+    )
+    count = np.where(quad, len(uu), int(tri.sum()))
+    patch = np.repeat(np.arange(len(corners)), count)
+    u = np.concatenate([uu if q else uu[tri] for q in quad])
+    v = np.concatenate([vv if q else vv[tri] for q in quad])
+    return patch, u, v, (area / count)[patch]
+
+
+def values_at(sol, patch: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(k,) luminance of the solution's mesh (piecewise linear in its leaves) at (u, v) (k,) of its
+    patches ``patch`` (k,)."""
     from iat.color import LUMINANCE_WEIGHTS
     from iat.radiosity.sampling import Lattice, sample_lattice
 
     lat = Lattice(sol.forest, np.asarray(sol.vert_key))
     vals = np.asarray(sol.vert_radiance, dtype=np.float64)
-    g = (np.arange(n_out) + 0.5) / n_out
-    uu, vv = (x.ravel() for x in np.meshgrid(g, g, indexing="ij"))
-    corners = np.asarray(sol.patch_corners)
-    out, weight, patch = [], [], []
-    for p in range(len(corners)):
-        u, v = uu, vv
-        if not sol.patch_is_quad[p]:
-            keep = u + v <= 1.0 + 1e-12
-            u, v = u[keep], v[keep]
+    out = np.empty(len(patch))
+    order = np.argsort(patch, kind="stable")
+    bounds = np.searchsorted(patch[order], np.arange(len(sol.patch_corners) + 1))
+    for p in np.unique(patch):
+        idx = order[bounds[p] : bounds[p + 1]]
         flat = lat.grid(p, vals).reshape(-1, 3)
-        out.append(sample_lattice(flat, sol.n, u, v) @ LUMINANCE_WEIGHTS)
-        c = corners[p]
-        area = 0.5 * np.linalg.norm(np.cross(c[1] - c[0], c[2] - c[0]))
-        if sol.patch_is_quad[p]:
-            area += 0.5 * np.linalg.norm(np.cross(c[2] - c[0], c[3] - c[0]))
-        weight.append(np.full(len(u), area / len(u)))
-        patch.append(np.full(len(u), p))
-    return np.concatenate(out), np.concatenate(weight), np.concatenate(patch)
+        out[idx] = sample_lattice(flat, sol.n, u[idx], v[idx]) @ LUMINANCE_WEIGHTS
+    return out
+
+
+def patch_uv(
+    corners: np.ndarray, is_quad: np.ndarray, patch: np.ndarray, x: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(u, v) (k,) of world points x (k, 3) on patches ``patch`` (k,) of corners (P, 4, 3): the
+    inverse of :func:`iat.geometry.quadtree.patch_point` (Gauss-Newton; exact on triangles)."""
+    from iat.geometry.quadtree import patch_point
+
+    c = np.asarray(corners)[patch]
+    quad = np.asarray(is_quad)[patch][:, None]
+    u, v = np.full(len(patch), 0.5), np.full(len(patch), 0.5)
+    for _ in range(8):
+        uc, vc = u[:, None], v[:, None]
+        du = np.where(quad, (1 - vc) * (c[:, 1] - c[:, 0]) + vc * (c[:, 2] - c[:, 3]), c[:, 1] - c[:, 0])
+        dv = np.where(quad, (1 - uc) * (c[:, 3] - c[:, 0]) + uc * (c[:, 2] - c[:, 1]), c[:, 2] - c[:, 0])
+        r = x - patch_point(corners, is_quad, patch, u, v)
+        a, b, d = (du * du).sum(1), (du * dv).sum(1), (dv * dv).sum(1)
+        ru, rv = (du * r).sum(1), (dv * r).sum(1)
+        det = np.maximum(a * d - b * b, 1e-300)
+        u, v = u + (d * ru - b * rv) / det, v + (a * rv - b * ru) / det
+    return u, v
+
+
+def patch_normals(sol) -> np.ndarray:
+    """(P, 3) unit normals of the solution's patches (from their first three corners)."""
+    c = np.asarray(sol.patch_corners)
+    n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+
+def read_on(sol, ref_sol, q: np.ndarray, x: np.ndarray, tol: float = 1e-6):
+    """Where the reference's points x (k, 3), on its patches q (k,), fall on ``sol``'s patches,
+    when the two were loaded with other cuts (an older loader that cut nothing where geometry
+    crosses or along shadows, or a region made again as other cells): (k,) the patch of ``sol``
+    that holds each point and faces the same way, and its (u, v) there. Raises ValueError when a
+    point lies on none."""
+    corners, quad = np.asarray(sol.patch_corners), np.asarray(sol.patch_is_quad)
+    nrm, ref_nrm = patch_normals(sol), patch_normals(ref_sol)
+    lo = np.where(quad[:, None], corners.min(axis=1), corners[:, :3].min(axis=1)) - tol
+    hi = np.where(quad[:, None], corners.max(axis=1), corners[:, :3].max(axis=1)) + tol
+    offset = np.einsum("pc,pc->p", nrm, corners[:, 0])
+    root, ur, vr = np.full(len(q), -1), np.zeros(len(q)), np.zeros(len(q))
+    order = np.argsort(q, kind="stable")
+    bounds = np.searchsorted(q[order], np.arange(len(ref_sol.patch_corners) + 1))
+    for p in np.unique(q):
+        idx = order[bounds[p] : bounds[p + 1]]
+        pts = x[idx]
+        cand = np.flatnonzero(
+            (nrm @ ref_nrm[p] > 0.999)
+            & np.all((lo <= pts.max(axis=0)) & (pts.min(axis=0) <= hi), axis=1)
+            & (np.abs(nrm @ pts[0] - offset) < 1e-5)
+        )
+        for c in cand:
+            todo = idx[root[idx] < 0]
+            if not len(todo):
+                break
+            u, v = patch_uv(corners, quad, np.full(len(todo), c), x[todo])
+            inside = (
+                (u >= -tol)
+                & (v >= -tol)
+                & ((u <= 1 + tol) & (v <= 1 + tol) if quad[c] else (u + v <= 1 + tol))
+            )
+            root[todo[inside]], ur[todo[inside]], vr[todo[inside]] = c, u[inside], v[inside]
+    if (root < 0).any():
+        raise ValueError(f"{int((root < 0).sum())} of the reference's points lie on no patch of the solution")
+    return root, np.clip(ur, 0.0, 1.0), np.clip(vr, 0.0, 1.0)
 
 
 def surface_error(sol, ref_sol, n_out: int = 256) -> float:
     """Area-weighted L1 error of the radiance over all surfaces (luminance, sampled at n_out x n_out
-    cell centres per patch, emitters excluded) relative to the reference's mean: shadow edges count here,
-    unlike in the smooth-pixel image measure."""
-    a, w, pa = surface_values(sol, n_out)
-    b, _, _ = surface_values(ref_sol, n_out)
+    cell centres per patch of the reference, emitters excluded) relative to the reference's mean:
+    shadow edges count here, unlike in the smooth-pixel image measure. A solution whose patches are
+    not the reference's is read where the reference's points fall on its patches (:func:`read_on`)."""
+    from iat.geometry.quadtree import patch_point
+
+    q, u, v, w = surface_points(ref_sol, n_out)
+    b = values_at(ref_sol, q, u, v)
+    ref_corners = np.asarray(ref_sol.patch_corners)
+    if len(sol.patch_corners) == len(ref_corners) and np.allclose(sol.patch_corners, ref_corners):
+        a = values_at(sol, q, u, v)
+    else:
+        a = values_at(
+            sol, *read_on(sol, ref_sol, q, patch_point(ref_corners, ref_sol.patch_is_quad, q, u, v))
+        )
     emitters = [int(row[0]) for row in ref_sol.stats.get("sources", {}).get("emitters", [])]
-    w = np.where(np.isin(pa, emitters), 0.0, w)
+    w = np.where(np.isin(q, emitters), 0.0, w)
     return float((np.abs(a - b) * w).sum() / (np.abs(b) * w).sum())
 
 
