@@ -6,7 +6,7 @@
     .venv/bin/python benchmarks/equal_error.py --rejudge     # the speed-ups again, from the saved JSON
 
 writes ``benchmarks/equal_error.json`` and ``benchmarks/equal_error.md``. Per model the default
-solve with the old tree and this tree's ``EQUAL_LADDER`` (the draft preset, convergence 0.2 and 0.1, 0.1 with tolerance 0.15, and the defaults), each in
+solve with the old tree and this tree's ``EQUAL_LADDER`` (the draft preset, convergence 0.4, 0.3, 0.2 and 0.1, 0.1 with tolerance 0.15, and the defaults), each in
 its own process, alternating (best wall and CPU seconds of ``--repeats``); each solution's surface
 error (area-weighted L1 of the luminance, 64 x 64 cells a patch, emitters left out) against a
 reference solve (``EQUAL_REFERENCE``: the final preset with seed 1, cached in ``out/solver_refs``),
@@ -41,6 +41,8 @@ EQUAL_REFERENCE = {"convergence": 0.005, "tolerance": 0.05, "samples": 32, "seed
 #: (the Cornell box's walls are one patch each: it meshes them finely at 0.1) and the defaults
 EQUAL_LADDER = {
     "draft": QUALITY_PRESETS["draft"],
+    "convergence 0.4": {"convergence": 0.4},
+    "convergence 0.3": {"convergence": 0.3},
     "convergence 0.2": {"convergence": 0.2},
     "convergence 0.1": {"convergence": 0.1},
     "convergence 0.1, tolerance 0.15": {"convergence": 0.1, "tolerance": 0.15},

@@ -13,7 +13,7 @@ import numpy as np
 from iat.errors import SolveError
 from iat.geometry import quadtree as qt
 from iat.radiosity.context import Context
-from iat.radiosity.kernels import add_at_rows, rows_product
+from iat.radiosity.kernels import add_at_rows, rows_product, shot_power
 from iat.radiosity.meshing import (
     VertexCache,
     coarse_weights,
@@ -277,9 +277,12 @@ class SolveRun:
         received (``vertex_power`` (V,): the power of a unit of reflected radiance at each)."""
         mesh, rad, P = self.mesh, self.rad, self.ctx.patches
         rows, dv, acc, field_mean = shot
-        dv = self.bounded_shot(s, rows, dv, field_mean, vertex_power)
-        for k, ci, got in acc:
-            add_at_rows(self.coarse[k].acc, ci, got)
+        got, received = shot_power(rows, dv, self.mesh.rho, vertex_power)
+        scale = self.shot_scale(s, got, field_mean)
+        if scale is not None:
+            dv, received = dv * scale, received * scale
+        for k, ci, got_k in acc:
+            add_at_rows(self.coarse[k].acc, ci, got_k)
         self.shot_index[s] += 1
         self.shot_power[s] += power
         self.shots += 1
@@ -291,22 +294,20 @@ class SolveRun:
         reached[s] = True
         touched = np.flatnonzero(reached)
         m_abs[touched] = rows_product(mesh.M.indptr, mesh.M.indices, mesh.M.data, rad.unshot, touched, True)
-        received = vertex_power[rows] @ dv  # (rows are distinct)
         self.shot_log.append((np.pi * P.area[s] * field_mean, received))
 
-    def bounded_shot(self, s: int, rows, dv: np.ndarray, field_mean: np.ndarray, vertex_power) -> np.ndarray:
-        """``dv`` (k, 3), a shot's reflected radiance at its vertices ``rows`` (k,), scaled back, per
-        channel, to the power s sent when its receivers would get more than ``FF_SUM_LIMIT`` times
-        that (its sampled form factors sum above 1: a blow-up, not quadrature noise)."""
-        rho = self.mesh.rho[rows]
-        got = vertex_power[rows] @ np.where(rho > 0, np.abs(dv) / np.where(rho > 0, rho, 1.0), 0.0)
+    def shot_scale(self, s: int, got: np.ndarray, field_mean: np.ndarray) -> np.ndarray | None:
+        """(3,) the factor, per channel, that scales a shot from s back to the power it sent when
+        its receivers would get more than ``FF_SUM_LIMIT`` times that (its sampled form factors sum
+        above 1: a blow-up, not quadrature noise); None when none would. ``got`` (3,): the power
+        they received (:func:`~iat.radiosity.kernels.shot_power`); ``field_mean`` (3,): the mean
+        radiance s shot."""
         sent = np.pi * self.ctx.patches.area[s] * np.abs(field_mean)
         over = got > FF_SUM_LIMIT * sent
         if not over.any():
-            return dv
-        scale = np.where(over, sent / np.where(over, got, 1.0), 1.0)
+            return None
         self.stats["renormalised_shots"] = self.stats.get("renormalised_shots", 0) + 1
-        return dv * scale
+        return np.where(over, sent / np.where(over, got, 1.0), 1.0)
 
     def reflected_bound(self) -> float:
         """Luminance power (W) the surfaces can reflect over all bounces at most: ``rho / (1 -
