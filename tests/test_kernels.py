@@ -368,3 +368,20 @@ def test_cosine_rays_are_disk_to_hemisphere_bit_for_bit():
     assert np.allclose(
         np.einsum("ic,ic->i", w, np.repeat(normal, 16, axis=0)), np.sqrt(1 - np.tile(dx**2 + dy**2, 7))
     )
+
+
+def test_shot_power_sums_what_the_vertices_received_and_reflect():
+    """kernels.shot_power against numpy: each channel's power the rows received (|dv| / rho, 0
+    where rho is 0) and reflect (dv, signed), weighted by the vertices' power."""
+    rng = np.random.default_rng(3)
+    rho = rng.random((40, 3))
+    rho[5] = 0.0
+    rho[7, 1] = 0.0
+    vertex_power = rng.random(40)
+    rows = np.array([2, 5, 7, 11, 30])
+    dv = rng.normal(size=(5, 3))
+    got, received = kernels.shot_power(rows, dv, rho, vertex_power)
+    r = rho[rows]
+    want = vertex_power[rows] @ np.where(r > 0, np.abs(dv) / np.where(r > 0, r, 1.0), 0.0)
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+    np.testing.assert_allclose(received, vertex_power[rows] @ dv, rtol=1e-12)
