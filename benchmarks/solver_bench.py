@@ -104,18 +104,13 @@ def surface_points(sol, n_out: int = 256) -> tuple[np.ndarray, np.ndarray, np.nd
     """The centres of an n_out x n_out grid of cells in each patch's (u, v) (no lattice point of any
     depth, so no solution is sampled only at its own vertices; on triangles those with u + v <= 1):
     (k,) patch, u, v and the area (m^2) each point stands for, concatenated over the patches."""
+    from iat.geometry.mesh import patch_areas
+
     g = (np.arange(n_out) + 0.5) / n_out
     uu, vv = (x.ravel() for x in np.meshgrid(g, g, indexing="ij"))
     tri = uu + vv <= 1.0 + 1e-12
     corners, quad = np.asarray(sol.patch_corners), np.asarray(sol.patch_is_quad)
-    area = 0.5 * np.linalg.norm(
-        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
-    )
-    area += np.where(
-        quad,
-        0.5 * np.linalg.norm(np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 0]), axis=1),
-        0.0,
-    )
+    area = patch_areas(corners, quad)
     count = np.where(quad, len(uu), int(tri.sum()))
     patch = np.repeat(np.arange(len(corners)), count)
     u = np.concatenate([uu if q else uu[tri] for q in quad])
@@ -163,21 +158,17 @@ def patch_uv(
     return u, v
 
 
-def patch_normals(sol) -> np.ndarray:
-    """(P, 3) unit normals of the solution's patches (from their first three corners)."""
-    c = np.asarray(sol.patch_corners)
-    n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-
-
 def read_on(sol, ref_sol, q: np.ndarray, x: np.ndarray, tol: float = 1e-6):
     """Where the reference's points x (k, 3), on its patches q (k,), fall on ``sol``'s patches,
     when the two were loaded with other cuts (an older loader that cut nothing where geometry
     crosses or along shadows, or a region made again as other cells): (k,) the patch of ``sol``
     that holds each point and faces the same way, and its (u, v) there. Raises ValueError when a
     point lies on none."""
+    from iat.geometry.mesh import patch_normals
+
     corners, quad = np.asarray(sol.patch_corners), np.asarray(sol.patch_is_quad)
-    nrm, ref_nrm = patch_normals(sol), patch_normals(ref_sol)
+    nrm = patch_normals(corners, quad)
+    ref_nrm = patch_normals(np.asarray(ref_sol.patch_corners), np.asarray(ref_sol.patch_is_quad))
     lo = np.where(quad[:, None], corners.min(axis=1), corners[:, :3].min(axis=1)) - tol
     hi = np.where(quad[:, None], corners.max(axis=1), corners[:, :3].max(axis=1)) + tol
     offset = np.einsum("pc,pc->p", nrm, corners[:, 0])

@@ -380,8 +380,8 @@ def test_shot_power_sums_what_the_vertices_received_and_reflect():
     vertex_power = rng.random(40)
     rows = np.array([2, 5, 7, 11, 30])
     dv = rng.normal(size=(5, 3))
-    got, received = kernels.shot_power(rows, dv, rho, vertex_power)
+    got, reflected = kernels.shot_power(rows, dv, rho, vertex_power)
     r = rho[rows]
     want = vertex_power[rows] @ np.where(r > 0, np.abs(dv) / np.where(r > 0, r, 1.0), 0.0)
     np.testing.assert_allclose(got, want, rtol=1e-12)
-    np.testing.assert_allclose(received, vertex_power[rows] @ dv, rtol=1e-12)
+    np.testing.assert_allclose(reflected, vertex_power[rows] @ dv, rtol=1e-12)

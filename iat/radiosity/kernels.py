@@ -529,21 +529,21 @@ def add_at_rows(out, rows, vals):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def shot_power(rows, dv, rho, vertex_power):
-    """What a shot's vertices ``rows`` (k,) got, in power: ``(sent_back, received)``, each (3,) a
+    """A shot's power at the vertices ``rows`` (k,) it reached: ``(got, reflected)``, each (3,) a
     channel's sum over them of ``vertex_power`` (V,) times ``|dv| / rho`` (the radiance they
     received before their albedo ``rho`` (V, 3); 0 where rho is 0) and times ``dv`` (k, 3), the
     radiance they reflect. One pass over the rows (numpy's took six temporaries of (k, 3))."""
     got = np.zeros(3)
-    received = np.zeros(3)
+    reflected = np.zeros(3)
     for i in range(rows.shape[0]):
         r = rows[i]
         w = vertex_power[r]
         for c in range(3):
             d = dv[i, c]
-            received[c] += w * d
+            reflected[c] += w * d
             if rho[r, c] > 0:
                 got[c] += w * abs(d) / rho[r, c]
-    return got, received
+    return got, reflected
 
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)

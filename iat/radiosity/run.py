@@ -274,13 +274,13 @@ class SolveRun:
         """Add what one :meth:`shot_gather` from s (of luminance ``power``) returned: to the coarse
         grids, the vertices' reflected and unshot radiance, and the rows of ``m_abs`` ((P, 3),
         ``M @ |unshot|``) that changed; log what it shot and what the vertices it reached
-        received (``vertex_power`` (V,): the power of a unit of reflected radiance at each)."""
+        reflect (``vertex_power`` (V,): the power of a unit of reflected radiance at each)."""
         mesh, rad, P = self.mesh, self.rad, self.ctx.patches
         rows, dv, acc, field_mean = shot
-        got, received = shot_power(rows, dv, self.mesh.rho, vertex_power)
+        got, reflected = shot_power(rows, dv, mesh.rho, vertex_power)
         scale = self.shot_scale(s, got, field_mean)
         if scale is not None:
-            dv, received = dv * scale, received * scale
+            dv, reflected = dv * scale, reflected * scale
         for k, ci, got_k in acc:
             add_at_rows(self.coarse[k].acc, ci, got_k)
         self.shot_index[s] += 1
@@ -294,7 +294,7 @@ class SolveRun:
         reached[s] = True
         touched = np.flatnonzero(reached)
         m_abs[touched] = rows_product(mesh.M.indptr, mesh.M.indices, mesh.M.data, rad.unshot, touched, True)
-        self.shot_log.append((np.pi * P.area[s] * field_mean, received))
+        self.shot_log.append((np.pi * P.area[s] * field_mean, reflected))
 
     def shot_scale(self, s: int, got: np.ndarray, field_mean: np.ndarray) -> np.ndarray | None:
         """(3,) the factor, per channel, that scales a shot from s back to the power it sent when
